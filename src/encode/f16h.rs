@@ -1,0 +1,202 @@
+//! Layout `f16h`: the hierarchical half-precision encoding of Koskela et al.
+//!
+//! Each inner node n has a frame `x_local = (x_world − W_n) · K_n` with one uniform,
+//! power-of-two scale K_n ("rays don't bend"). Only the root frame is stored (fp32); every
+//! child box is stored in fp16 in its parent's frame, rounded outward, so it contains the true
+//! box. A child's frame is derived from its stored fp16 box alone by [`derive_child`], which
+//! the traversal (CPU reference and shader) runs identically:
+//!
+//! ```text
+//! c   = fp16(0.5 · (lo + hi))                      centre, per axis, in the parent frame
+//! h   = max over axes of max(hi − c, c − lo)      half extent (fp32)
+//! W_i = W_n + c / K_n                              fp32, one rounding per axis
+//! m   = h + h·2⁻²⁰ + max|W_i|·K_n·2⁻²²             covers fp32 rounding of h and of W_i
+//! r   = 2^(14 − e) where m = f·2^e, f ∈ [0.5, 1)  so m·r < 16384
+//! K_i = K_n · r                                     (r capped so K stays in [2⁻⁶⁰, 2⁶⁰])
+//! ```
+//!
+//! Consequently every coordinate a node stores lies in [−16384, 16384], a quarter of fp16's
+//! finite range, leaving room for the slab test's differences and products.
+//!
+//! Node byte layout for branching B (16·B bytes): `lo` f16[3][B] at 0, `hi` f16[3][B] at
+//! 6·B, `child` u32[B] at 12·B. B=2: 32 bytes, B=4: 64, B=8: 128, B=16: 256.
+//! The root frame ([`RootFrame`], 48 bytes) is uploaded separately.
+
+use super::{encode_child, node_types, EncodeError, TriBuffer};
+use crate::bvh::{ChildRef, WideBvh};
+use crate::fp16;
+use crate::geom::Aabb;
+use crate::scene::Scene;
+use half::f16;
+
+/// Largest magnitude of any stored coordinate.
+pub const COORD_LIMIT: f32 = 16384.0;
+/// Bounds on the frame scale K.
+pub const K_MIN_LOG2: i32 = -60;
+pub const K_MAX_LOG2: i32 = 60;
+
+/// Accessors shared by the f16h node structs.
+pub trait NodeF16h: bytemuck::Pod {
+    const B: usize;
+    fn lo(&self, axis: usize, slot: usize) -> f16;
+    fn hi(&self, axis: usize, slot: usize) -> f16;
+    fn child(&self, slot: usize) -> u32;
+    fn empty() -> Self;
+    fn set(&mut self, slot: usize, lo: [f16; 3], hi: [f16; 3], child: u32);
+}
+
+node_types!(F16hNodes, NodeF16h, f16, [(F16hNode2, 2, B2), (F16hNode4, 4, B4), (F16hNode8, 8, B8), (F16hNode16, 16, B16)]);
+
+/// A node frame: `x_local = (x_world − w) · k`, `k` a power of two.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub w: [f32; 3],
+    pub k: f32,
+}
+
+/// The root frame and the root's world box (fp32), as uploaded: `w` at 0, `k` at 12,
+/// `box_lo` at 16, pad, `box_hi` at 32, pad. 48 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RootFrame {
+    pub w: [f32; 3],
+    pub k: f32,
+    pub box_lo: [f32; 3],
+    pub _pad0: f32,
+    pub box_hi: [f32; 3],
+    pub _pad1: f32,
+}
+const _: () = assert!(std::mem::size_of::<RootFrame>() == 48);
+
+/// A child's frame as derived from its stored box: centre `c` (parent frame, fp16), scale
+/// ratio `r` (power of two), and the resulting world frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChildFrame {
+    pub c: [f16; 3],
+    pub r: f32,
+    pub frame: Frame,
+}
+
+/// Binary exponent e of x = f·2^e with f ∈ [0.5, 1) (x > 0, normal); −126 for 0 and subnormals.
+#[inline]
+pub fn frexp_exp(x: f32) -> i32 {
+    let e = ((x.to_bits() >> 23) & 0xff) as i32;
+    if e == 0 {
+        -126
+    } else {
+        e - 126
+    }
+}
+
+#[inline]
+fn pow2(e: i32) -> f32 {
+    f32::from_bits(((e + 127) as u32) << 23)
+}
+
+/// Scale exponent for a half extent `m` under a parent scale exponent `parent_log2`
+/// (0 for the root): the largest power of two keeping m·r < 16384, clamped so K stays bounded.
+#[inline]
+fn ratio_log2(m: f32, parent_log2: i32) -> i32 {
+    let j = 14 - frexp_exp(m);
+    j.clamp(K_MIN_LOG2 - parent_log2, K_MAX_LOG2 - parent_log2)
+}
+
+/// Derives a child's frame from its stored fp16 box in the parent frame. Runs identically in
+/// the encoder, the CPU reference and the shader (fp32 round-to-nearest, no fused ops).
+#[inline]
+pub fn derive_child(parent: &Frame, lo: [f16; 3], hi: [f16; 3]) -> ChildFrame {
+    let mut c = [f16::ZERO; 3];
+    let mut h = 0f32;
+    let inv_k = 1.0 / parent.k;
+    let mut w = [0f32; 3];
+    let mut wmax = 0f32;
+    for a in 0..3 {
+        let (l, u) = (lo[a].to_f32(), hi[a].to_f32());
+        c[a] = f16::from_f32(0.5 * (l + u));
+        let cf = c[a].to_f32();
+        h = h.max(u - cf).max(cf - l);
+        w[a] = parent.w[a] + cf * inv_k;
+        wmax = wmax.max(w[a].abs());
+    }
+    let m = h + h * (1.0 / 1_048_576.0) + wmax * parent.k * (1.0 / 4_194_304.0);
+    let j = ratio_log2(m, frexp_exp(parent.k) - 1);
+    let r = pow2(j);
+    ChildFrame { c, r, frame: Frame { w, k: parent.k * r } }
+}
+
+/// The root frame: centred on the root box, largest half extent below 16384 local units.
+pub fn root_frame(b: &Aabb) -> RootFrame {
+    let w = b.center();
+    let mut m = 0f64;
+    for a in 0..3 {
+        m = m.max(b.max[a] as f64 - w[a] as f64).max(w[a] as f64 - b.min[a] as f64);
+    }
+    let m = (m * (1.0 + 1e-6)) as f32;
+    let k = pow2(ratio_log2(m, 0));
+    RootFrame { w: w.into(), k, box_lo: b.min.into(), _pad0: 0.0, box_hi: b.max.into(), _pad1: 0.0 }
+}
+
+/// Maps a world box into a frame and rounds it outward to fp16 (exact: fp32 inputs, f64
+/// arithmetic with power-of-two k).
+pub fn to_local(f: &Frame, b: &Aabb) -> ([f16; 3], [f16; 3], [f64; 6]) {
+    let mut lo = [f16::ZERO; 3];
+    let mut hi = [f16::ZERO; 3];
+    let mut exact = [0f64; 6];
+    for a in 0..3 {
+        let l = (b.min[a] as f64 - f.w[a] as f64) * f.k as f64;
+        let u = (b.max[a] as f64 - f.w[a] as f64) * f.k as f64;
+        exact[a] = l;
+        exact[3 + a] = u;
+        lo[a] = fp16::down_f64(l);
+        hi[a] = fp16::up_f64(u);
+    }
+    (lo, hi, exact)
+}
+
+/// An encoded `f16h` BVH: nodes (root at 0), the root frame, the triangles, and (for tests
+/// and statistics) the frame of every node.
+#[derive(Clone, Debug)]
+pub struct F16hBvh {
+    pub branching: usize,
+    pub nodes: F16hNodes,
+    pub root: RootFrame,
+    pub frames: Vec<Frame>,
+    pub tris: TriBuffer,
+}
+
+fn encode_nodes<N: NodeF16h>(w: &WideBvh, root: &RootFrame) -> Result<(Vec<N>, Vec<Frame>), EncodeError> {
+    let mut frames: Vec<Option<Frame>> = vec![None; w.nodes.len()];
+    frames[0] = Some(Frame { w: root.w, k: root.k });
+    let mut out = Vec::with_capacity(w.nodes.len());
+    for (i, n) in w.nodes.iter().enumerate() {
+        // Children always follow their parent, so the frame is known by now.
+        let f = frames[i].expect("wide BVH nodes are in depth-first order");
+        let mut node = N::empty();
+        for (slot, (b, c)) in n.children.iter().enumerate() {
+            let (lo, hi, _) = to_local(&f, b);
+            for v in lo.iter().chain(&hi) {
+                if !(v.to_f32().abs() <= COORD_LIMIT) {
+                    return Err(EncodeError::OutOfRange { node: i, child: slot, value: v.to_f64() });
+                }
+            }
+            node.set(slot, lo, hi, encode_child(c));
+            if let ChildRef::Inner(j) = c {
+                frames[*j as usize] = Some(derive_child(&f, lo, hi).frame);
+            }
+        }
+        out.push(node);
+    }
+    Ok((out, frames.into_iter().map(|f| f.unwrap()).collect()))
+}
+
+pub fn encode(scene: &Scene, w: &WideBvh) -> Result<F16hBvh, EncodeError> {
+    let root = root_frame(&w.nodes[0].bounds);
+    let (nodes, frames) = match w.branching {
+        2 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B2(n), f))?,
+        4 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B4(n), f))?,
+        8 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B8(n), f))?,
+        16 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B16(n), f))?,
+        b => panic!("unsupported branching {b}"),
+    };
+    Ok(F16hBvh { branching: w.branching, nodes, root, frames, tris: TriBuffer::new(scene, w) })
+}

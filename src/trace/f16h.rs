@@ -1,0 +1,289 @@
+//! Reference traversal of the `f16h` layout: box tests and origin moves in IEEE half
+//! arithmetic (`half::f16`, one rounding per operation), conservative, so it returns exactly
+//! the fp32 closest hit. The shader does the same operations in the same order.
+//!
+//! # State per stack entry (the seed's "extra stack")
+//! node; its frame (W, K) in fp32; the ray origin O in the node's frame (fp16); `e`, a bound
+//! on the origin's error; `tp`, the world parameter of the point P that O stands for; `tlo`,
+//! a lower bound on the world parameter of any point of the ray that can still matter in this
+//! node.
+//!
+//! # The bound relied on (invariant)
+//! With d* = D / max|D| (exact) and L the node frame's map:
+//! (I1) ‖O − L(P)‖∞ ≤ e, where P = O_world + tp·D exactly;
+//! (I2) every point X of the ray inside the node's true box with t_X ∈ [tmin, t_closest] has
+//!      t_X ≥ tlo.
+//! Write X = L(P) + s·d* (local units, s = (t_X − tp)·M·K). Since X lies in the node's box
+//! (|X| ≤ 16384) and |O| ≤ `OCAP`, |s| ≤ S = 16384 + OCAP + e. The approximate line
+//! A(s) = O + s·d16 then satisfies ‖A(s) − X‖∞ ≤ e + S·(2⁻¹² + 2⁻²⁴) (direction rounding).
+//! So a child whose true box contains X has A(s) inside its stored box widened by
+//! w_req = e + (36864 + e)·(2⁻¹² + 2⁻²⁴). The test widens by w = e·(1 + 2⁻¹¹) + 44 ≥ w_req + 32:
+//! the 32 absorb the two fp16 subtractions (lo − O) − w, whose half-ulp errors are ≤ 16 each
+//! below 65536 (larger results overflow outward, to ±inf). The products with 1/d16 then carry
+//! relative error ≤ 2⁻¹⁰ (rounding of 1/d16 and of the product), which the factors
+//! (1 ∓ 2⁻⁸) on the entry/exit cover with room for their own rounding. Hence the computed
+//! interval [tn_lb, tf_ub] contains every such s: no false misses.
+//! Culling uses s ≤ (t_closest − tp)·M·K (rounded up) and s ≥ −(tp − tlo)·M·K (rounded down).
+//!
+//! # Origin move
+//! For a hit inner child the new origin is E = O + s_e·d16 with s_e = max(tn, s_lower), then
+//! O' = (E − c)·r in the child frame (fp16, r exact). Its error bound e' = r·(e + |s_e|·2⁻¹⁰ +
+//! 2⁻¹¹·(|E| + |E − c|) + ε) plus the fp32 rounding of W' and tp'. The bound compounds: each
+//! level multiplies by r while P's true position is fixed, so in world units it converges to
+//! ≈ the root frame's fp16 grid (root extent / 2048). When e' would exceed `EMAX` (or O'
+//! leaves ±`OCAP`, or r > 2¹⁵), the origin is re-anchored: recomputed in fp32 from the world
+//! ray at the child's fp32 entry distance (`Counters::reanchors`). Keeping this rare is what
+//! makes fp16 origin moves usable; the counter reports how rare.
+
+use super::{slab32, sort_hits, upper32, Closest, Counters, Hit, RayPre};
+use crate::bvh::ChildRef;
+use crate::encode::f16h::{derive_child, F16hBvh, F16hNodes, Frame, NodeF16h};
+use crate::encode::{decode_child, CHILD_EMPTY};
+use crate::fp16::{down_f32, up_f32};
+use crate::rays::Ray;
+use half::f16;
+
+/// Largest |origin coordinate| kept in a frame (node boxes span ±16384).
+pub const OCAP: f32 = 20480.0;
+/// Largest origin error (local units) an fp16 origin move may leave; beyond it, re-anchor.
+pub const EMAX: f32 = 2048.0;
+/// Above this origin error the box tests are skipped: every child counts as hit.
+pub const EBIG: f32 = 16384.0;
+/// Absolute part of the box widening: drift 9 + two half-ulp subtractions 32 + spare.
+pub const W_MARGIN: f32 = 44.0;
+/// Geometric bound on |s| without the error term: 16384 + OCAP.
+const S_BASE: f32 = 16384.0 + OCAP;
+
+const TWO_M11: f32 = 1.0 / 2048.0;
+const TWO_M10: f32 = 1.0 / 1024.0;
+const TWO_M18: f32 = 1.0 / 262_144.0;
+const TWO_M21: f32 = 1.0 / 2_097_152.0;
+const TWO_M22: f32 = 1.0 / 4_194_304.0;
+const TWO_M23: f32 = 1.0 / 8_388_608.0;
+const TWO_M24: f32 = 1.0 / 16_777_216.0;
+
+/// One stack entry (see the module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct Entry {
+    pub node: u32,
+    pub frame: Frame,
+    pub o: [f16; 3],
+    pub e: f32,
+    pub tp: f32,
+    pub tlo: f32,
+}
+
+/// Per-ray fp16 constants: d16 = fp16(D / max|D|) (−0 → +0), idir = fp16(1 / d16).
+#[derive(Clone, Copy, Debug)]
+pub struct Ray16 {
+    pub m: f32,
+    pub d: [f16; 3],
+    pub idir: [f16; 3],
+}
+
+impl Ray16 {
+    pub fn new(r: &RayPre) -> Ray16 {
+        let m = r.d.abs().max_element();
+        let mut d = [f16::ZERO; 3];
+        let mut idir = [f16::ZERO; 3];
+        for a in 0..3 {
+            let x = f16::from_f32(r.d[a] / m);
+            d[a] = if x == f16::ZERO { f16::ZERO } else { x };
+            idir[a] = f16::from_f32(1.0 / d[a].to_f32());
+        }
+        Ray16 { m, d, idir }
+    }
+}
+
+/// Places the origin at world parameter `t` in frame `f`, computed in fp32 and rounded to
+/// fp16, clamped to ±OCAP; returns it with its error bound (fp32 rounding of the point and the
+/// frame map, the clamp distance, the fp16 rounding).
+pub fn anchor(r: &RayPre, f: &Frame, t: f32) -> ([f16; 3], f32) {
+    let mut o = [f16::ZERO; 3];
+    let mut mag = 0f32;
+    let mut clampd = 0f32;
+    let mut lmax = 0f32;
+    for a in 0..3 {
+        let td = t * r.d[a];
+        let x = r.o[a] + td;
+        let l = (x - f.w[a]) * f.k;
+        mag = mag.max(r.o[a].abs() + td.abs() + x.abs() + f.w[a].abs());
+        let lc = l.clamp(-OCAP, OCAP);
+        clampd = clampd.max((l - lc).abs());
+        lmax = lmax.max(lc.abs());
+        o[a] = f16::from_f32(lc);
+    }
+    let e = (mag * f.k * TWO_M23 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
+    (o, e)
+}
+
+/// The fp16 slab test of one child box: returns (tn, tn_lb, tf_ub) in the node's local
+/// parameter s. NaN products (only for an exactly zero widened difference times an infinite
+/// 1/d) impose no constraint.
+#[inline]
+pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f16, f16, f16) {
+    let mut tn = f16::NEG_INFINITY;
+    let mut tf = f16::INFINITY;
+    for a in 0..3 {
+        let la = (lo[a] - o[a]) - w;
+        let ha = (hi[a] - o[a]) + w;
+        let mut t0 = la * r16.idir[a];
+        let mut t1 = ha * r16.idir[a];
+        if t0 > t1 {
+            std::mem::swap(&mut t0, &mut t1);
+        }
+        if t0 > tn {
+            tn = t0;
+        }
+        if t1 < tf {
+            tf = t1;
+        }
+    }
+    const LO_DOWN: f16 = f16::from_f32_const(1.0 - 1.0 / 256.0);
+    const LO_UP: f16 = f16::from_f32_const(1.0 + 1.0 / 256.0);
+    let tn_lb = tn * if tn > f16::ZERO { LO_DOWN } else { LO_UP };
+    let tf_ub = tf * if tf > f16::ZERO { LO_UP } else { LO_DOWN };
+    (tn, tn_lb, tf_ub)
+}
+
+/// Rounds an fp32 value computed with a few roundings up to a safe upper bound.
+#[inline]
+fn up32(x: f32) -> f32 {
+    if x.is_infinite() {
+        x
+    } else {
+        upper32(x)
+    }
+}
+
+pub fn trace(bvh: &F16hBvh, ray: &Ray) -> (Hit, Counters) {
+    match &bvh.nodes {
+        F16hNodes::B2(n) => trace_n(bvh, n, ray),
+        F16hNodes::B4(n) => trace_n(bvh, n, ray),
+        F16hNodes::B8(n) => trace_n(bvh, n, ray),
+        F16hNodes::B16(n) => trace_n(bvh, n, ray),
+    }
+}
+
+fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray) -> (Hit, Counters) {
+    let r = RayPre::new(ray);
+    let r16 = Ray16::new(&r);
+    let mut c = Counters { box_tests: 1, ..Default::default() };
+    let mut best = Closest::new(ray.tmax);
+    let root = &bvh.root;
+    let (near, far) = slab32(&r, root.box_lo, root.box_hi, r.tmin, r.tmax);
+    if !(near <= far) {
+        return (Hit::MISS, c);
+    }
+    let rf = Frame { w: root.w, k: root.k };
+    let (o, e) = anchor(&r, &rf, near);
+    let mut stack: Vec<Entry> = Vec::with_capacity(64);
+    stack.push(Entry { node: 0, frame: rf, o, e, tp: near, tlo: near });
+    // (tn, tn_lb) per hit slot
+    let mut hits = [((f16::ZERO, f16::ZERO), 0usize); 16];
+    let mut pending = [(0u32, Frame { w: [0.0; 3], k: 0.0 }, [f16::ZERO; 3], 0f32, 0f32, 0f32); 16];
+    while let Some(en) = stack.pop() {
+        if en.tlo > best.t {
+            continue;
+        }
+        c.nodes += 1;
+        let n = &nodes[en.node as usize];
+        let mk = r16.m * en.frame.k;
+        let s_max = S_BASE + en.e + 1.0;
+        let s_lim = up_f32(up32((best.t - en.tp) * mk).min(s_max));
+        let sigma = up32((en.tp - en.tlo) * mk);
+        let lower = down_f32((-sigma).max(-s_max));
+        let precise = en.e <= EBIG;
+        let w = up_f32(en.e + en.e * TWO_M11 + W_MARGIN);
+        let mut nh = 0;
+        for s in 0..N::B {
+            if n.child(s) == CHILD_EMPTY {
+                break;
+            }
+            c.box_tests += 1;
+            if precise {
+                let lo = [n.lo(0, s), n.lo(1, s), n.lo(2, s)];
+                let hi = [n.hi(0, s), n.hi(1, s), n.hi(2, s)];
+                let (tn, tn_lb, tf_ub) = slab16(&en.o, &r16, w, lo, hi);
+                if tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= s_lim {
+                    hits[nh] = ((tn, tn_lb), s);
+                    nh += 1;
+                }
+            } else {
+                hits[nh] = ((lower, lower), s);
+                nh += 1;
+            }
+        }
+        sort_hits(&mut hits[..nh], |t| t.0.to_f32());
+        let mut np = 0;
+        for &((tn, tn_lb), s) in &hits[..nh] {
+            match decode_child(n.child(s)) {
+                ChildRef::Leaf { first, count } => {
+                    for i in first..first + count {
+                        c.tri_tests += 1;
+                        best.test(&r, &bvh.tris.verts[i as usize], bvh.tris.ids[i as usize] as i32);
+                    }
+                }
+                ChildRef::Inner(j) => {
+                    let lo = [n.lo(0, s), n.lo(1, s), n.lo(2, s)];
+                    let hi = [n.hi(0, s), n.hi(1, s), n.hi(2, s)];
+                    let cf = derive_child(&en.frame, lo, hi);
+                    // Lower bound of the world parameter of anything that matters in the child.
+                    let s_lo = tn_lb.max(lower).to_f32();
+                    let q = s_lo / mk;
+                    let tlo = ((en.tp + q) - (en.tp.abs() + q.abs()) * TWO_M21).max(en.tlo);
+                    let s_e = tn.max(lower);
+                    let mut moved = None;
+                    if precise && cf.r <= 32768.0 {
+                        let r16c = f16::from_f32(cf.r);
+                        let mut o2 = [f16::ZERO; 3];
+                        let (mut emag, mut ecmag, mut omag) = (0f32, 0f32, 0f32);
+                        let mut finite = true;
+                        for a in 0..3 {
+                            let ea = en.o[a] + s_e * r16.d[a];
+                            let ec = ea - cf.c[a];
+                            o2[a] = ec * r16c;
+                            emag = emag.max(ea.to_f32().abs());
+                            ecmag = ecmag.max(ec.to_f32().abs());
+                            omag = omag.max(o2[a].to_f32().abs());
+                            finite &= o2[a].is_finite();
+                        }
+                        let se = s_e.to_f32();
+                        let step = se / mk;
+                        let tp = en.tp + step;
+                        let wmax = cf.frame.w.iter().fold(0f32, |m, x| m.max(x.abs()));
+                        let mk2 = r16.m * cf.frame.k;
+                        let e2 = (cf.r * (en.e + se.abs() * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
+                            + wmax * TWO_M24 * cf.frame.k
+                            + (en.tp.abs() + step.abs()) * TWO_M22 * mk2)
+                            * (1.0 + TWO_M18);
+                        if finite && omag <= OCAP && e2 <= EMAX {
+                            moved = Some((o2, e2, tp));
+                        }
+                    }
+                    let (o2, e2, tp) = moved.unwrap_or_else(|| {
+                        c.reanchors += 1;
+                        let inv_k = 1.0 / en.frame.k;
+                        let mut blo = [0f32; 3];
+                        let mut bhi = [0f32; 3];
+                        for a in 0..3 {
+                            blo[a] = en.frame.w[a] + lo[a].to_f32() * inv_k;
+                            bhi[a] = en.frame.w[a] + hi[a].to_f32() * inv_k;
+                        }
+                        let (tin, tout) = slab32(&r, blo, bhi, f32::NEG_INFINITY, f32::INFINITY);
+                        let tp = tin.min(tout).max(tlo);
+                        let (o2, e2) = anchor(&r, &cf.frame, tp);
+                        (o2, e2, tp)
+                    });
+                    pending[np] = (j, cf.frame, o2, e2, tp, tlo);
+                    np += 1;
+                }
+            }
+        }
+        for k in (0..np).rev() {
+            let (node, frame, o, e, tp, tlo) = pending[k];
+            stack.push(Entry { node, frame, o, e, tp, tlo });
+        }
+    }
+    (best.hit(), c)
+}

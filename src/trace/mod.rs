@@ -1,0 +1,202 @@
+//! CPU reference traversal, one module per layout, plus brute force. These are the oracles
+//! every GPU variant is compared with.
+//!
+//! Rules shared by every tracer (and by the shaders):
+//! - Triangle tests are fp32 world space, watertight (Woop, Benthin, Wald 2013, with the
+//!   paper's fp64 fallback when an edge function is exactly zero), accepting
+//!   `tmin <= t <= t_closest`.
+//! - Closest-hit ties (bit-identical t) go to the lower `prim`, so results never depend on
+//!   traversal order and variants compare ray for ray without tolerance.
+//! - Box tests are conservative (never reject a box the exact ray touches), so a traversal
+//!   returns exactly the brute-force closest hit.
+
+pub mod brute;
+pub mod f16h;
+pub mod f32;
+pub mod tri;
+
+use crate::rays::Ray;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// One row of `hits.npy`: `t` (+inf on a miss), `prim` (−1 on a miss), barycentrics `u`, `v`
+/// of vertices 1 and 2 (hit point = (1−u−v)·v0 + u·v1 + v·v2). 16 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Hit {
+    pub t: f32,
+    pub prim: i32,
+    pub u: f32,
+    pub v: f32,
+}
+const _: () = assert!(std::mem::size_of::<Hit>() == 16);
+
+impl Hit {
+    pub const MISS: Hit = Hit { t: f32::INFINITY, prim: -1, u: 0.0, v: 0.0 };
+    pub fn is_hit(&self) -> bool {
+        self.prim >= 0
+    }
+    /// Bitwise equality of all four fields.
+    pub fn same_bits(&self, o: &Hit) -> bool {
+        bytemuck::bytes_of(self) == bytemuck::bytes_of(o)
+    }
+}
+
+/// Work counters of one ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Inner nodes popped and visited.
+    pub nodes: u32,
+    /// Ray–box tests (child boxes of visited nodes, plus the root's own box).
+    pub box_tests: u32,
+    /// Ray–triangle tests.
+    pub tri_tests: u32,
+    /// f16h only: child origins recomputed from the fp32 world ray because the fp16 origin
+    /// move's error bound grew too large.
+    pub reanchors: u32,
+}
+
+impl std::ops::AddAssign for Counters {
+    fn add_assign(&mut self, o: Counters) {
+        self.nodes += o.nodes;
+        self.box_tests += o.box_tests;
+        self.tri_tests += o.tri_tests;
+        self.reanchors += o.reanchors;
+    }
+}
+
+/// Per-ray constants shared by the fp32 box and triangle tests.
+#[derive(Clone, Copy, Debug)]
+pub struct RayPre {
+    pub o: Vec3,
+    /// Direction with −0 components replaced by +0 (so 1/d is +inf, never −inf).
+    pub d: Vec3,
+    pub inv: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+    pub kx: usize,
+    pub ky: usize,
+    pub kz: usize,
+    pub sx: f32,
+    pub sy: f32,
+    pub sz: f32,
+}
+
+impl RayPre {
+    pub fn new(r: &Ray) -> RayPre {
+        let d = Vec3::from(r.dir.map(|c| if c == 0.0 { 0.0 } else { c }));
+        let kz = crate::geom::max_abs_axis(d);
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        RayPre {
+            o: r.o(),
+            d,
+            inv: Vec3::ONE / d,
+            tmin: r.tmin,
+            tmax: r.tmax,
+            kx,
+            ky,
+            kz,
+            sx: d[kx] / d[kz],
+            sy: d[ky] / d[kz],
+            sz: 1.0 / d[kz],
+        }
+    }
+}
+
+/// The closest hit so far. `prim == i32::MAX` until something is hit, so a hit exactly at
+/// `tmax` is accepted like any other (`t <= tmax`).
+#[derive(Clone, Copy, Debug)]
+pub struct Closest {
+    pub t: f32,
+    pub prim: i32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Closest {
+    pub fn new(tmax: f32) -> Closest {
+        Closest { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0 }
+    }
+    /// Tests triangle `verts` with public id `prim` and keeps it if closer (ties: lower prim).
+    #[inline]
+    pub fn test(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
+        if let Some((t, u, v)) = tri::intersect(r, verts) {
+            if t >= r.tmin && (t < self.t || (t == self.t && prim < self.prim)) {
+                *self = Closest { t, prim, u, v };
+            }
+        }
+    }
+    pub fn hit(&self) -> Hit {
+        if self.prim == i32::MAX {
+            Hit::MISS
+        } else {
+            Hit { t: self.t, prim: self.prim, u: self.u, v: self.v }
+        }
+    }
+}
+
+/// Multiplies a computed ray parameter so it becomes a lower bound of the exact one
+/// (relative error allowance 2⁻²⁰ ≫ the 2γ₃ of Ize 2013). NaN stays NaN.
+#[inline]
+pub fn lower32(t: f32) -> f32 {
+    t * if t > 0.0 { 1.0 - 1.0 / 1_048_576.0 } else { 1.0 + 1.0 / 1_048_576.0 }
+}
+
+/// Upper-bound counterpart of [`lower32`].
+#[inline]
+pub fn upper32(t: f32) -> f32 {
+    t * if t > 0.0 { 1.0 + 1.0 / 1_048_576.0 } else { 1.0 - 1.0 / 1_048_576.0 }
+}
+
+/// Conservative fp32 slab test of the ray line against a world box over `[t0, t1]`.
+/// An axis whose products are NaN (origin exactly on a face plane of a zero direction
+/// component) imposes no constraint: NaN comparisons are false (pbrt's formulation).
+/// Returns the (lowered) entry and (raised) exit; the box is hit when `near <= far`.
+#[inline]
+pub fn slab32(r: &RayPre, lo: [f32; 3], hi: [f32; 3], t0: f32, t1: f32) -> (f32, f32) {
+    let mut near = t0;
+    let mut far = t1;
+    for a in 0..3 {
+        let mut n = (lo[a] - r.o[a]) * r.inv[a];
+        let mut f = (hi[a] - r.o[a]) * r.inv[a];
+        if n > f {
+            std::mem::swap(&mut n, &mut f);
+        }
+        let n = lower32(n);
+        let f = upper32(f);
+        if n > near {
+            near = n;
+        }
+        if f < far {
+            far = f;
+        }
+    }
+    (near, far)
+}
+
+/// Traces a batch of rays in parallel with `f`, keeping input order.
+pub fn trace_all<F>(rays: &[Ray], f: F) -> (Vec<Hit>, Vec<Counters>)
+where
+    F: Fn(&Ray) -> (Hit, Counters) + Sync + Send,
+{
+    rays.par_iter().map(f).unzip()
+}
+
+/// Sorts up to 16 (key, slot) pairs ascending by key, then slot (insertion sort; the order the
+/// shaders use).
+#[inline]
+pub(crate) fn sort_hits<T: Copy>(v: &mut [(T, usize)], key: impl Fn(&T) -> f32) {
+    for i in 1..v.len() {
+        let x = v[i];
+        let mut j = i;
+        while j > 0 && (key(&v[j - 1].0) > key(&x.0) || (key(&v[j - 1].0) == key(&x.0) && v[j - 1].1 > x.1)) {
+            v[j] = v[j - 1];
+            j -= 1;
+        }
+        v[j] = x;
+    }
+}

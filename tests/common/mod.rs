@@ -1,0 +1,70 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use halftrace::bvh::{self, BinaryBvh};
+use halftrace::pipeline::{self, RayKind, RayParams};
+use halftrace::rays::Ray;
+use halftrace::scene::{self, Scene};
+use halftrace::trace::Hit;
+use std::path::PathBuf;
+
+/// `../shared/scenes` beside the repository. Missing scenes fail the test loudly: CI always
+/// has them.
+pub fn scenes_dir() -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes");
+    assert!(d.is_dir(), "shared scenes not found at {} — tests need ../shared/scenes", d.display());
+    d
+}
+
+/// Every scene file in the shared folder, sorted by name.
+pub fn all_scenes() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(scenes_dir())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            let n = p.to_string_lossy();
+            n.ends_with(".obj") || n.ends_with(".obj.gz")
+        })
+        .collect();
+    v.sort();
+    assert!(v.len() >= 10, "expected the shared scene set, found {} files", v.len());
+    v
+}
+
+pub fn load(name: &str) -> Scene {
+    scene::load(&scenes_dir().join(name)).unwrap()
+}
+
+pub struct Prepared {
+    pub scene: Scene,
+    pub bin: BinaryBvh,
+}
+
+pub fn prepare(path: &PathBuf) -> Prepared {
+    let scene = scene::load(path).unwrap_or_else(|e| panic!("{e}"));
+    let bin = bvh::build_binary(&scene);
+    Prepared { scene, bin }
+}
+
+/// The ray sets the conformance tests use: primary, ao, diffuse at `res`², and grazing rays.
+pub fn ray_sets(p: &Prepared, res: u32, grazing: usize) -> Vec<(String, Vec<Ray>)> {
+    let params = RayParams { width: res, height: res, camera: None, seed: 7, grazing };
+    [RayKind::Primary, RayKind::Ao, RayKind::Diffuse, RayKind::Grazing]
+        .into_iter()
+        .map(|k| (k.to_string(), pipeline::make_rays(&p.scene, &p.bin, &k, &params).unwrap()))
+        .collect()
+}
+
+/// Compares two hit lists ray for ray (bitwise); panics naming the variant, the ray and both
+/// results at the first mismatches.
+pub fn assert_same_hits(what: &str, rays: &[Ray], expected: &[Hit], got: &[Hit]) {
+    assert_eq!(expected.len(), got.len(), "{what}: hit count");
+    let bad: Vec<usize> = (0..got.len()).filter(|&i| !expected[i].same_bits(&got[i])).collect();
+    if !bad.is_empty() {
+        let mut msg = format!("{what}: {} of {} rays differ; first ones:\n", bad.len(), got.len());
+        for &i in bad.iter().take(5) {
+            msg += &format!("  ray {i} {:?}: expected {:?}, got {:?}\n", rays[i], expected[i], got[i]);
+        }
+        panic!("{msg}");
+    }
+}
