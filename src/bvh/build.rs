@@ -4,8 +4,36 @@
 
 use crate::geom::Aabb;
 use crate::scene::Scene;
-use glam::Vec3;
+use glam::Vec3A;
 use rayon::prelude::*;
+
+/// SIMD box used inside the builder.
+#[derive(Clone, Copy, Debug)]
+struct Bx {
+    min: Vec3A,
+    max: Vec3A,
+}
+
+impl Bx {
+    const EMPTY: Bx = Bx { min: Vec3A::splat(f32::INFINITY), max: Vec3A::splat(f32::NEG_INFINITY) };
+    #[inline(always)]
+    fn union(&self, o: &Bx) -> Bx {
+        Bx { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+    #[inline(always)]
+    fn grow(&mut self, p: Vec3A) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+    #[inline(always)]
+    fn area(&self) -> f32 {
+        let d = (self.max - self.min).max(Vec3A::ZERO);
+        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+    }
+    fn aabb(&self) -> Aabb {
+        Aabb { min: self.min.into(), max: self.max.into() }
+    }
+}
 
 /// Number of SAH bins per axis.
 pub const BINS: usize = 16;
@@ -37,17 +65,17 @@ pub struct BinaryBvh {
 }
 
 struct Ctx<'a> {
-    bounds: &'a [Aabb],
-    centroids: &'a [Vec3],
+    bounds: &'a [Bx],
+    centroids: &'a [Vec3A],
 }
 
 #[derive(Clone, Copy)]
 struct Bin {
-    bounds: Aabb,
+    bounds: Bx,
     count: u32,
 }
 
-const EMPTY_BIN: Bin = Bin { bounds: Aabb::EMPTY, count: 0 };
+const EMPTY_BIN: Bin = Bin { bounds: Bx::EMPTY, count: 0 };
 
 /// Subtrees below this many triangles are built sequentially.
 const PAR_SUBTREE: usize = 4096;
@@ -57,22 +85,24 @@ const PAR_BINNING: usize = 65536;
 /// Builds the binary BVH of a scene.
 pub fn build_binary(scene: &Scene) -> BinaryBvh {
     let n = scene.tris.len();
-    let (bounds, centroids): (Vec<Aabb>, Vec<Vec3>) = scene
+    let (bounds, centroids): (Vec<Bx>, Vec<Vec3A>) = scene
         .tris
         .par_iter()
         .map(|t| {
-            let b = Aabb::from_points(t);
-            (b, b.center())
+            let (a, b, c) = (Vec3A::from(t[0]), Vec3A::from(t[1]), Vec3A::from(t[2]));
+            let bx = Bx { min: a.min(b).min(c), max: a.max(b).max(c) };
+            (bx, (bx.min + bx.max) * 0.5)
         })
         .unzip();
     let ctx = Ctx { bounds: &bounds, centroids: &centroids };
     let mut prims: Vec<u32> = (0..n as u32).collect();
-    let nodes = build_rec(&ctx, &mut prims, 0);
+    let (b, cb) = range_bounds(&ctx, &prims);
+    let nodes = build_rec(&ctx, &mut prims, 0, b, cb);
     BinaryBvh { nodes, prims }
 }
 
-fn range_bounds(ctx: &Ctx, prims: &[u32]) -> (Aabb, Aabb) {
-    let f = |(mut b, mut c): (Aabb, Aabb), &p: &u32| {
+fn range_bounds(ctx: &Ctx, prims: &[u32]) -> (Bx, Bx) {
+    let f = |(mut b, mut c): (Bx, Bx), &p: &u32| {
         b = b.union(&ctx.bounds[p as usize]);
         c.grow(ctx.centroids[p as usize]);
         (b, c)
@@ -80,25 +110,33 @@ fn range_bounds(ctx: &Ctx, prims: &[u32]) -> (Aabb, Aabb) {
     if prims.len() >= PAR_BINNING {
         prims
             .par_chunks(8192)
-            .map(|ch| ch.iter().fold((Aabb::EMPTY, Aabb::EMPTY), f))
-            .reduce(|| (Aabb::EMPTY, Aabb::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
+            .map(|ch| ch.iter().fold((Bx::EMPTY, Bx::EMPTY), f))
+            .reduce(|| (Bx::EMPTY, Bx::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
     } else {
-        prims.iter().fold((Aabb::EMPTY, Aabb::EMPTY), f)
+        prims.iter().fold((Bx::EMPTY, Bx::EMPTY), f)
     }
 }
 
-fn bin_prims(ctx: &Ctx, prims: &[u32], cb: &Aabb, scale: Vec3) -> [[Bin; BINS]; 3] {
-    let f = |mut bins: [[Bin; BINS]; 3], &p: &u32| {
+fn bin_chunk(ctx: &Ctx, prims: &[u32], cb: &Bx, scale: Vec3A) -> [[Bin; BINS]; 3] {
+    let mut bins = [[EMPTY_BIN; BINS]; 3];
+    let top = glam::UVec3::splat(BINS as u32 - 1);
+    for &p in prims {
         let c = ctx.centroids[p as usize];
         let b = &ctx.bounds[p as usize];
+        let idx = ((c - cb.min) * scale).as_uvec3().min(top);
         for a in 0..3 {
-            let i = (((c[a] - cb.min[a]) * scale[a]) as usize).min(BINS - 1);
-            let bin = &mut bins[a][i];
+            let bin = &mut bins[a][idx[a] as usize];
             bin.count += 1;
             bin.bounds = bin.bounds.union(b);
         }
-        bins
-    };
+    }
+    bins
+}
+
+fn bin_prims(ctx: &Ctx, prims: &[u32], cb: &Bx, scale: Vec3A) -> [[Bin; BINS]; 3] {
+    if prims.len() < PAR_BINNING {
+        return bin_chunk(ctx, prims, cb, scale);
+    }
     let merge = |mut x: [[Bin; BINS]; 3], y: [[Bin; BINS]; 3]| {
         for a in 0..3 {
             for i in 0..BINS {
@@ -108,30 +146,27 @@ fn bin_prims(ctx: &Ctx, prims: &[u32], cb: &Aabb, scale: Vec3) -> [[Bin; BINS]; 
         }
         x
     };
-    if prims.len() >= PAR_BINNING {
-        prims.par_chunks(8192).map(|ch| ch.iter().fold([[EMPTY_BIN; BINS]; 3], f)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge)
-    } else {
-        prims.iter().fold([[EMPTY_BIN; BINS]; 3], f)
-    }
+    prims.par_chunks(8192).map(|ch| bin_chunk(ctx, ch, cb, scale)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge)
 }
 
 /// Builds the subtree over `prims` (in place partition); returns its nodes with the root first
 /// and child indices local to the returned vector. `base` is the offset of `prims` in the
 /// global primitive array.
-fn build_rec(ctx: &Ctx, prims: &mut [u32], base: u32) -> Vec<BinaryNode> {
+fn build_rec(ctx: &Ctx, prims: &mut [u32], base: u32, bounds: Bx, cb: Bx) -> Vec<BinaryNode> {
     let mut nodes = Vec::with_capacity(2 * prims.len() / 3 + 1);
     if prims.len() < PAR_SUBTREE {
-        build_seq(ctx, prims, base, &mut nodes);
+        nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
+        build_seq_at(ctx, prims, base, &mut nodes, 0, bounds, cb);
         return nodes;
     }
-    let (bounds, cb) = range_bounds(ctx, prims);
-    let Some(mid) = split(ctx, prims, &bounds, &cb) else {
-        nodes.push(BinaryNode { bounds, first: base, count: prims.len() as u32 });
+    let Some(sp) = split(ctx, prims, &bounds, &cb) else {
+        nodes.push(BinaryNode { bounds: bounds.aabb(), first: base, count: prims.len() as u32 });
         return nodes;
     };
+    let mid = sp.mid;
     let (l, r) = prims.split_at_mut(mid);
-    let (ln, rn) = rayon::join(|| build_rec(ctx, l, base), || build_rec(ctx, r, base + mid as u32));
-    nodes.push(BinaryNode { bounds, first: 1, count: 0 });
+    let (ln, rn) = rayon::join(|| build_rec(ctx, l, base, sp.lb, sp.lcb), || build_rec(ctx, r, base + mid as u32, sp.rb, sp.rcb));
+    nodes.push(BinaryNode { bounds: bounds.aabb(), first: 1, count: 0 });
     nodes.push(ln[0]);
     nodes.push(rn[0]);
     // Children of the root are at 1 and 2; the rest of each subtree follows.
@@ -151,53 +186,57 @@ fn build_rec(ctx: &Ctx, prims: &mut [u32], base: u32) -> Vec<BinaryNode> {
     nodes
 }
 
-fn build_seq(ctx: &Ctx, prims: &mut [u32], base: u32, nodes: &mut Vec<BinaryNode>) {
-    nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
-    build_seq_at(ctx, prims, base, nodes, nodes.len() - 1);
-}
-
 /// Builds the subtree over `prims` with its root written to `nodes[slot]`.
-fn build_seq_at(ctx: &Ctx, prims: &mut [u32], base: u32, nodes: &mut Vec<BinaryNode>, slot: usize) {
-    let (bounds, cb) = range_bounds(ctx, prims);
-    let Some(mid) = split(ctx, prims, &bounds, &cb) else {
-        nodes[slot] = BinaryNode { bounds, first: base, count: prims.len() as u32 };
+fn build_seq_at(ctx: &Ctx, prims: &mut [u32], base: u32, nodes: &mut Vec<BinaryNode>, slot: usize, bounds: Bx, cb: Bx) {
+    let Some(sp) = split(ctx, prims, &bounds, &cb) else {
+        nodes[slot] = BinaryNode { bounds: bounds.aabb(), first: base, count: prims.len() as u32 };
         return;
     };
     let first = nodes.len();
-    nodes[slot] = BinaryNode { bounds, first: first as u32, count: 0 };
+    nodes[slot] = BinaryNode { bounds: bounds.aabb(), first: first as u32, count: 0 };
     nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
     nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
-    let (l, r) = prims.split_at_mut(mid);
-    build_seq_at(ctx, l, base, nodes, first);
-    build_seq_at(ctx, r, base + mid as u32, nodes, first + 1);
+    let (l, r) = prims.split_at_mut(sp.mid);
+    build_seq_at(ctx, l, base, nodes, first, sp.lb, sp.lcb);
+    build_seq_at(ctx, r, base + sp.mid as u32, nodes, first + 1, sp.rb, sp.rcb);
 }
 
-/// Chooses a SAH split and partitions `prims`; returns the split position or `None` for a leaf.
-fn split(ctx: &Ctx, prims: &mut [u32], bounds: &Aabb, cb: &Aabb) -> Option<usize> {
+/// A chosen split: position in the range and both children's bounds and centroid bounds.
+struct Split {
+    mid: usize,
+    lb: Bx,
+    lcb: Bx,
+    rb: Bx,
+    rcb: Bx,
+}
+
+/// Chooses a SAH split and partitions `prims` (centroid bounds of both sides are gathered
+/// during the partition, box bounds come from the bins); returns `None` for a leaf.
+fn split(ctx: &Ctx, prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Split> {
     let n = prims.len();
     if n <= 1 {
         return None;
     }
     let ext = cb.max - cb.min;
-    let mut best = (f32::INFINITY, 0usize, 0usize);
+    // (cost, axis, bin, left box, right box)
+    let mut best = (f32::INFINITY, 0usize, 0usize, Bx::EMPTY, Bx::EMPTY);
     if ext.max_element() > 0.0 {
-        let scale = Vec3::select(ext.cmpgt(Vec3::ZERO), Vec3::splat(BINS as f32 * (1.0 - 1e-6)) / ext, Vec3::ZERO);
+        let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32 * (1.0 - 1e-6)) / ext, Vec3A::ZERO);
         let bins = bin_prims(ctx, prims, cb, scale);
         for a in 0..3 {
             if ext[a] <= 0.0 {
                 continue;
             }
-            // Sweep from the right to get suffix areas and counts.
-            let mut right_area = [0f32; BINS];
+            let mut right_box = [Bx::EMPTY; BINS];
             let mut right_count = [0u32; BINS];
-            let (mut rb, mut rc) = (Aabb::EMPTY, 0u32);
+            let (mut rb, mut rc) = (Bx::EMPTY, 0u32);
             for i in (1..BINS).rev() {
                 rb = rb.union(&bins[a][i].bounds);
                 rc += bins[a][i].count;
-                right_area[i] = rb.area();
+                right_box[i] = rb;
                 right_count[i] = rc;
             }
-            let (mut lb, mut lc) = (Aabb::EMPTY, 0u32);
+            let (mut lb, mut lc) = (Bx::EMPTY, 0u32);
             for i in 0..BINS - 1 {
                 lb = lb.union(&bins[a][i].bounds);
                 lc += bins[a][i].count;
@@ -205,49 +244,50 @@ fn split(ctx: &Ctx, prims: &mut [u32], bounds: &Aabb, cb: &Aabb) -> Option<usize
                 if lc == 0 || rc == 0 {
                     continue;
                 }
-                let cost = lb.area() * lc as f32 + right_area[i + 1] * rc as f32;
+                let cost = lb.area() * lc as f32 + right_box[i + 1].area() * rc as f32;
                 if cost < best.0 {
-                    best = (cost, a, i);
+                    best = (cost, a, i, lb, right_box[i + 1]);
                 }
             }
         }
-    }
-    let parent_area = bounds.area();
-    let leaf_cost = n as f32;
-    if best.0.is_finite() {
-        let split_cost = C_TRAV + if parent_area > 0.0 { best.0 / parent_area } else { n as f32 };
-        if n <= MAX_LEAF && leaf_cost <= split_cost {
-            return None;
-        }
-        let (_, a, i) = best;
-        let scale = BINS as f32 * (1.0 - 1e-6) / ext[a];
-        let goes_left = |p: &u32| (((ctx.centroids[*p as usize][a] - cb.min[a]) * scale) as usize).min(BINS - 1) <= i;
-        let mid = partition(prims, goes_left);
-        if mid > 0 && mid < n {
-            return Some(mid);
+        if best.0.is_finite() {
+            let split_cost = C_TRAV + if bounds.area() > 0.0 { best.0 / bounds.area() } else { n as f32 };
+            if n <= MAX_LEAF && n as f32 <= split_cost {
+                return None;
+            }
+            let (_, a, i, lb, rb) = best;
+            let (mut lcb, mut rcb) = (Bx::EMPTY, Bx::EMPTY);
+            let mut m = 0;
+            for j in 0..n {
+                let p = prims[j];
+                let c = ctx.centroids[p as usize];
+                if (((c[a] - cb.min[a]) * scale[a]) as usize).min(BINS - 1) <= i {
+                    lcb.grow(c);
+                    prims.swap(m, j);
+                    m += 1;
+                } else {
+                    rcb.grow(c);
+                }
+            }
+            if m > 0 && m < n {
+                return Some(Split { mid: m, lb, lcb, rb, rcb });
+            }
         }
     }
     if n <= MAX_LEAF {
         return None;
     }
     // All centroids coincide (or binning failed): split in the middle of the index range.
-    Some(n / 2)
-}
-
-fn partition(v: &mut [u32], pred: impl Fn(&u32) -> bool) -> usize {
-    let mut i = 0;
-    for j in 0..v.len() {
-        if pred(&v[j]) {
-            v.swap(i, j);
-            i += 1;
-        }
-    }
-    i
+    let mid = n / 2;
+    let (lb, lcb) = range_bounds(ctx, &prims[..mid]);
+    let (rb, rcb) = range_bounds(ctx, &prims[mid..]);
+    Some(Split { mid, lb, lcb, rb, rcb })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn grid_scene(n: usize) -> Scene {
         let mut tris = Vec::new();

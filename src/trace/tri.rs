@@ -62,8 +62,10 @@ mod tests {
         let t1 = [0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0];
         for i in 1..1000 {
             let x = i as f32 / 1000.0;
-            let r = RayPre::new(&Ray::new(Vec3::new(x, x, 1.0), Vec3::new(0.001, -0.0007, -1.0), 0.0, f32::INFINITY));
-            assert!(intersect(&r, &t0).is_some() || intersect(&r, &t1).is_some(), "gap at {x}");
+            for d in [Vec3::new(0.0, 0.0, -1.0), Vec3::new(-0.3, -0.3, -1.0), Vec3::new(0.37, -0.21, -1.0)] {
+                let r = RayPre::new(&Ray::new(Vec3::new(x, x, 0.0) - d, d, 0.0, f32::INFINITY));
+                assert!(intersect(&r, &t0).is_some() || intersect(&r, &t1).is_some(), "gap at {x} dir {d}");
+            }
         }
     }
 
