@@ -1,1 +1,36 @@
-fn main(){}
+//! BVH build + collapse + encode throughput on the largest shared scene (igea, 268k
+//! triangles), every B and layout. Target on the 2-core CI machine: ≥ 2 M triangles/s for
+//! the binary SAH build.
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use halftrace::bvh::{self, BRANCHINGS};
+use halftrace::encode;
+use std::path::PathBuf;
+
+fn bench(c: &mut Criterion) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/igea.obj.gz");
+    let scene = halftrace::scene::load(&path).expect("benchmarks need ../shared/scenes/igea.obj.gz");
+    let n = scene.len() as u64;
+    let mut g = c.benchmark_group("build");
+    g.sample_size(20);
+    g.throughput(Throughput::Elements(n));
+    g.bench_function("binary_sah/igea", |b| b.iter(|| bvh::build_binary(&scene)));
+    let bin = bvh::build_binary(&scene);
+    for b in BRANCHINGS {
+        g.bench_function(format!("collapse/b{b}"), |bn| bn.iter(|| bvh::collapse(&bin, b)));
+        let w = bvh::collapse(&bin, b);
+        g.bench_function(format!("encode_f32/b{b}"), |bn| bn.iter(|| encode::f32::encode(&scene, &w)));
+        g.bench_function(format!("encode_f16h/b{b}"), |bn| bn.iter(|| encode::f16h::encode(&scene, &w).unwrap()));
+        g.bench_function(format!("total_f16h/b{b}"), |bn| {
+            bn.iter(|| {
+                let bin = bvh::build_binary(&scene);
+                let w = bvh::collapse(&bin, b);
+                encode::f16h::encode(&scene, &w).unwrap()
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

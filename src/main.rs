@@ -7,8 +7,14 @@ use halftrace::encode::Layout;
 use halftrace::pipeline::{self, Encoded, RayKind, RayParams};
 use halftrace::rays::Camera;
 use halftrace::{npy, scene};
+use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
+
+/// Writes a line to stdout, returning I/O errors (a closed pipe ends the command quietly).
+macro_rules! outln {
+    ($($t:tt)*) => { writeln!(std::io::stdout(), $($t)*)? };
+}
 
 #[derive(Parser)]
 #[command(name = "halftrace", version, about = "Half-precision hierarchical BVH traversal harness")]
@@ -89,21 +95,21 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let secs = t1.elapsed().as_secs_f64();
     let nhit = hits.iter().filter(|h| h.is_hit()).count();
     let m = pipeline::mean_counters(&counters);
-    println!("scene {} ({} triangles), layout {layout}, B={}, rays {kind}: {} rays, {} hits", scene.name, scene.len(), a.branching, rays.len(), nhit);
-    println!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
-    println!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
+    outln!("scene {} ({} triangles), layout {layout}, B={}, rays {kind}: {} rays, {} hits", scene.name, scene.len(), a.branching, rays.len(), nhit);
+    outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
+    outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
     if let Some(p) = &a.out {
         npy::write_hits(p, &hits)?;
-        println!("hits written to {}", p.display());
+        outln!("hits written to {}", p.display());
     }
     if let Some(p) = &a.save_rays {
         npy::write_rays(p, &rays)?;
-        println!("rays written to {}", p.display());
+        outln!("rays written to {}", p.display());
     }
     if let Some(p) = &a.image {
         anyhow::ensure!(kind == RayKind::Primary, "--image needs --rays primary");
         pipeline::write_image(p, &scene, &rays, &hits, a.width, a.height)?;
-        println!("image written to {}", p.display());
+        outln!("image written to {}", p.display());
     }
     Ok(())
 }
@@ -113,21 +119,21 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let bin = bvh::build_binary(&scene);
     let ms = t0.elapsed().as_secs_f64() * 1e3;
-    println!("scene {} ({} triangles, {} degenerate); binary SAH build {:.1} ms ({:.2} Mtris/s)", scene.name, scene.len(), scene.degenerate, ms, scene.len() as f64 / ms / 1e3);
-    println!("{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9} {:>6}", "B", "layout", "nodes", "leaves", "node bytes", "bytes/node", "depth", "SAH cost", "fill");
+    outln!("scene {} ({} triangles, {} degenerate); binary SAH build {:.1} ms ({:.2} Mtris/s)", scene.name, scene.len(), scene.degenerate, ms, scene.len() as f64 / ms / 1e3);
+    outln!("{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9} {:>6}", "B", "layout", "nodes", "leaves", "node bytes", "bytes/node", "depth", "SAH cost", "fill");
     for b in bvh::BRANCHINGS {
         let w = bvh::collapse(&bin, b);
         let st = stats(&w);
         for layout in Layout::ALL {
             let enc = Encoded::new(&scene, &bin, layout, b)?;
-            println!(
+            outln!(
                 "{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9.2} {:>6.2}",
                 b, layout.name(), st.inner_nodes, st.leaves, enc.node_bytes(), enc.node_bytes() / enc.node_count(), st.depth, st.sah_cost, st.fill
             );
         }
     }
     let tb = halftrace::encode::TriBuffer::new(&scene, &bvh::collapse(&bin, 2));
-    println!("triangles (shared by all layouts): {} bytes", tb.bytes());
+    outln!("triangles (shared by all layouts): {} bytes", tb.bytes());
     Ok(())
 }
 

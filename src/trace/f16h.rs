@@ -287,3 +287,102 @@ fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray) -> (Hit, Counters
     }
     (best.hit(), c)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fp16;
+    use proptest::prelude::*;
+
+    /// A unit-max-norm direction from three random components.
+    fn dir(v: [f64; 3]) -> Option<[f64; 3]> {
+        let m = v.iter().fold(0f64, |m, x| m.max(x.abs()));
+        (m > 1e-9).then(|| {
+            let d = v.map(|x| ((x / m) as f32) as f64);
+            // make the dominant component exactly ±1
+            let k = (0..3).max_by(|&a, &b| d[a].abs().total_cmp(&d[b].abs())).unwrap();
+            let mut d = d;
+            d[k] = d[k].signum();
+            d
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20000))]
+
+        /// The invariant the traversal relies on: if the true line through P (within e of
+        /// O) reaches a point X of a box at parameter s, the widened fp16 slab test of the
+        /// stored box reports an interval containing s.
+        #[test]
+        fn slab16_never_misses_a_point_the_true_ray_reaches(
+            x in prop::array::uniform3(-16384.0f64..16384.0),
+            off in prop::array::uniform3(-1.0f64..1.0),
+            e_scale in prop_oneof![Just(0.0f64), 0.0f64..1.0, 0.0f64..64.0, 0.0f64..2048.0],
+            dv in prop::array::uniform3(-1.0f64..1.0),
+            zero_axis in 0usize..4,
+            s_frac in -1.0f64..1.0,
+            ext in prop::array::uniform3(prop_oneof![Just(0.0f64), 0.0f64..0.01, 0.0f64..50.0, 0.0f64..5000.0]),
+        ) {
+            let mut dv = dv;
+            if zero_axis < 3 { dv[zero_axis] = 0.0; }
+            let Some(d) = dir(dv) else { return Ok(()) };
+            // P = X − s·d with |P| ≤ 20000, so X = P + s·d lies in the box at parameter s.
+            let mut s = s_frac * (16384.0 + 20000.0);
+            for a in 0..3 {
+                if d[a] != 0.0 {
+                    s = s.signum() * s.abs().min((20000.0 - x[a].abs()) / d[a].abs());
+                }
+            }
+            let p = [0, 1, 2].map(|a| x[a] - s * d[a]);
+            let o: [f16; 3] = [0, 1, 2].map(|a| f16::from_f64((p[a] + off[a] * e_scale).clamp(-OCAP as f64, OCAP as f64)));
+            let e_true = (0..3).fold(0f64, |m, a| m.max((o[a].to_f64() - p[a]).abs()));
+            let e = (e_true as f32) * (1.0 + 1e-6) + 1e-6;
+            let lo = [0, 1, 2].map(|a| fp16::down_f64((x[a] - ext[a]).max(-16384.0)));
+            let hi = [0, 1, 2].map(|a| fp16::up_f64((x[a] + ext[a]).min(16384.0)));
+            let pre = RayPre::new(&Ray::new(glam::Vec3::ZERO, glam::Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32), 0.0, f32::INFINITY));
+            let r16 = Ray16::new(&pre);
+            prop_assert_eq!(r16.m, 1.0);
+            let w = up_f32(e + e * TWO_M11 + W_MARGIN);
+            let (_tn, tn_lb, tf_ub) = slab16(&o, &r16, w, lo, hi);
+            prop_assert!(tn_lb.to_f64() <= s && s <= tf_ub.to_f64(),
+                "s={} not in [{}, {}] (o={:?} e={} d={:?} box {:?}..{:?})", s, tn_lb, tf_ub, o, e, d, lo, hi);
+        }
+
+        /// Encoder and frame derivation: a random box inside a random parent frame is stored
+        /// conservatively, and its own children map into [-16384, 16384] in the derived frame.
+        #[test]
+        fn derived_frames_keep_children_in_range(
+            w in prop::array::uniform3(-1.0e4f32..1.0e4),
+            k_log2 in -20i32..20,
+            c in prop::array::uniform3(-16000.0f64..16000.0),
+            half in prop::array::uniform3(prop_oneof![0.0f64..1e-3, 0.0f64..1.0, 0.0f64..300.0]),
+            inner in prop::array::uniform3(0.0f64..1.0),
+        ) {
+            let parent = Frame { w, k: 2f32.powi(k_log2) };
+            // A world box whose local image is centred at c with the given half extents.
+            let to_world = |l: f64, a: usize| (l / parent.k as f64 + w[a] as f64) as f32;
+            let mut b = crate::geom::Aabb::EMPTY;
+            for corner in 0..8 {
+                let p: [f32; 3] = [0, 1, 2].map(|a| {
+                    let h = half[a].min(16384.0 - c[a].abs());
+                    to_world(if corner >> a & 1 == 1 { c[a] + h } else { c[a] - h }, a)
+                });
+                b.grow(glam::Vec3::from(p));
+            }
+            let (lo, hi, exact) = crate::encode::f16h::to_local(&parent, &b);
+            prop_assume!(exact.iter().all(|v| v.abs() <= 16384.0));
+            for a in 0..3 {
+                prop_assert!(lo[a].to_f64() <= exact[a] && hi[a].to_f64() >= exact[3 + a]);
+            }
+            let cf = crate::encode::f16h::derive_child(&parent, lo, hi);
+            // A grandchild anywhere inside the true child box maps within range.
+            let g: [f32; 3] = [0, 1, 2].map(|a| b.min[a] + (b.max[a] - b.min[a]) * inner[a] as f32);
+            for a in 0..3 {
+                for v in [b.min[a], b.max[a], g[a]] {
+                    let l = (v as f64 - cf.frame.w[a] as f64) * cf.frame.k as f64;
+                    prop_assert!(l.abs() < 16384.0, "axis {} value {} maps to {}", a, v, l);
+                }
+            }
+        }
+    }
+}

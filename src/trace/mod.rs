@@ -200,3 +200,32 @@ pub(crate) fn sort_hits<T: Copy>(v: &mut [(T, usize)], key: impl Fn(&T) -> f32) 
         v[j] = x;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20000))]
+
+        /// The fp32 slab test never rejects a box that the exact (f64) ray reaches at a
+        /// parameter inside the interval.
+        #[test]
+        fn slab32_never_misses(
+            o in prop::array::uniform3(-100.0f32..100.0),
+            d in prop::array::uniform3(prop_oneof![Just(0.0f32), -1.0f32..1.0, -1e-6f32..1e-6]),
+            s in 0.0f64..300.0,
+            ext in prop::array::uniform3(prop_oneof![Just(0.0f32), 0.0f32..1e-4, 0.0f32..10.0]),
+        ) {
+            prop_assume!(d.iter().any(|&x| x != 0.0));
+            let x = [0, 1, 2].map(|a| o[a] as f64 + s * d[a] as f64);
+            // The box contains the exact point in f32 (round outward).
+            let lo = [0, 1, 2].map(|a| { let v = (x[a] - ext[a] as f64) as f32; if v as f64 > x[a] - ext[a] as f64 { v.next_down() } else { v } });
+            let hi = [0, 1, 2].map(|a| { let v = (x[a] + ext[a] as f64) as f32; if (v as f64) < x[a] + ext[a] as f64 { v.next_up() } else { v } });
+            let r = RayPre::new(&Ray::new(Vec3::from(o), Vec3::from(d), 0.0, f32::INFINITY));
+            let (near, far) = slab32(&r, lo, hi, 0.0, f32::INFINITY);
+            prop_assert!(near as f64 <= s && s <= far as f64, "s={} not in [{}, {}]", s, near, far);
+        }
+    }
+}
