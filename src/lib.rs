@@ -13,3 +13,6 @@ pub mod pipeline;
 pub mod rays;
 pub mod scene;
 pub mod trace;
+
+#[doc(hidden)]
+pub fn _shaderc_probe() -> bool { shaderc::Compiler::new().is_ok() }

@@ -73,7 +73,9 @@ pub struct Entry {
     pub tlo: f32,
 }
 
-/// Per-ray fp16 constants: d16 = fp16(D / max|D|) (−0 → +0), idir = fp16(1 / d16).
+/// Per-ray fp16 constants: d16 = fp16(D / max|D|), with components below 2⁻¹⁵ in magnitude
+/// flushed to +0 (an error ≤ 2⁻¹⁵, inside the 2⁻¹² direction budget), and idir = fp16(1 / d16),
+/// finite (|idir| ≤ 32768) for every non-zero component.
 #[derive(Clone, Copy, Debug)]
 pub struct Ray16 {
     pub m: f32,
@@ -81,15 +83,18 @@ pub struct Ray16 {
     pub idir: [f16; 3],
 }
 
+/// Direction components (after normalising the largest to ±1) below this are treated as 0.
+pub const D_FLUSH: f32 = 1.0 / 32768.0;
+
 impl Ray16 {
     pub fn new(r: &RayPre) -> Ray16 {
         let m = r.d.abs().max_element();
         let mut d = [f16::ZERO; 3];
         let mut idir = [f16::ZERO; 3];
         for a in 0..3 {
-            let x = f16::from_f32(r.d[a] / m);
-            d[a] = if x == f16::ZERO { f16::ZERO } else { x };
-            idir[a] = f16::from_f32(1.0 / d[a].to_f32());
+            let x = r.d[a] / m;
+            d[a] = if x.abs() < D_FLUSH { f16::ZERO } else { f16::from_f32(x) };
+            idir[a] = if d[a] == f16::ZERO { f16::INFINITY } else { f16::from_f32(1.0 / d[a].to_f32()) };
         }
         Ray16 { m, d, idir }
     }
@@ -118,8 +123,8 @@ pub fn anchor(r: &RayPre, f: &Frame, t: f32) -> ([f16; 3], f32) {
 }
 
 /// The fp16 slab test of one child box: returns (tn, tn_lb, tf_ub) in the node's local
-/// parameter s. NaN products (only for an exactly zero widened difference times an infinite
-/// 1/d) impose no constraint.
+/// parameter s. An axis with d16 = 0 constrains nothing when O lies in the widened slab and
+/// rejects the box otherwise; no NaN is ever formed.
 #[inline]
 pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f16, f16, f16) {
     let mut tn = f16::NEG_INFINITY;
@@ -127,17 +132,19 @@ pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> 
     for a in 0..3 {
         let la = (lo[a] - o[a]) - w;
         let ha = (hi[a] - o[a]) + w;
-        let mut t0 = la * r16.idir[a];
-        let mut t1 = ha * r16.idir[a];
-        if t0 > t1 {
-            std::mem::swap(&mut t0, &mut t1);
-        }
-        if t0 > tn {
-            tn = t0;
-        }
-        if t1 < tf {
-            tf = t1;
-        }
+        let (t0, t1) = if r16.d[a] == f16::ZERO {
+            if la <= f16::ZERO && ha >= f16::ZERO {
+                (f16::NEG_INFINITY, f16::INFINITY)
+            } else {
+                (f16::INFINITY, f16::NEG_INFINITY)
+            }
+        } else {
+            let x = la * r16.idir[a];
+            let y = ha * r16.idir[a];
+            (x.min(y), x.max(y))
+        };
+        tn = tn.max(t0);
+        tf = tf.min(t1);
     }
     const LO_DOWN: f16 = f16::from_f32_const(1.0 - 1.0 / 256.0);
     const LO_UP: f16 = f16::from_f32_const(1.0 + 1.0 / 256.0);

@@ -69,7 +69,7 @@ impl std::ops::AddAssign for Counters {
 #[derive(Clone, Copy, Debug)]
 pub struct RayPre {
     pub o: Vec3,
-    /// Direction with −0 components replaced by +0 (so 1/d is +inf, never −inf).
+    /// Direction with zero and subnormal components replaced by +0.
     pub d: Vec3,
     pub inv: Vec3,
     pub tmin: f32,
@@ -84,7 +84,8 @@ pub struct RayPre {
 
 impl RayPre {
     pub fn new(r: &Ray) -> RayPre {
-        let d = Vec3::from(r.dir.map(|c| if c == 0.0 { 0.0 } else { c }));
+        // Subnormal components are flushed to +0 so 1/d is finite or +inf.
+        let d = Vec3::from(r.dir.map(|c| if c.abs() < f32::MIN_POSITIVE { 0.0 } else { c }));
         let kz = crate::geom::max_abs_axis(d);
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
@@ -153,27 +154,28 @@ pub fn upper32(t: f32) -> f32 {
 }
 
 /// Conservative fp32 slab test of the ray line against a world box over `[t0, t1]`.
-/// An axis whose products are NaN (origin exactly on a face plane of a zero direction
-/// component) imposes no constraint: NaN comparisons are false (pbrt's formulation).
+/// An axis with a zero direction component constrains nothing when the origin lies in the
+/// slab (faces included) and rejects the box otherwise; no NaN is ever formed, so the shader's
+/// min/max and comparisons cannot disagree with this code.
 /// Returns the (lowered) entry and (raised) exit; the box is hit when `near <= far`.
 #[inline]
 pub fn slab32(r: &RayPre, lo: [f32; 3], hi: [f32; 3], t0: f32, t1: f32) -> (f32, f32) {
     let mut near = t0;
     let mut far = t1;
     for a in 0..3 {
-        let mut n = (lo[a] - r.o[a]) * r.inv[a];
-        let mut f = (hi[a] - r.o[a]) * r.inv[a];
-        if n > f {
-            std::mem::swap(&mut n, &mut f);
-        }
-        let n = lower32(n);
-        let f = upper32(f);
-        if n > near {
-            near = n;
-        }
-        if f < far {
-            far = f;
-        }
+        let (n, f) = if r.d[a] == 0.0 {
+            if r.o[a] >= lo[a] && r.o[a] <= hi[a] {
+                (f32::NEG_INFINITY, f32::INFINITY)
+            } else {
+                (f32::INFINITY, f32::NEG_INFINITY)
+            }
+        } else {
+            let x = (lo[a] - r.o[a]) * r.inv[a];
+            let y = (hi[a] - r.o[a]) * r.inv[a];
+            (lower32(x.min(y)), upper32(x.max(y)))
+        };
+        near = near.max(n);
+        far = far.min(f);
     }
     (near, far)
 }
