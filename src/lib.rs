@@ -8,11 +8,11 @@ pub mod bvh;
 pub mod encode;
 pub mod fp16;
 pub mod geom;
+pub mod gpu;
 pub mod npy;
 pub mod pipeline;
 pub mod rays;
 pub mod scene;
 pub mod trace;
+pub mod variant;
 
-#[doc(hidden)]
-pub fn _shaderc_probe() -> bool { shaderc::Compiler::new().is_ok() }

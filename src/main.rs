@@ -6,7 +6,8 @@ use halftrace::bvh::{self, stats::stats};
 use halftrace::encode::Layout;
 use halftrace::pipeline::{self, Encoded, RayKind, RayParams};
 use halftrace::rays::Camera;
-use halftrace::{npy, scene};
+use halftrace::variant::Variant;
+use halftrace::{gpu, npy, scene};
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -32,6 +33,14 @@ enum Cmd {
         /// OBJ or .obj.gz scene.
         #[arg(long)]
         scene: PathBuf,
+    },
+    /// List Vulkan devices and their fp16, 16-bit storage, subgroup and ray-query support.
+    Devices,
+    /// Compile the default variant matrix and write one SPIR-V file per variant.
+    Shaders {
+        /// Output folder (e.g. spirv/).
+        #[arg(long)]
+        emit: PathBuf,
     },
 }
 
@@ -68,6 +77,27 @@ struct TraceArgs {
     /// Write a shaded PNG (primary rays only).
     #[arg(long)]
     image: Option<PathBuf>,
+    /// gpu or cpu (default: gpu when a Vulkan device can be opened).
+    #[arg(long)]
+    backend: Option<String>,
+    /// Vulkan device: index or name substring (see `halftrace devices`).
+    #[arg(long)]
+    device: Option<String>,
+    /// Timed dispatches after the warm-up.
+    #[arg(long, default_value_t = 10)]
+    repeat: usize,
+    /// Untimed warm-up dispatches.
+    #[arg(long, default_value_t = 2)]
+    warmup: usize,
+    /// Also run the counting kernel and print work per ray.
+    #[arg(long)]
+    stats: bool,
+    /// Run this SPIR-V module in place of the built-in kernel (same interface).
+    #[arg(long)]
+    spirv: Option<PathBuf>,
+    /// Treat a device feature as missing (testing): shaderFloat16, storageBuffer16BitAccess.
+    #[arg(long, hide = true)]
+    mask_feature: Vec<String>,
 }
 
 fn load_scene(path: &PathBuf) -> anyhow::Result<scene::Scene> {
@@ -90,14 +120,64 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let params = RayParams { width: a.width, height: a.height, camera, seed: a.seed, ..Default::default() };
     let rays = pipeline::make_rays(&scene, &bin, &kind, &params)?;
     let enc = Encoded::new(&scene, &bin, layout, a.branching)?;
-    let t1 = Instant::now();
-    let (hits, counters) = enc.trace(&rays);
-    let secs = t1.elapsed().as_secs_f64();
+    let variant = Variant::new(layout, a.branching, 1);
+    let backend = match a.backend.as_deref() {
+        Some("cpu") => "cpu",
+        Some("gpu") => "gpu",
+        None if a.spirv.is_some() => "gpu",
+        None => {
+            if gpu::list_devices().map(|d| !d.is_empty()).unwrap_or(false) {
+                "gpu"
+            } else {
+                "cpu"
+            }
+        }
+        Some(other) => anyhow::bail!("--backend '{other}': use gpu or cpu"),
+    };
+    outln!("scene {} ({} triangles), variant {variant}, rays {kind}: {} rays", scene.name, scene.len(), rays.len());
+    let (hits, counters) = if backend == "cpu" {
+        let t1 = Instant::now();
+        let (hits, counters) = enc.trace(&rays);
+        let secs = t1.elapsed().as_secs_f64();
+        outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
+        (hits, Some(counters))
+    } else {
+        let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
+        let g = gpu::Gpu::new(&opts)?;
+        outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
+        let custom = a.spirv.as_deref().map(gpu::shader::load_checked).transpose()?;
+        let bvh_gpu = gpu::traversal::GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
+        let pipe = gpu::traversal::pipeline(&g, &variant, false, custom.as_deref()).with_context(|| variant.to_string())?;
+        let out = gpu::traversal::run(&g, &bvh_gpu, &pipe, &rays, a.warmup, a.repeat.max(1), false).with_context(|| variant.to_string())?;
+        // Correctness before speed: the CPU reference of the same layout.
+        let (ref_hits, ref_counters) = enc.trace(&rays);
+        let bad: Vec<usize> = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&ref_hits[i])).collect();
+        if let Some(&i) = bad.first() {
+            anyhow::bail!("{variant}{}: {} of {} rays differ from the CPU reference; first: ray {i} {:?}: gpu {:?}, cpu {:?}",
+                if a.spirv.is_some() { " (custom SPIR-V)" } else { "" }, bad.len(), rays.len(), rays[i], out.hits[i], ref_hits[i]);
+        }
+        let mut t = out.times_ms.clone();
+        t.sort_by(f64::total_cmp);
+        let med = t[t.len() / 2];
+        outln!("backend gpu: validated against the CPU reference ({} rays identical)", rays.len());
+        outln!("time over {} dispatches after {} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.len(), a.warmup, med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+        let counters = if a.stats {
+            let sp = gpu::traversal::pipeline(&g, &variant, true, None)?;
+            let so = gpu::traversal::run(&g, &bvh_gpu, &sp, &rays, 0, 1, true)?;
+            let c = so.counters.unwrap();
+            anyhow::ensure!(c == ref_counters, "{variant}: GPU counters differ from the CPU reference");
+            Some(c)
+        } else {
+            None
+        };
+        (out.hits, counters)
+    };
     let nhit = hits.iter().filter(|h| h.is_hit()).count();
-    let m = pipeline::mean_counters(&counters);
-    outln!("scene {} ({} triangles), layout {layout}, B={}, rays {kind}: {} rays, {} hits", scene.name, scene.len(), a.branching, rays.len(), nhit);
-    outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
-    outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
+    outln!("{nhit} hits");
+    if let Some(c) = counters.filter(|_| a.stats || backend == "cpu") {
+        let m = pipeline::mean_counters(&c);
+        outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
+    }
     if let Some(p) = &a.out {
         npy::write_hits(p, &hits)?;
         outln!("hits written to {}", p.display());
@@ -137,11 +217,40 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn devices() -> anyhow::Result<()> {
+    let list = gpu::list_devices()?;
+    if list.is_empty() {
+        outln!("no Vulkan devices");
+    }
+    for d in list {
+        outln!(
+            "{}: {} ({}), Vulkan {}, driver {}\n   shaderFloat16 {}, storageBuffer16BitAccess {}, shaderFloat64 {}, subgroup size {}, ray query {}, max storage buffer {} MiB",
+            d.index, d.name, d.kind, d.api_version, d.driver, d.shader_float16, d.storage_16bit, d.shader_float64, d.subgroup_size, d.ray_query, d.max_storage_buffer >> 20
+        );
+    }
+    Ok(())
+}
+
+fn shaders(dir: &PathBuf) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for v in Variant::matrix() {
+        for stats in [false, true] {
+            let code = gpu::shader::compile(&v, stats, true)?;
+            let p = dir.join(format!("{}.spv", v.name(stats)));
+            std::fs::write(&p, bytemuck::cast_slice(&code)).with_context(|| format!("writing {}", p.display()))?;
+            outln!("{}", p.display());
+        }
+    }
+    Ok(())
+}
+
 fn main() {
     let cli = Cli::parse();
     let r = match cli.cmd {
         Cmd::Trace(a) => trace(a),
         Cmd::BvhStats { scene } => bvh_stats(&scene),
+        Cmd::Devices => devices(),
+        Cmd::Shaders { emit } => shaders(&emit),
     };
     if let Err(e) = r {
         eprintln!("error: {e:#}");

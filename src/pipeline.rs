@@ -111,6 +111,28 @@ impl Encoded {
         }
     }
 
+    pub fn layout(&self) -> Layout {
+        match self {
+            Encoded::F32(_) => Layout::F32,
+            Encoded::F16h(_) => Layout::F16h,
+        }
+    }
+
+    pub fn branching(&self) -> usize {
+        match self {
+            Encoded::F32(e) => e.branching,
+            Encoded::F16h(e) => e.branching,
+        }
+    }
+
+    /// Largest traversal stack this BVH can need.
+    pub fn max_stack(&self) -> usize {
+        match self {
+            Encoded::F32(e) => e.max_stack,
+            Encoded::F16h(e) => e.max_stack,
+        }
+    }
+
     pub fn node_count(&self) -> usize {
         match self {
             Encoded::F32(e) => e.nodes.len(),

@@ -7,7 +7,7 @@
 //! the traversal (CPU reference and shader) runs identically:
 //!
 //! ```text
-//! c   = fp16(0.5 · (lo + hi))                      centre, per axis, in the parent frame
+//! c   = (lo + hi) · 0.5 in fp16 arithmetic          centre, per axis, in the parent frame
 //! h   = max over axes of max(hi − c, c − lo)      half extent (fp32)
 //! W_i = W_n + c / K_n                              fp32, one rounding per axis
 //! m   = h + h·2⁻²⁰ + max|W_i|·K_n·2⁻²²             covers fp32 rounding of h and of W_i
@@ -112,7 +112,8 @@ pub fn derive_child(parent: &Frame, lo: [f16; 3], hi: [f16; 3]) -> ChildFrame {
     let mut wmax = 0f32;
     for a in 0..3 {
         let (l, u) = (lo[a].to_f32(), hi[a].to_f32());
-        c[a] = f16::from_f32(0.5 * (l + u));
+        // In fp16 arithmetic: shader compilers may fold an f32→f16→f32 round trip away.
+        c[a] = (lo[a] + hi[a]) * f16::from_f32_const(0.5);
         let cf = c[a].to_f32();
         h = h.max(u - cf).max(cf - l);
         w[a] = parent.w[a] + cf * inv_k;
@@ -162,6 +163,8 @@ pub struct F16hBvh {
     pub root: RootFrame,
     pub frames: Vec<Frame>,
     pub tris: TriBuffer,
+    /// Largest traversal stack: (B−1)·depth + 1.
+    pub max_stack: usize,
 }
 
 fn encode_nodes<N: NodeF16h>(w: &WideBvh, root: &RootFrame) -> Result<(Vec<N>, Vec<Frame>), EncodeError> {
@@ -198,5 +201,5 @@ pub fn encode(scene: &Scene, w: &WideBvh) -> Result<F16hBvh, EncodeError> {
         16 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B16(n), f))?,
         b => panic!("unsupported branching {b}"),
     };
-    Ok(F16hBvh { branching: w.branching, nodes, root, frames, tris: TriBuffer::new(scene, w) })
+    Ok(F16hBvh { branching: w.branching, nodes, root, frames, tris: TriBuffer::new(scene, w), max_stack: w.max_stack() })
 }

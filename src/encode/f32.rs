@@ -28,6 +28,8 @@ pub struct F32Bvh {
     pub root_lo: [f32; 3],
     pub root_hi: [f32; 3],
     pub tris: TriBuffer,
+    /// Largest traversal stack: (B−1)·depth + 1.
+    pub max_stack: usize,
 }
 
 fn encode_nodes<N: NodeF32>(w: &WideBvh) -> Vec<N> {
@@ -52,5 +54,5 @@ pub fn encode(scene: &Scene, w: &WideBvh) -> F32Bvh {
         b => panic!("unsupported branching {b}"),
     };
     let rb = w.nodes[0].bounds;
-    F32Bvh { branching: w.branching, nodes, root_lo: rb.min.into(), root_hi: rb.max.into(), tris: TriBuffer::new(scene, w) }
+    F32Bvh { branching: w.branching, nodes, root_lo: rb.min.into(), root_hi: rb.max.into(), tris: TriBuffer::new(scene, w), max_stack: w.max_stack() }
 }

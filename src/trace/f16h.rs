@@ -75,7 +75,7 @@ pub struct Entry {
 
 /// Per-ray fp16 constants: d16 = fp16(D / max|D|), with components below 2⁻¹⁵ in magnitude
 /// flushed to +0 (an error ≤ 2⁻¹⁵, inside the 2⁻¹² direction budget), and idir = fp16(1 / d16),
-/// finite (|idir| ≤ 32768) for every non-zero component.
+/// finite (|idir| ≤ 32768) for every non-zero component, computed by fp16 division.
 #[derive(Clone, Copy, Debug)]
 pub struct Ray16 {
     pub m: f32,
@@ -94,7 +94,8 @@ impl Ray16 {
         for a in 0..3 {
             let x = r.d[a] / m;
             d[a] = if x.abs() < D_FLUSH { f16::ZERO } else { f16::from_f32(x) };
-            idir[a] = if d[a] == f16::ZERO { f16::INFINITY } else { f16::from_f32(1.0 / d[a].to_f32()) };
+            // fp16 division (correctly rounded), not an f32 round trip a compiler may fold.
+            idir[a] = if d[a] == f16::ZERO { f16::INFINITY } else { f16::ONE / d[a] };
         }
         Ray16 { m, d, idir }
     }
@@ -164,15 +165,21 @@ fn up32(x: f32) -> f32 {
 }
 
 pub fn trace(bvh: &F16hBvh, ray: &Ray) -> (Hit, Counters) {
+    trace_logged(bvh, ray, None)
+}
+
+/// [`trace`], optionally logging every visited node as
+/// `[node, tlo, tp, e, o.x, o.y, o.z, t_closest]` (debugging the shader against this code).
+pub fn trace_logged(bvh: &F16hBvh, ray: &Ray, log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
     match &bvh.nodes {
-        F16hNodes::B2(n) => trace_n(bvh, n, ray),
-        F16hNodes::B4(n) => trace_n(bvh, n, ray),
-        F16hNodes::B8(n) => trace_n(bvh, n, ray),
-        F16hNodes::B16(n) => trace_n(bvh, n, ray),
+        F16hNodes::B2(n) => trace_n(bvh, n, ray, log),
+        F16hNodes::B4(n) => trace_n(bvh, n, ray, log),
+        F16hNodes::B8(n) => trace_n(bvh, n, ray, log),
+        F16hNodes::B16(n) => trace_n(bvh, n, ray, log),
     }
 }
 
-fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray) -> (Hit, Counters) {
+fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
     let r = RayPre::new(ray);
     let r16 = Ray16::new(&r);
     let mut c = Counters { box_tests: 1, ..Default::default() };
@@ -194,6 +201,9 @@ fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray) -> (Hit, Counters
             continue;
         }
         c.nodes += 1;
+        if let Some(l) = log.as_deref_mut() {
+            l.push([en.node as f32, en.tlo, en.tp, en.e, en.o[0].to_f32(), en.o[1].to_f32(), en.o[2].to_f32(), best.t]);
+        }
         let n = &nodes[en.node as usize];
         let mk = r16.m * en.frame.k;
         let s_max = S_BASE + en.e + 1.0;

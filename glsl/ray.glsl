@@ -1,0 +1,81 @@
+// Shared interface of every traversal kernel: bindings, push constants, ray set-up.
+// Mirrors src/gpu/traversal.rs (PushConstants, BINDINGS) and src/trace/mod.rs (RayPre).
+#extension GL_EXT_shader_explicit_arithmetic_types_float16 : require
+#extension GL_EXT_shader_16bit_storage : require
+#extension GL_EXT_spirv_intrinsics : require
+// IEEE fp16: round-to-nearest-even after every operation, signed zeros/inf/NaN preserved.
+spirv_execution_mode(capabilities = [4467], 4462, 16);
+spirv_execution_mode(capabilities = [4466], 4461, 16);
+spirv_execution_mode(capabilities = [4466], 4461, 32);
+
+layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+
+layout(push_constant) uniform Push {
+    uint ray_count;
+    uint node_count;
+    uint pad0;
+    uint pad1;
+    vec4 root_wk;   // f16h root frame: w.xyz, k
+    vec4 box_lo;    // root box, world space
+    vec4 box_hi;
+} pc;
+
+layout(std430, set = 0, binding = 1) readonly buffer TriVerts { float tri_v[]; };   // 9 floats per triangle, leaf order
+layout(std430, set = 0, binding = 2) readonly buffer TriIds { uint tri_id[]; };     // public prim id per triangle
+layout(std430, set = 0, binding = 3) readonly buffer Rays { float ray_f[]; };       // ox oy oz tmin dx dy dz tmax
+struct Hit { float t; int prim; float u; float v; };
+layout(std430, set = 0, binding = 4) writeonly buffer Hits { Hit hits[]; };
+#ifdef STATS
+layout(std430, set = 0, binding = 5) writeonly buffer Counters { uvec4 counters[]; }; // nodes, box tests, tri tests, re-anchors
+#endif
+
+#define INF uintBitsToFloat(0x7f800000u)
+#define FLT_MIN_NORMAL uintBitsToFloat(0x00800000u)
+const uint CHILD_EMPTY = 0xffffffffu;
+const uint LEAF_BIT = 0x80000000u;
+const int NO_PRIM = 0x7fffffff;
+
+uint ray_index() {
+    return (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64u + gl_LocalInvocationID.x;
+}
+
+struct RayPre {
+    vec3 o;
+    vec3 d;     // subnormal and zero components flushed to +0
+    vec3 inv;
+    float tmin;
+    float tmax;
+    int kx, ky, kz;
+    float sx, sy, sz;
+};
+
+RayPre ray_pre(uint i) {
+    RayPre r;
+    uint b = 8u * i;
+    r.o = vec3(ray_f[b], ray_f[b + 1u], ray_f[b + 2u]);
+    r.tmin = ray_f[b + 3u];
+    vec3 d = vec3(ray_f[b + 4u], ray_f[b + 5u], ray_f[b + 6u]);
+    r.tmax = ray_f[b + 7u];
+    for (int a = 0; a < 3; a++) {
+        if (abs(d[a]) < FLT_MIN_NORMAL) d[a] = 0.0;
+    }
+    r.d = d;
+    vec3 ad = abs(d);
+    int kz = (ad.x >= ad.y && ad.x >= ad.z) ? 0 : ((ad.y >= ad.z) ? 1 : 2);
+    int kx = (kz + 1) % 3;
+    int ky = (kx + 1) % 3;
+    if (d[kz] < 0.0) { int t = kx; kx = ky; ky = t; }
+    r.kx = kx; r.ky = ky; r.kz = kz;
+    precise vec3 inv = vec3(1.0) / d;
+    r.inv = inv;
+    precise float sx = d[kx] / d[kz];
+    precise float sy = d[ky] / d[kz];
+    precise float sz = 1.0 / d[kz];
+    r.sx = sx; r.sy = sy; r.sz = sz;
+    return r;
+}
+
+void write_hit(uint i, float t, int prim, float u, float v) {
+    if (prim == NO_PRIM) hits[i] = Hit(INF, -1, 0.0, 0.0);
+    else hits[i] = Hit(t, prim, u, v);
+}

@@ -1,0 +1,349 @@
+//! Instance, device selection, logical device, queue, allocator, command pool, and the
+//! validation layer's messenger. Everything is destroyed once, in reverse order, on drop.
+
+use super::{GpuError, VkResultExt};
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use std::ffi::{c_void, CStr};
+use std::mem::ManuallyDrop;
+use std::sync::Mutex;
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+/// What the harness needs to know about a device.
+#[derive(Clone, Debug)]
+pub struct DeviceInfo {
+    pub index: usize,
+    pub name: String,
+    pub kind: String,
+    pub driver: String,
+    pub api_version: String,
+    pub shader_float16: bool,
+    pub storage_16bit: bool,
+    pub shader_float64: bool,
+    pub subgroup_size: u32,
+    pub ray_query: bool,
+    pub max_storage_buffer: u64,
+    pub timestamp_period_ns: f32,
+    pub timestamps: bool,
+    /// Float controls the kernels declare: fp16 round-to-nearest-even and fp16/fp32
+    /// signed-zero/inf/NaN preservation (without them, drivers may skip fp16 roundings).
+    pub fp16_rte: bool,
+    pub preserve_16: bool,
+    pub preserve_32: bool,
+}
+
+/// How to open a device.
+#[derive(Clone, Debug, Default)]
+pub struct ContextOptions {
+    /// Index or case-insensitive name substring; default: first discrete GPU, else
+    /// integrated, else virtual, else CPU (lavapipe), else anything.
+    pub device: Option<String>,
+    /// Feature names to treat as missing (tests of the error path): `shaderFloat16`,
+    /// `storageBuffer16BitAccess`.
+    pub mask_features: Vec<String>,
+    /// Enable VK_LAYER_KHRONOS_validation if installed (also `HALFTRACE_VALIDATION=1`).
+    pub validation: bool,
+    /// Pretend the device's storage-buffer limit is this many bytes (testing).
+    pub max_buffer: Option<u64>,
+}
+
+/// An open Vulkan device with its queue, allocator and command pool.
+pub struct Gpu {
+    _entry: ash::Entry,
+    instance: ash::Instance,
+    debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *mut Mutex<Vec<String>>)>,
+    pub(crate) physical: vk::PhysicalDevice,
+    pub(crate) device: ash::Device,
+    pub(crate) queue: vk::Queue,
+    pub(crate) pool: vk::CommandPool,
+    pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
+    pub info: DeviceInfo,
+    pub validation_enabled: bool,
+}
+
+// The raw messages pointer is only touched through its Mutex.
+unsafe impl Send for Gpu {}
+unsafe impl Sync for Gpu {}
+
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _ty: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    if !data.is_null() && !user.is_null() {
+        let msg = unsafe { (*data).message_as_c_str() }.map(|m| m.to_string_lossy().to_string()).unwrap_or_default();
+        let store = unsafe { &*(user as *const Mutex<Vec<String>>) };
+        if let Ok(mut v) = store.lock() {
+            v.push(format!("{severity:?}: {msg}"));
+        }
+    }
+    vk::FALSE
+}
+
+fn load_entry() -> Result<ash::Entry, GpuError> {
+    unsafe { ash::Entry::load() }.map_err(|e| GpuError::Loader(e.to_string()))
+}
+
+fn make_instance(entry: &ash::Entry, validation: bool) -> Result<(ash::Instance, bool), GpuError> {
+    let app = vk::ApplicationInfo::default().application_name(c"halftrace").api_version(vk::API_VERSION_1_2);
+    let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
+    let have_layer = layers.iter().any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
+    let use_layer = validation && have_layer;
+    let layer_ptrs = if use_layer { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
+    let ext_ptrs = if use_layer { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+    let info = vk::InstanceCreateInfo::default().application_info(&app).enabled_layer_names(&layer_ptrs).enabled_extension_names(&ext_ptrs);
+    let inst = unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?;
+    Ok((inst, use_layer))
+}
+
+fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {
+    unsafe {
+        let props = instance.get_physical_device_properties(pd);
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
+        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11).push_next(&mut v12);
+        instance.get_physical_device_features2(pd, &mut f2);
+        let f64ok = f2.features.shader_float64 == vk::TRUE;
+        let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
+        let mut drv = vk::PhysicalDeviceDriverProperties::default();
+        let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
+        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut sub).push_next(&mut drv).push_next(&mut fc);
+        instance.get_physical_device_properties2(pd, &mut p2);
+        let exts = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
+        let has = |n: &CStr| exts.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|x| x == n));
+        let qf = instance.get_physical_device_queue_family_properties(pd);
+        let timestamps = qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
+        let v = props.api_version;
+        DeviceInfo {
+            index,
+            name: props.device_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default(),
+            kind: format!("{:?}", props.device_type).to_lowercase(),
+            driver: format!(
+                "{} {}",
+                drv.driver_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default(),
+                drv.driver_info_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
+            ),
+            api_version: format!("{}.{}.{}", vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v)),
+            shader_float16: v12.shader_float16 == vk::TRUE,
+            storage_16bit: v11.storage_buffer16_bit_access == vk::TRUE,
+            shader_float64: f64ok,
+            subgroup_size: sub.subgroup_size,
+            ray_query: has(ash::khr::ray_query::NAME) && has(ash::khr::acceleration_structure::NAME),
+            max_storage_buffer: props.limits.max_storage_buffer_range as u64,
+            timestamp_period_ns: props.limits.timestamp_period,
+            timestamps,
+            fp16_rte: fc.shader_rounding_mode_rte_float16 == vk::TRUE,
+            preserve_16: fc.shader_signed_zero_inf_nan_preserve_float16 == vk::TRUE,
+            preserve_32: fc.shader_signed_zero_inf_nan_preserve_float32 == vk::TRUE,
+        }
+    }
+}
+
+/// Lists every Vulkan device with the features halftrace cares about.
+pub fn list_devices() -> Result<Vec<DeviceInfo>, GpuError> {
+    let entry = load_entry()?;
+    let (instance, _) = make_instance(&entry, false)?;
+    let pds = unsafe { instance.enumerate_physical_devices() };
+    let out = pds.map(|v| v.into_iter().enumerate().map(|(i, pd)| describe(&instance, pd, i)).collect()).vk("vkEnumeratePhysicalDevices");
+    unsafe { instance.destroy_instance(None) };
+    out
+}
+
+fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError> {
+    if infos.is_empty() {
+        return Err(GpuError::NoDevice);
+    }
+    if let Some(w) = want {
+        if let Ok(i) = w.parse::<usize>() {
+            return if i < infos.len() { Ok(i) } else { Err(GpuError::DeviceNotFound(w.into())) };
+        }
+        let wl = w.to_lowercase();
+        return infos.iter().position(|d| d.name.to_lowercase().contains(&wl)).ok_or_else(|| GpuError::DeviceNotFound(w.into()));
+    }
+    for kind in ["discrete_gpu", "integrated_gpu", "virtual_gpu", "cpu"] {
+        if let Some(i) = infos.iter().position(|d| d.kind == kind) {
+            return Ok(i);
+        }
+    }
+    Ok(0)
+}
+
+impl Gpu {
+    pub fn new(opts: &ContextOptions) -> Result<Gpu, GpuError> {
+        let validation = opts.validation || std::env::var("HALFTRACE_VALIDATION").is_ok_and(|v| v == "1");
+        let entry = load_entry()?;
+        let (instance, use_layer) = make_instance(&entry, validation)?;
+        // From here on, failures must destroy the instance.
+        match Self::open(entry, instance.clone(), use_layer, opts) {
+            Ok(g) => Ok(g),
+            Err((e, debug)) => {
+                unsafe {
+                    if let Some((du, m, store)) = debug {
+                        du.destroy_debug_utils_messenger(m, None);
+                        drop(Box::from_raw(store));
+                    }
+                    instance.destroy_instance(None);
+                }
+                Err(e)
+            }
+        }
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn open(
+        entry: ash::Entry,
+        instance: ash::Instance,
+        use_layer: bool,
+        opts: &ContextOptions,
+    ) -> Result<Gpu, (GpuError, Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *mut Mutex<Vec<String>>)>)> {
+        let mut debug = None;
+        if use_layer {
+            let du = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let store = Box::into_raw(Box::new(Mutex::new(Vec::<String>::new())));
+            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+                .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
+                .message_type(vk::DebugUtilsMessageTypeFlagsEXT::GENERAL | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE)
+                .pfn_user_callback(Some(debug_callback))
+                .user_data(store as *mut c_void);
+            match unsafe { du.create_debug_utils_messenger(&info, None) } {
+                Ok(m) => debug = Some((du, m, store)),
+                Err(r) => {
+                    unsafe { drop(Box::from_raw(store)) };
+                    return Err((GpuError::Vk { call: "vkCreateDebugUtilsMessengerEXT", result: r }, None));
+                }
+            }
+        }
+        macro_rules! tryd {
+            ($e:expr) => {
+                match $e {
+                    Ok(v) => v,
+                    Err(e) => return Err((e, debug)),
+                }
+            };
+        }
+        let pds = tryd!(unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices"));
+        let infos: Vec<DeviceInfo> = pds.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect();
+        let idx = tryd!(pick(&infos, opts.device.as_deref()));
+        let mut info = infos[idx].clone();
+        let physical = pds[idx];
+        if let Some(m) = opts.max_buffer {
+            info.max_storage_buffer = info.max_storage_buffer.min(m);
+        }
+        for m in &opts.mask_features {
+            match m.as_str() {
+                "shaderFloat16" => info.shader_float16 = false,
+                "storageBuffer16BitAccess" => info.storage_16bit = false,
+                "shaderFloat64" => info.shader_float64 = false,
+                other => return Err((GpuError::Other(format!("unknown feature to mask: '{other}'")), debug)),
+            }
+        }
+        if !info.shader_float16 {
+            return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "shaderFloat16 (fp16 arithmetic in shaders)".into() }, debug));
+        }
+        if !info.storage_16bit {
+            return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "storageBuffer16BitAccess (fp16 in storage buffers)".into() }, debug));
+        }
+        for (ok, what) in [
+            (info.fp16_rte, "shaderRoundingModeRTEFloat16 (IEEE rounding of every fp16 operation)"),
+            (info.preserve_16, "shaderSignedZeroInfNanPreserveFloat16"),
+            (info.preserve_32, "shaderSignedZeroInfNanPreserveFloat32"),
+        ] {
+            if !ok {
+                return Err((GpuError::MissingFeature { device: info.name.clone(), feature: what.into() }, debug));
+            }
+        }
+        if !info.timestamps {
+            return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "timestamp queries on a compute queue".into() }, debug));
+        }
+        let qfs = unsafe { instance.get_physical_device_queue_family_properties(physical) };
+        let qfi = qfs.iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0).unwrap() as u32;
+        let prio = [1.0f32];
+        let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(true);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(true);
+        let base = vk::PhysicalDeviceFeatures::default().shader_float64(info.shader_float64);
+        let dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).enabled_features(&base).push_next(&mut v11).push_next(&mut v12);
+        let device = tryd!(unsafe { instance.create_device(physical, &dinfo, None) }.vk("vkCreateDevice"));
+        let queue = unsafe { device.get_device_queue(qfi, 0) };
+        let pool = match unsafe { device.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(qfi).flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER), None) } {
+            Ok(p) => p,
+            Err(r) => {
+                unsafe { device.destroy_device(None) };
+                return Err((GpuError::Vk { call: "vkCreateCommandPool", result: r }, debug));
+            }
+        };
+        let allocator = match Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device: physical,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        }) {
+            Ok(a) => a,
+            Err(e) => {
+                unsafe {
+                    device.destroy_command_pool(pool, None);
+                    device.destroy_device(None);
+                }
+                return Err((GpuError::Other(format!("creating the allocator: {e}")), debug));
+            }
+        };
+        Ok(Gpu { _entry: entry, instance, debug, physical, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info, validation_enabled: use_layer })
+    }
+
+    /// Bytes currently allocated through the allocator (0 once every buffer is dropped).
+    pub fn allocated_bytes(&self) -> u64 {
+        self.allocator.lock().map(|a| a.generate_report().total_allocated_bytes).unwrap_or(u64::MAX)
+    }
+
+    /// Validation messages (warnings and errors) reported so far.
+    pub fn validation_messages(&self) -> Vec<String> {
+        match &self.debug {
+            Some((_, _, store)) => unsafe { &**store }.lock().map(|v| v.clone()).unwrap_or_default(),
+            None => Vec::new(),
+        }
+    }
+
+    /// Records commands with `record`, submits them and waits for completion.
+    pub fn submit_and_wait(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
+        let d = &self.device;
+        unsafe {
+            let cmd = d
+                .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(self.pool).level(vk::CommandBufferLevel::PRIMARY).command_buffer_count(1))
+                .vk("vkAllocateCommandBuffers")?[0];
+            let result = (|| {
+                d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)).vk("vkBeginCommandBuffer")?;
+                record(cmd);
+                d.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
+                let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
+                let cmds = [cmd];
+                let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+                let r = d.queue_submit(self.queue, &submit, fence).vk("vkQueueSubmit").and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX).vk("vkWaitForFences"));
+                d.destroy_fence(fence, None);
+                r
+            })();
+            d.free_command_buffers(self.pool, &[cmd]);
+            result
+        }
+    }
+}
+
+impl Drop for Gpu {
+    fn drop(&mut self) {
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            self.device.destroy_command_pool(self.pool, None);
+            // Frees every remaining block (and reports leaks through gpu-allocator's log).
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            if let Some((du, m, store)) = self.debug.take() {
+                du.destroy_debug_utils_messenger(m, None);
+                drop(Box::from_raw(store));
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}

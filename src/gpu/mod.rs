@@ -1,0 +1,49 @@
+//! The Vulkan backend: the only module with `unsafe`. One file per Vulkan concept:
+//! [`context`] (instance, device, queue, allocator, validation), [`buffer`], [`shader`]
+//! (GLSL → SPIR-V, interface checks), [`pipeline`], [`timer`] (timestamp queries), and
+//! [`traversal`] (uploading a BVH and dispatching a traversal variant).
+
+pub mod buffer;
+pub mod context;
+pub mod pipeline;
+pub mod shader;
+pub mod timer;
+pub mod traversal;
+
+pub use context::{list_devices, ContextOptions, DeviceInfo, Gpu};
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error("Vulkan loader not available: {0} (install libvulkan1 and a driver, e.g. mesa-vulkan-drivers)")]
+    Loader(String),
+    #[error("no Vulkan device found")]
+    NoDevice,
+    #[error("--device '{0}' matches no device (see `halftrace devices`)")]
+    DeviceNotFound(String),
+    #[error("device '{device}' lacks {feature}, which halftrace needs")]
+    MissingFeature { device: String, feature: String },
+    #[error("Vulkan call {call} failed: {result}")]
+    Vk { call: &'static str, result: ash::vk::Result },
+    #[error("allocating {what} ({bytes} bytes): {source}")]
+    Alloc { what: String, bytes: u64, source: gpu_allocator::AllocationError },
+    #[error("{what} needs {bytes} bytes, more than the device's limit of {limit} bytes for one storage buffer")]
+    TooBig { what: String, bytes: u64, limit: u64 },
+    #[error("shader {variant} failed to compile:\n{log}")]
+    Compile { variant: String, log: String },
+    #[error("{path}: {msg}")]
+    Spirv { path: String, msg: String },
+    #[error("{0}")]
+    Other(String),
+}
+
+/// Maps a failed Vulkan call to a [`GpuError`].
+pub(crate) trait VkResultExt<T> {
+    fn vk(self, call: &'static str) -> Result<T, GpuError>;
+}
+
+impl<T> VkResultExt<T> for Result<T, ash::vk::Result> {
+    fn vk(self, call: &'static str) -> Result<T, GpuError> {
+        self.map_err(|result| GpuError::Vk { call, result })
+    }
+}

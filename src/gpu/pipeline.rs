@@ -1,0 +1,108 @@
+//! A compute pipeline with one descriptor set of storage buffers and a push-constant block.
+
+use super::buffer::Buffer;
+use super::{Gpu, GpuError, VkResultExt};
+use ash::vk;
+
+pub struct ComputePipeline<'g> {
+    gpu: &'g Gpu,
+    pub name: String,
+    module: vk::ShaderModule,
+    dsl: vk::DescriptorSetLayout,
+    layout: vk::PipelineLayout,
+    pipeline: vk::Pipeline,
+    pool: vk::DescriptorPool,
+    set: vk::DescriptorSet,
+    push_size: u32,
+}
+
+impl<'g> ComputePipeline<'g> {
+    pub fn new(gpu: &'g Gpu, name: &str, spirv: &[u32], bindings: u32, push_size: u32) -> Result<ComputePipeline<'g>, GpuError> {
+        let d = &gpu.device;
+        let mut p = ComputePipeline {
+            gpu,
+            name: name.into(),
+            module: vk::ShaderModule::null(),
+            dsl: vk::DescriptorSetLayout::null(),
+            layout: vk::PipelineLayout::null(),
+            pipeline: vk::Pipeline::null(),
+            pool: vk::DescriptorPool::null(),
+            set: vk::DescriptorSet::null(),
+            push_size,
+        };
+        // Every object created is destroyed by Drop, even when a later step fails.
+        unsafe {
+            p.module = d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(spirv), None).vk("vkCreateShaderModule")?;
+            let b: Vec<vk::DescriptorSetLayoutBinding> = (0..bindings)
+                .map(|i| vk::DescriptorSetLayoutBinding::default().binding(i).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::COMPUTE))
+                .collect();
+            p.dsl = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&b), None).vk("vkCreateDescriptorSetLayout")?;
+            let dsls = [p.dsl];
+            let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).offset(0).size(push_size)];
+            p.layout = d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&dsls).push_constant_ranges(&ranges), None).vk("vkCreatePipelineLayout")?;
+            let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(p.module).name(c"main");
+            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout)];
+            p.pipeline = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None).map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
+            let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: bindings }];
+            p.pool = d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None).vk("vkCreateDescriptorPool")?;
+            p.set = d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&dsls)).vk("vkAllocateDescriptorSets")?[0];
+        }
+        Ok(p)
+    }
+
+    /// Points binding i at `buffers[i]`.
+    pub fn bind(&self, buffers: &[&Buffer]) {
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers.iter().map(|b| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }]).collect();
+        let writes: Vec<vk::WriteDescriptorSet> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, info)| vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(i as u32).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info))
+            .collect();
+        unsafe { self.gpu.device.update_descriptor_sets(&writes, &[]) };
+    }
+
+    /// Records a dispatch of `groups` workgroups (split over x and y past 65535).
+    pub fn dispatch(&self, cmd: vk::CommandBuffer, push: &[u8], groups: u32) {
+        assert_eq!(push.len() as u32, self.push_size);
+        let d = &self.gpu.device;
+        let gx = groups.clamp(1, 65535);
+        let gy = groups.div_ceil(65535).max(1);
+        unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+            d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[self.set], &[]);
+            d.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
+            d.cmd_dispatch(cmd, gx, gy, 1);
+        }
+    }
+
+    /// A barrier making shader writes visible to transfers and later dispatches.
+    pub fn barrier(&self, cmd: vk::CommandBuffer) {
+        let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+        unsafe {
+            self.gpu.device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &mb, &[], &[]);
+        }
+    }
+}
+
+impl Drop for ComputePipeline<'_> {
+    fn drop(&mut self) {
+        let d = &self.gpu.device;
+        unsafe {
+            if self.pool != vk::DescriptorPool::null() {
+                d.destroy_descriptor_pool(self.pool, None);
+            }
+            if self.pipeline != vk::Pipeline::null() {
+                d.destroy_pipeline(self.pipeline, None);
+            }
+            if self.layout != vk::PipelineLayout::null() {
+                d.destroy_pipeline_layout(self.layout, None);
+            }
+            if self.dsl != vk::DescriptorSetLayout::null() {
+                d.destroy_descriptor_set_layout(self.dsl, None);
+            }
+            if self.module != vk::ShaderModule::null() {
+                d.destroy_shader_module(self.module, None);
+            }
+        }
+    }
+}
