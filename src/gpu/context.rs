@@ -53,7 +53,6 @@ pub struct Gpu {
     _entry: ash::Entry,
     instance: ash::Instance,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *mut Mutex<Vec<String>>)>,
-    pub(crate) physical: vk::PhysicalDevice,
     pub(crate) device: ash::Device,
     pub(crate) queue: vk::Queue,
     pub(crate) pool: vk::CommandPool,
@@ -176,7 +175,7 @@ impl Gpu {
         let entry = load_entry()?;
         let (instance, use_layer) = make_instance(&entry, validation)?;
         // From here on, failures must destroy the instance.
-        match Self::open(entry, instance.clone(), use_layer, opts) {
+        match Self::open(entry.clone(), instance.clone(), use_layer, opts) {
             Ok(g) => Ok(g),
             Err((e, debug)) => {
                 unsafe {
@@ -291,7 +290,7 @@ impl Gpu {
                 return Err((GpuError::Other(format!("creating the allocator: {e}")), debug));
             }
         };
-        Ok(Gpu { _entry: entry, instance, debug, physical, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info, validation_enabled: use_layer })
+        Ok(Gpu { _entry: entry, instance, debug, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info, validation_enabled: use_layer })
     }
 
     /// Bytes currently allocated through the allocator (0 once every buffer is dropped).

@@ -22,23 +22,27 @@ fn source(name: &str) -> Option<&'static str> {
 /// Compiles one variant. `f64_fallback`: use fp64 for the watertight test's exact-zero edge
 /// case (needs `shaderFloat64`; the CPU reference always does).
 pub fn compile(v: &Variant, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
-    let name = v.name(stats);
-    let compile_err = |log: String| GpuError::Compile { variant: name.clone(), log };
+    let file = v.source_file();
+    let src = source(file).ok_or_else(|| GpuError::Compile { variant: v.name(stats), log: format!("missing source {file}") })?;
+    compile_source(&v.name(stats), file, src, &v.defines(stats, f64_fallback))
+}
+
+/// Compiles GLSL compute source (which may `#include` the files in `glsl/`) with defines.
+pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
+    let compile_err = |log: String| GpuError::Compile { variant: name.to_string(), log };
     let compiler = shaderc::Compiler::new().map_err(|e| compile_err(format!("shaderc unavailable: {e}")))?;
     let mut opts = shaderc::CompileOptions::new().map_err(|e| compile_err(format!("shaderc options: {e}")))?;
     opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
     opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
     opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
-    for (k, val) in v.defines(stats, f64_fallback) {
-        opts.add_macro_definition(&k, Some(&val));
+    for (k, val) in defines {
+        opts.add_macro_definition(k, Some(val));
     }
     opts.set_include_callback(|req, _ty, _from, _depth| {
         source(req)
             .map(|s| shaderc::ResolvedInclude { resolved_name: req.to_string(), content: s.to_string() })
             .ok_or_else(|| format!("no such include: {req}"))
     });
-    let file = v.source_file();
-    let src = source(file).ok_or_else(|| compile_err(format!("missing source {file}")))?;
     let art = compiler.compile_into_spirv(src, shaderc::ShaderKind::Compute, file, "main", Some(&opts)).map_err(|e| compile_err(e.to_string()))?;
     Ok(art.as_binary().to_vec())
 }
