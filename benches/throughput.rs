@@ -7,7 +7,7 @@
 use halftrace::encode::Layout;
 use halftrace::gpu::{traversal, ContextOptions, Gpu};
 use halftrace::pipeline::{make_rays, Encoded, RayKind, RayParams};
-use halftrace::variant::Variant;
+use halftrace::variant::{PacketImpl, Variant};
 use std::path::PathBuf;
 
 fn main() {
@@ -25,8 +25,8 @@ fn main() {
             let v = Variant::new(layout, 4, 1);
             let enc = Encoded::new(&scene, &bin, layout, 4).unwrap();
             let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-            let pipe = traversal::pipeline(&g, &v, false, None).unwrap();
-            let out = traversal::run(&g, &gb, &pipe, &rays, 2, 10, false).unwrap();
+            let pipe = traversal::pipeline(&g, &v, PacketImpl::Single, false, None).unwrap();
+            let out = traversal::run(&g, &gb, &pipe, &rays, 2, 10).unwrap();
             let (cpu, _) = enc.trace(&rays);
             let bad = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&cpu[i])).count();
             assert_eq!(bad, 0, "{v} {kind}: {bad} rays differ from the CPU reference");

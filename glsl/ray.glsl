@@ -8,7 +8,10 @@ spirv_execution_mode(capabilities = [4467], 4462, 16);
 spirv_execution_mode(capabilities = [4466], 4461, 16);
 spirv_execution_mode(capabilities = [4466], 4461, 32);
 
-layout(local_size_x = 64, local_size_y = 1, local_size_z = 1) in;
+#ifndef WG
+#define WG 64
+#endif
+layout(local_size_x = WG, local_size_y = 1, local_size_z = 1) in;
 
 layout(push_constant) uniform Push {
     uint ray_count;
@@ -26,7 +29,8 @@ layout(std430, set = 0, binding = 3) readonly buffer Rays { float ray_f[]; };   
 struct Hit { float t; int prim; float u; float v; };
 layout(std430, set = 0, binding = 4) writeonly buffer Hits { Hit hits[]; };
 #ifdef STATS
-layout(std430, set = 0, binding = 5) writeonly buffer Counters { uvec4 counters[]; }; // nodes, box tests, tri tests, re-anchors
+// per ray: [nodes, box tests, tri tests, re-anchors], [packet nodes, active rays summed, 0, 0]
+layout(std430, set = 0, binding = 5) writeonly buffer Counters { uvec4 counters[]; };
 #endif
 
 #define INF uintBitsToFloat(0x7f800000u)
@@ -36,7 +40,7 @@ const uint LEAF_BIT = 0x80000000u;
 const int NO_PRIM = 0x7fffffff;
 
 uint ray_index() {
-    return (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * 64u + gl_LocalInvocationID.x;
+    return (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * uint(WG) + gl_LocalInvocationID.x;
 }
 
 struct RayPre {

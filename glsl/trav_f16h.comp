@@ -187,6 +187,7 @@ void main() {
     if (overflow) hits[i] = Hit(0.0, -2, 0.0, 0.0);
     else write_hit(i, best_t, best_prim, best_u, best_v);
 #ifdef STATS
-    counters[i] = cnt;
+    counters[2u * i] = cnt;
+    counters[2u * i + 1u] = uvec4(cnt.x, cnt.x, 0u, 0u);
 #endif
 }

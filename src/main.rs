@@ -6,7 +6,7 @@ use halftrace::bvh::{self, stats::stats};
 use halftrace::encode::Layout;
 use halftrace::pipeline::{self, Encoded, RayKind, RayParams};
 use halftrace::rays::Camera;
-use halftrace::variant::Variant;
+use halftrace::variant::{PacketImpl, Variant};
 use halftrace::{gpu, npy, scene};
 use std::io::Write;
 use std::path::PathBuf;
@@ -55,6 +55,13 @@ struct TraceArgs {
     /// Branching factor: 2, 4, 8 or 16.
     #[arg(long, default_value_t = 4)]
     branching: usize,
+    /// Rays per packet: 1, 4, 8, 16, 32 or 64.
+    #[arg(long, default_value_t = 1)]
+    packet: usize,
+    /// Packet implementation: subgroup or shared (default: subgroup when P fits the device's
+    /// subgroup, else shared memory).
+    #[arg(long)]
+    packet_impl: Option<String>,
     /// primary, ao, diffuse, grazing, or a FILE.npy (float32, N x 8).
     #[arg(long, default_value = "primary")]
     rays: String,
@@ -120,7 +127,15 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let params = RayParams { width: a.width, height: a.height, camera, seed: a.seed, ..Default::default() };
     let rays = pipeline::make_rays(&scene, &bin, &kind, &params)?;
     let enc = Encoded::new(&scene, &bin, layout, a.branching)?;
-    let variant = Variant::new(layout, a.branching, 1);
+    anyhow::ensure!(halftrace::variant::PACKETS.contains(&a.packet), "--packet {}: use one of 1, 4, 8, 16, 32, 64", a.packet);
+    let variant = Variant::new(layout, a.branching, a.packet);
+    let force_impl = match a.packet_impl.as_deref() {
+        None => None,
+        Some("subgroup") => Some(PacketImpl::Subgroup),
+        Some("shared") => Some(PacketImpl::Shared),
+        Some(o) => anyhow::bail!("--packet-impl '{o}': use subgroup or shared"),
+    }
+    .filter(|_| a.packet > 1);
     let backend = match a.backend.as_deref() {
         Some("cpu") => "cpu",
         Some("gpu") => "gpu",
@@ -137,7 +152,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     outln!("scene {} ({} triangles), variant {variant}, rays {kind}: {} rays", scene.name, scene.len(), rays.len());
     let (hits, counters) = if backend == "cpu" {
         let t1 = Instant::now();
-        let (hits, counters) = enc.trace(&rays);
+        let (hits, counters) = enc.trace_packets(&rays, a.packet);
         let secs = t1.elapsed().as_secs_f64();
         outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
         (hits, Some(counters))
@@ -145,27 +160,32 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
         let g = gpu::Gpu::new(&opts)?;
         outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
-        let custom = a.spirv.as_deref().map(gpu::shader::load_checked).transpose()?;
+        let imp = gpu::traversal::choose_impl(&g, &variant, force_impl);
+        let wg = variant.workgroup(imp);
+        let custom = a.spirv.as_deref().map(|p| gpu::shader::load_checked(p, wg)).transpose()?;
         let bvh_gpu = gpu::traversal::GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
-        let pipe = gpu::traversal::pipeline(&g, &variant, false, custom.as_deref()).with_context(|| variant.to_string())?;
-        let out = gpu::traversal::run(&g, &bvh_gpu, &pipe, &rays, a.warmup, a.repeat.max(1), false).with_context(|| variant.to_string())?;
-        // Correctness before speed: the CPU reference of the same layout.
-        let (ref_hits, ref_counters) = enc.trace(&rays);
+        let kernel = gpu::traversal::pipeline(&g, &variant, imp, false, custom.as_deref()).with_context(|| variant.to_string())?;
+        let kname = kernel.name();
+        let out = gpu::traversal::run(&g, &bvh_gpu, &kernel, &rays, a.warmup, a.repeat.max(1)).with_context(|| kname.clone())?;
+        // Correctness before speed: the CPU reference of the same layout and packet size.
+        let (ref_hits, ref_counters) = enc.trace_packets(&rays, a.packet);
         let bad: Vec<usize> = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&ref_hits[i])).collect();
         if let Some(&i) = bad.first() {
-            anyhow::bail!("{variant}{}: {} of {} rays differ from the CPU reference; first: ray {i} {:?}: gpu {:?}, cpu {:?}",
+            anyhow::bail!("{kname}{}: {} of {} rays differ from the CPU reference; first: ray {i} {:?}: gpu {:?}, cpu {:?}",
                 if a.spirv.is_some() { " (custom SPIR-V)" } else { "" }, bad.len(), rays.len(), rays[i], out.hits[i], ref_hits[i]);
         }
         let mut t = out.times_ms.clone();
         t.sort_by(f64::total_cmp);
         let med = t[t.len() / 2];
-        outln!("backend gpu: validated against the CPU reference ({} rays identical)", rays.len());
+        outln!("kernel {kname}: validated against the CPU reference ({} rays identical)", rays.len());
         outln!("time over {} dispatches after {} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.len(), a.warmup, med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
         let counters = if a.stats {
-            let sp = gpu::traversal::pipeline(&g, &variant, true, None)?;
-            let so = gpu::traversal::run(&g, &bvh_gpu, &sp, &rays, 0, 1, true)?;
+            let sk = gpu::traversal::pipeline(&g, &variant, imp, true, None)?;
+            let so = gpu::traversal::run(&g, &bvh_gpu, &sk, &rays, 0, 1)?;
             let c = so.counters.unwrap();
-            anyhow::ensure!(c == ref_counters, "{variant}: GPU counters differ from the CPU reference");
+            if let Some(i) = (0..rays.len()).find(|&i| c[i] != ref_counters[i]) {
+                anyhow::bail!("{}: ray {i}: GPU counters {:?} differ from the CPU reference {:?}", sk.name(), c[i], ref_counters[i]);
+            }
             Some(c)
         } else {
             None
@@ -177,6 +197,14 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     if let Some(c) = counters.filter(|_| a.stats || backend == "cpu") {
         let m = pipeline::mean_counters(&c);
         outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
+        let packets = rays.len().div_ceil(a.packet).max(1);
+        let pn: u64 = c.iter().map(|x| x.packet_nodes as u64).sum();
+        outln!(
+            "per packet of {}: {:.2} nodes visited; SIMD utilisation {:.1}% (active rays per visited node)",
+            a.packet,
+            pn as f64 / packets as f64,
+            100.0 * halftrace::trace::packet::simd_utilisation(&c, a.packet)
+        );
     }
     if let Some(p) = &a.out {
         npy::write_hits(p, &hits)?;
@@ -233,10 +261,10 @@ fn devices() -> anyhow::Result<()> {
 
 fn shaders(dir: &PathBuf) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    for v in Variant::matrix() {
+    for (v, imp) in halftrace::variant::spirv_matrix() {
         for stats in [false, true] {
-            let code = gpu::shader::compile(&v, stats, true)?;
-            let p = dir.join(format!("{}.spv", v.name(stats)));
+            let code = gpu::shader::compile(&v, imp, stats, true)?;
+            let p = dir.join(format!("{}.spv", v.kernel_name(imp, stats)));
             std::fs::write(&p, bytemuck::cast_slice(&code)).with_context(|| format!("writing {}", p.display()))?;
             outln!("{}", p.display());
         }

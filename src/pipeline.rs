@@ -140,6 +140,17 @@ impl Encoded {
         }
     }
 
+    /// Traces rays in packets of `p` on the CPU reference of this layout (p = 1: single rays).
+    pub fn trace_packets(&self, rays: &[Ray], p: usize) -> (Vec<Hit>, Vec<Counters>) {
+        if p == 1 {
+            return self.trace(rays);
+        }
+        match self {
+            Encoded::F32(e) => trace::packet::trace_f32(e, rays, p),
+            Encoded::F16h(e) => trace::packet::trace_f16h(e, rays, p),
+        }
+    }
+
     /// Traces all rays on the CPU reference of this layout.
     pub fn trace(&self, rays: &[Ray]) -> (Vec<Hit>, Vec<Counters>) {
         match self {
@@ -153,7 +164,7 @@ impl Encoded {
 pub fn write_image(path: &Path, scene: &Scene, rays: &[Ray], hits: &[Hit], width: u32, height: u32) -> anyhow::Result<()> {
     anyhow::ensure!(rays.len() == (width * height) as usize, "--image needs primary rays ({}x{} = {} rays, got {})", width, height, width * height, rays.len());
     let mut img = image::RgbImage::new(width, height);
-    for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
+    for (&(x, y), (r, h)) in rays::pixel_order(width, height).iter().zip(rays.iter().zip(hits)) {
         let px = if h.is_hit() {
             let n = scene.normal(h.prim as usize).normalize_or_zero();
             let c = n.dot(r.d().normalize()).abs();
@@ -162,7 +173,7 @@ pub fn write_image(path: &Path, scene: &Scene, rays: &[Ray], hits: &[Hit], width
         } else {
             [22, 26, 38]
         };
-        img.put_pixel(i as u32 % width, i as u32 / width, image::Rgb(px));
+        img.put_pixel(x, y, image::Rgb(px));
     }
     img.save(path).with_context(|| format!("writing {}", path.display()))
 }

@@ -115,7 +115,35 @@ impl Camera {
     }
 }
 
-/// One normalised primary ray per pixel centre, rows top to bottom, `tmin = 0`, `tmax = +inf`.
+/// Side of the square screen tiles primary rays are ordered in.
+pub const TILE: u32 = 8;
+
+/// Pixel order of primary rays: 8×8 tiles in row-major order, pixels inside a tile in Morton
+/// (Z) order, pixels outside the image skipped. Any aligned run of P = 4, 8, 16, 32, 64 rays
+/// inside a full tile is then a compact block (2×2, 4×2, 4×4, 8×4, 8×8), so packets of
+/// neighbouring rays are coherent for every packet size at once.
+pub fn pixel_order(width: u32, height: u32) -> Vec<(u32, u32)> {
+    let mut v = Vec::with_capacity((width * height) as usize);
+    for ty in (0..height).step_by(TILE as usize) {
+        for tx in (0..width).step_by(TILE as usize) {
+            for m in 0..TILE * TILE {
+                // de-interleave the Morton index: even bits x, odd bits y
+                let (mut x, mut y) = (0, 0);
+                for b in 0..3 {
+                    x |= ((m >> (2 * b)) & 1) << b;
+                    y |= ((m >> (2 * b + 1)) & 1) << b;
+                }
+                let (px, py) = (tx + x, ty + y);
+                if px < width && py < height {
+                    v.push((px, py));
+                }
+            }
+        }
+    }
+    v
+}
+
+/// One normalised primary ray per pixel centre, in [`pixel_order`], `tmin = 0`, `tmax = +inf`.
 pub fn primary(cam: &Camera, width: u32, height: u32) -> Result<Vec<Ray>, RayError> {
     if width == 0 || height == 0 {
         return Err(RayError::Param(format!("image size {width}x{height}: width and height must be positive")));
@@ -126,16 +154,14 @@ pub fn primary(cam: &Camera, width: u32, height: u32) -> Result<Vec<Ray>, RayErr
     let up = right.cross(fwd);
     let h = (0.5 * cam.fov_deg.to_radians()).tan();
     let aspect = width as f32 / height as f32;
-    let mut rays = Vec::with_capacity((width * height) as usize);
-    for y in 0..height {
-        for x in 0..width {
+    Ok(pixel_order(width, height)
+        .into_iter()
+        .map(|(x, y)| {
             let px = ((x as f32 + 0.5) / width as f32 * 2.0 - 1.0) * h * aspect;
             let py = (1.0 - (y as f32 + 0.5) / height as f32 * 2.0) * h;
-            let d = (fwd + right * px + up * py).normalize();
-            rays.push(Ray::new(cam.eye, d, 0.0, f32::INFINITY));
-        }
-    }
-    Ok(rays)
+            Ray::new(cam.eye, (fwd + right * px + up * py).normalize(), 0.0, f32::INFINITY)
+        })
+        .collect())
 }
 
 /// SplitMix64: a tiny, stable, seedable generator (its stream never changes across versions).
@@ -164,7 +190,8 @@ pub const AO_LENGTH: f32 = 0.1;
 /// Offset of secondary ray origins along the surface normal, as a fraction of the diagonal.
 pub const SURFACE_OFFSET: f32 = 1e-5;
 
-/// Cosine-weighted hemisphere rays from the primary hits (one per hit, in pixel order), on the
+/// Cosine-weighted hemisphere rays from the primary hits (one per hit, in primary-ray order, so
+/// neighbouring rays come from neighbouring pixels), on the
 /// side of the surface the primary ray came from. `length`: `Some(fraction of the scene
 /// diagonal)` for ao, `None` (unbounded) for diffuse.
 pub fn secondary(scene: &Scene, primary: &[Ray], hits: &[Hit], seed: u64, length: Option<f32>) -> Vec<Ray> {
@@ -299,4 +326,30 @@ pub fn grazing(scene: &Scene, boxes: &[Aabb], count: usize, seed: u64) -> Vec<Ra
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_order_covers_the_image_once_and_packets_are_tiles() {
+        for (w, h) in [(8, 8), (16, 8), (13, 7), (64, 48)] {
+            let o = pixel_order(w, h);
+            let mut seen = vec![false; (w * h) as usize];
+            for &(x, y) in &o {
+                assert!(!seen[(y * w + x) as usize]);
+                seen[(y * w + x) as usize] = true;
+            }
+            assert!(seen.iter().all(|&s| s));
+        }
+        let o = pixel_order(64, 64);
+        for (p, (bw, bh)) in [(4, (2, 2)), (8, (4, 2)), (16, (4, 4)), (32, (8, 4)), (64, (8, 8))] {
+            for chunk in o.chunks(p) {
+                let (x0, x1) = (chunk.iter().map(|c| c.0).min().unwrap(), chunk.iter().map(|c| c.0).max().unwrap());
+                let (y0, y1) = (chunk.iter().map(|c| c.1).min().unwrap(), chunk.iter().map(|c| c.1).max().unwrap());
+                assert_eq!((x1 - x0 + 1, y1 - y0 + 1), (bw, bh), "P={p}");
+            }
+        }
+    }
 }

@@ -13,8 +13,31 @@ pub struct Variant {
     pub packet: usize,
 }
 
-/// Packet sizes of the default matrix (single-ray kernels for now).
-pub const PACKETS: [usize; 1] = [1];
+pub use crate::trace::packet::PACKETS;
+
+/// How the P rays of a packet cooperate on the GPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum PacketImpl {
+    /// P = 1: classic per-invocation traversal.
+    Single,
+    /// Clusters of P invocations of a subgroup (P ≤ subgroup size), clustered subgroup ops.
+    Subgroup,
+    /// One packet per workgroup of P invocations, reductions through shared memory.
+    Shared,
+}
+
+impl PacketImpl {
+    /// The implementation used for packet size `p` on a device with `subgroup` lanes.
+    pub fn choose(p: usize, subgroup: u32) -> PacketImpl {
+        if p == 1 {
+            PacketImpl::Single
+        } else if p <= subgroup as usize {
+            PacketImpl::Subgroup
+        } else {
+            PacketImpl::Shared
+        }
+    }
+}
 
 /// GPU stack entries per ray for a branching factor: room for (B−1)·depth + 1 entries with
 /// depth ≤ 64, 32, 24, 16 for B = 2, 4, 8, 16.
@@ -32,19 +55,52 @@ impl Variant {
         Variant { layout, branching, packet }
     }
 
-    /// The kernel's name; with `stats`, the counting variant's.
-    pub fn name(&self, stats: bool) -> String {
-        format!("trav_{}_b{}_p{}{}", self.layout.name(), self.branching, self.packet, if stats { "_stats" } else { "" })
+    /// The kernel's name: `trav_{layout}_b{B}_p{P}`, then `_subgroup` for the subgroup packet
+    /// implementation and `_stats` for the counting kernel. Packets of P > 1 without a suffix
+    /// use shared memory (portable to any subgroup size).
+    pub fn kernel_name(&self, imp: PacketImpl, stats: bool) -> String {
+        format!(
+            "trav_{}_b{}_p{}{}{}",
+            self.layout.name(),
+            self.branching,
+            self.packet,
+            if imp == PacketImpl::Subgroup { "_subgroup" } else { "" },
+            if stats { "_stats" } else { "" }
+        )
     }
 
-    /// The default matrix: every layout and B, every packet size.
+    /// The kernel name of the portable implementation.
+    pub fn name(&self, stats: bool) -> String {
+        self.kernel_name(self.portable_impl(), stats)
+    }
+
+    /// Single-ray for P = 1, shared memory otherwise.
+    pub fn portable_impl(&self) -> PacketImpl {
+        if self.packet == 1 {
+            PacketImpl::Single
+        } else {
+            PacketImpl::Shared
+        }
+    }
+
+    /// Workgroup size of a kernel.
+    pub fn workgroup(&self, imp: PacketImpl) -> u32 {
+        match imp {
+            PacketImpl::Shared => self.packet as u32,
+            _ => 64,
+        }
+    }
+
+    /// The default matrix (the seed's two series): every layout with B ∈ {2, 4, 8, 16} at
+    /// P = 1, and P ∈ {4, 8, 16, 32, 64} at B = 4.
     pub fn matrix() -> Vec<Variant> {
         let mut v = Vec::new();
         for layout in Layout::ALL {
             for b in BRANCHINGS {
-                for p in PACKETS {
-                    v.push(Variant::new(layout, b, p));
-                }
+                v.push(Variant::new(layout, b, 1));
+            }
+            for p in PACKETS.into_iter().filter(|&p| p > 1) {
+                v.push(Variant::new(layout, 4, p));
             }
         }
         v
@@ -52,19 +108,25 @@ impl Variant {
 
     /// The GLSL entry file of this variant.
     pub fn source_file(&self) -> &'static str {
-        match self.layout {
-            Layout::F32 => "trav_f32.comp",
-            Layout::F16h => "trav_f16h.comp",
+        match (self.layout, self.packet) {
+            (Layout::F32, 1) => "trav_f32.comp",
+            (Layout::F16h, 1) => "trav_f16h.comp",
+            (Layout::F32, _) => "trav_f32_packet.comp",
+            (Layout::F16h, _) => "trav_f16h_packet.comp",
         }
     }
 
     /// Preprocessor definitions of this variant.
-    pub fn defines(&self, stats: bool, f64_fallback: bool) -> Vec<(String, String)> {
+    pub fn defines(&self, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Vec<(String, String)> {
         let mut d = vec![
             ("B".to_string(), self.branching.to_string()),
             ("P".to_string(), self.packet.to_string()),
+            ("WG".to_string(), self.workgroup(imp).to_string()),
             ("STACK_SIZE".to_string(), stack_entries(self.branching).to_string()),
         ];
+        if imp == PacketImpl::Subgroup {
+            d.push(("PACKET_SUBGROUP".into(), "1".into()));
+        }
         if stats {
             d.push(("STATS".into(), "1".into()));
         }
@@ -79,4 +141,17 @@ impl std::fmt::Display for Variant {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.name(false))
     }
+}
+
+/// The kernels kept in `spirv/`: every variant of the default matrix in its portable
+/// implementation, plus the subgroup implementation of every packet variant.
+pub fn spirv_matrix() -> Vec<(Variant, PacketImpl)> {
+    let mut out = Vec::new();
+    for v in Variant::matrix() {
+        out.push((v, v.portable_impl()));
+        if v.packet > 1 {
+            out.push((v, PacketImpl::Subgroup));
+        }
+    }
+    out
 }

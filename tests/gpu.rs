@@ -12,7 +12,7 @@ use halftrace::gpu::pipeline::ComputePipeline;
 use halftrace::gpu::{shader, traversal, ContextOptions, Gpu, GpuError};
 use halftrace::pipeline::Encoded;
 use halftrace::rays::Ray;
-use halftrace::variant::Variant;
+use halftrace::variant::{PacketImpl, Variant};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -43,14 +43,14 @@ fn every_variant_equals_the_cpu_reference_on_every_scene() {
                 let v = Variant::new(layout, b, 1);
                 let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
                 let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-                let timed = traversal::pipeline(&g, &v, false, None).unwrap();
-                let stats = traversal::pipeline(&g, &v, true, None).unwrap();
+                let timed = traversal::pipeline(&g, &v, PacketImpl::Single, false, None).unwrap();
+                let stats = traversal::pipeline(&g, &v, PacketImpl::Single, true, None).unwrap();
                 for (kind, rays) in &sets {
                     let (hits, counters) = enc.trace(rays);
                     let what = format!("{} {v} {kind}", p.scene.name);
-                    let a = traversal::run(&g, &gb, &timed, rays, 0, 1, false).unwrap();
+                    let a = traversal::run(&g, &gb, &timed, rays, 0, 1).unwrap();
                     assert_same_hits(&format!("{what} (timed kernel) vs CPU"), rays, &hits, &a.hits);
-                    let s = traversal::run(&g, &gb, &stats, rays, 0, 1, true).unwrap();
+                    let s = traversal::run(&g, &gb, &stats, rays, 0, 1).unwrap();
                     assert_same_hits(&format!("{what} (counting kernel) vs CPU"), rays, &hits, &s.hits);
                     let c = s.counters.unwrap();
                     if let Some(i) = (0..rays.len()).find(|&i| c[i] != counters[i]) {
@@ -74,16 +74,16 @@ fn odd_ray_counts_and_all_miss_batches() {
     for layout in Layout::ALL {
         let enc = Encoded::new(&p.scene, &p.bin, layout, 8).unwrap();
         let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-        let pipe = traversal::pipeline(&g, &Variant::new(layout, 8, 1), false, None).unwrap();
+        let pipe = traversal::pipeline(&g, &Variant::new(layout, 8, 1), PacketImpl::Single, false, None).unwrap();
         for n in [1usize, 63, 65, 1000] {
             let r = &rays[..n];
-            let a = traversal::run(&g, &gb, &pipe, r, 1, 2, false).unwrap();
+            let a = traversal::run(&g, &gb, &pipe, r, 1, 2).unwrap();
             assert_eq!(a.times_ms.len(), 2);
             assert_same_hits(&format!("{layout} n={n}"), r, &enc.trace(r).0, &a.hits);
         }
         // Rays pointing away from the scene: all misses.
         let away: Vec<Ray> = (0..100).map(|i| Ray { origin: [100.0, i as f32, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY }).collect();
-        let a = traversal::run(&g, &gb, &pipe, &away, 0, 1, false).unwrap();
+        let a = traversal::run(&g, &gb, &pipe, &away, 0, 1).unwrap();
         assert!(a.hits.iter().all(|h| h.prim == -1 && h.t == f32::INFINITY));
     }
     clean(&g);
@@ -252,12 +252,13 @@ fn instructions(words: &[u32]) -> Vec<(u32, Vec<u32>)> {
 fn spirv_folder_is_fresh_valid_and_really_fp16() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv");
     let mut n = 0;
-    for v in Variant::matrix() {
+    let expected = halftrace::variant::spirv_matrix();
+    for (v, imp) in &expected {
         for stats in [false, true] {
-            let name = v.name(stats);
+            let name = v.kernel_name(*imp, stats);
             let p = dir.join(format!("{name}.spv"));
             let on_disk = std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}; run `halftrace shaders --emit spirv/`", p.display()));
-            let fresh = shader::compile(&v, stats, true).unwrap();
+            let fresh = shader::compile(v, *imp, stats, true).unwrap();
             assert!(on_disk == bytemuck::cast_slice::<u32, u8>(&fresh), "{} is stale against glsl/; run `halftrace shaders --emit spirv/`", p.display());
             let val = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&p).output().expect("spirv-val (package spirv-tools) is required");
             assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
@@ -274,5 +275,86 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             n += 1;
         }
     }
-    assert_eq!(n, 16);
+    let files = std::fs::read_dir(&dir).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "spv")).count();
+    assert_eq!(files, n, "spirv/ holds files that are not in the default matrix");
+    assert_eq!(n, 2 * expected.len());
+}
+
+/// Packets change the work, never the answer: for every scene, layout, B, P (both packet
+/// implementations where the device allows) and ray kind, GPU hits equal the single-ray CPU
+/// hits ray for ray, and GPU counters equal the CPU packet reference.
+#[test]
+fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
+    use halftrace::trace::packet::PACKETS;
+    let g = gpu();
+    let mut kernels = Vec::new();
+    for layout in Layout::ALL {
+        for b in BRANCHINGS {
+            for p in PACKETS.into_iter().filter(|&p| p > 1) {
+                let v = Variant::new(layout, b, p);
+                let mut imps = vec![halftrace::variant::PacketImpl::Shared];
+                if p <= g.info.subgroup_size as usize {
+                    imps.push(halftrace::variant::PacketImpl::Subgroup);
+                }
+                for imp in imps {
+                    kernels.push((traversal::pipeline(&g, &v, imp, false, None).unwrap(), traversal::pipeline(&g, &v, imp, true, None).unwrap()));
+                }
+            }
+        }
+    }
+    let mut checked = 0usize;
+    for path in all_scenes() {
+        let p = prepare(&path);
+        let sets = ray_sets(&p, 16, 200);
+        for layout in Layout::ALL {
+            for b in BRANCHINGS {
+                let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
+                let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+                let single: Vec<_> = sets.iter().map(|(_, rays)| enc.trace(rays).0).collect();
+                for (timed, stats) in kernels.iter().filter(|(k, _)| k.variant.layout == layout && k.variant.branching == b) {
+                    let pk = timed.variant.packet;
+                    for ((kind, rays), want) in sets.iter().zip(&single) {
+                        let what = format!("{} {} {kind}", p.scene.name, timed.name());
+                        let (cpu_hits, cpu_counters) = enc.trace_packets(rays, pk);
+                        assert_same_hits(&format!("{what}: CPU packet reference vs single-ray"), rays, want, &cpu_hits);
+                        let a = traversal::run(&g, &gb, timed, rays, 0, 1).unwrap();
+                        assert_same_hits(&format!("{what} vs single-ray"), rays, want, &a.hits);
+                        let s = traversal::run(&g, &gb, stats, rays, 0, 1).unwrap();
+                        assert_same_hits(&format!("{what} (counting) vs single-ray"), rays, want, &s.hits);
+                        let c = s.counters.unwrap();
+                        if let Some(i) = (0..rays.len()).find(|&i| c[i] != cpu_counters[i]) {
+                            panic!("{what}: ray {i} (packet {}): GPU counters {:?}, CPU packet reference {:?}", i / pk, c[i], cpu_counters[i]);
+                        }
+                        checked += rays.len();
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("{checked} packet-traced rays checked");
+    drop(kernels);
+    clean(&g);
+}
+
+#[test]
+fn packet_edge_cases_partial_packets_and_all_misses() {
+    let g = gpu();
+    let p = prepare(&scenes_dir().join("stanford-bunny.obj"));
+    let rays = &ray_sets(&p, 40, 10)[0].1;
+    let r1000 = &rays[..1000];
+    let away: Vec<Ray> = (0..130).map(|i| Ray { origin: [1.0, i as f32 * 0.01, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY }).collect();
+    for layout in Layout::ALL {
+        let enc = Encoded::new(&p.scene, &p.bin, layout, 4).unwrap();
+        let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+        let v = Variant::new(layout, 4, 64);
+        let k = traversal::pipeline(&g, &v, halftrace::variant::PacketImpl::Shared, true, None).unwrap();
+        let a = traversal::run(&g, &gb, &k, r1000, 0, 1).unwrap();
+        assert_same_hits("1000 rays, P=64", r1000, &enc.trace(r1000).0, &a.hits);
+        assert_eq!(a.counters.unwrap(), enc.trace_packets(r1000, 64).1);
+        let m = traversal::run(&g, &gb, &k, &away, 0, 1).unwrap();
+        assert!(m.hits.iter().all(|h| h.prim == -1));
+        let c = m.counters.unwrap();
+        assert!(c.iter().all(|c| c.nodes == 0 && c.tri_tests == 0 && c.packet_nodes == 0), "all-miss packets visit nothing");
+    }
+    clean(&g);
 }

@@ -2,7 +2,7 @@
 //! them), and the interface check applied to user-supplied SPIR-V modules.
 
 use super::GpuError;
-use crate::variant::Variant;
+use crate::variant::{PacketImpl, Variant};
 
 /// The GLSL sources in `glsl/`, embedded so the binary is self-contained.
 pub const SOURCES: &[(&str, &str)] = &[
@@ -13,6 +13,9 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("node.glsl", include_str!("../../glsl/node.glsl")),
     ("trav_f32.comp", include_str!("../../glsl/trav_f32.comp")),
     ("trav_f16h.comp", include_str!("../../glsl/trav_f16h.comp")),
+    ("packet.glsl", include_str!("../../glsl/packet.glsl")),
+    ("trav_f32_packet.comp", include_str!("../../glsl/trav_f32_packet.comp")),
+    ("trav_f16h_packet.comp", include_str!("../../glsl/trav_f16h_packet.comp")),
 ];
 
 fn source(name: &str) -> Option<&'static str> {
@@ -21,10 +24,11 @@ fn source(name: &str) -> Option<&'static str> {
 
 /// Compiles one variant. `f64_fallback`: use fp64 for the watertight test's exact-zero edge
 /// case (needs `shaderFloat64`; the CPU reference always does).
-pub fn compile(v: &Variant, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+pub fn compile(v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
     let file = v.source_file();
-    let src = source(file).ok_or_else(|| GpuError::Compile { variant: v.name(stats), log: format!("missing source {file}") })?;
-    compile_source(&v.name(stats), file, src, &v.defines(stats, f64_fallback))
+    let name = v.kernel_name(imp, stats);
+    let src = source(file).ok_or_else(|| GpuError::Compile { variant: name.clone(), log: format!("missing source {file}") })?;
+    compile_source(&name, file, src, &v.defines(imp, stats, f64_fallback))
 }
 
 /// Compiles GLSL compute source (which may `#include` the files in `glsl/`) with defines.
@@ -49,7 +53,6 @@ pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, Str
 
 /// What a traversal module must look like to be dispatched in place of a built-in one.
 pub const EXPECTED_BINDINGS: [u32; 6] = [0, 1, 2, 3, 4, 5];
-pub const LOCAL_SIZE: u32 = 64;
 
 /// A summary of a SPIR-V module's interface.
 #[derive(Debug, Default, Clone, PartialEq)]
@@ -108,8 +111,9 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
     Ok(itf)
 }
 
-/// Loads a user SPIR-V file and checks it can stand in for a traversal kernel.
-pub fn load_checked(path: &std::path::Path) -> Result<Vec<u32>, GpuError> {
+/// Loads a user SPIR-V file and checks it can stand in for a traversal kernel whose
+/// workgroup has `local_size` invocations.
+pub fn load_checked(path: &std::path::Path, local_size: u32) -> Result<Vec<u32>, GpuError> {
     let err = |msg: String| GpuError::Spirv { path: path.display().to_string(), msg };
     let bytes = std::fs::read(path).map_err(|e| err(format!("cannot read: {e}")))?;
     if bytes.len() % 4 != 0 {
@@ -121,8 +125,8 @@ pub fn load_checked(path: &std::path::Path) -> Result<Vec<u32>, GpuError> {
         return Err(err(format!("no GLCompute entry point named 'main' (found {:?})", itf.entry_points)));
     }
     match itf.local_size {
-        Some([x, 1, 1]) if x == LOCAL_SIZE => {}
-        other => return Err(err(format!("workgroup size must be ({LOCAL_SIZE}, 1, 1), found {other:?}"))),
+        Some([x, 1, 1]) if x == local_size => {}
+        other => return Err(err(format!("workgroup size must be ({local_size}, 1, 1), found {other:?}"))),
     }
     for &(set, b) in &itf.bindings {
         if set != 0 || !EXPECTED_BINDINGS.contains(&b) {

@@ -8,7 +8,7 @@ use crate::encode::Layout;
 use crate::pipeline::Encoded;
 use crate::rays::Ray;
 use crate::trace::{Counters, Hit};
-use crate::variant::{stack_entries, Variant};
+use crate::variant::{stack_entries, PacketImpl, Variant};
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
@@ -27,7 +27,8 @@ pub struct PushConstants {
 const _: () = assert!(std::mem::size_of::<PushConstants>() == 64);
 
 /// Descriptor bindings: 0 nodes, 1 triangle vertices, 2 triangle ids, 3 rays, 4 hits,
-/// 5 counters (uvec4 per ray: nodes, box tests, triangle tests, re-anchors).
+/// 5 counters (two uvec4 per ray: nodes, box tests, triangle tests, re-anchors; packet
+/// nodes, active rays summed over them — in the first ray of a packet — and two zeros).
 pub const BINDINGS: u32 = 6;
 
 /// A BVH resident on the device.
@@ -80,13 +81,36 @@ impl<'g> GpuBvh<'g> {
     }
 }
 
+/// A traversal kernel ready to dispatch.
+pub struct Kernel<'g> {
+    pub pipe: ComputePipeline<'g>,
+    pub variant: Variant,
+    pub imp: PacketImpl,
+    pub stats: bool,
+}
+
+impl Kernel<'_> {
+    pub fn name(&self) -> String {
+        self.variant.kernel_name(self.imp, self.stats)
+    }
+}
+
+/// The packet implementation this device uses for a variant (`force` overrides it).
+pub fn choose_impl(gpu: &Gpu, v: &Variant, force: Option<PacketImpl>) -> PacketImpl {
+    force.unwrap_or_else(|| PacketImpl::choose(v.packet, gpu.info.subgroup_size))
+}
+
 /// Compiles (or takes) the module of a variant and builds its pipeline.
-pub fn pipeline<'g>(gpu: &'g Gpu, v: &Variant, stats: bool, spirv: Option<&[u32]>) -> Result<ComputePipeline<'g>, GpuError> {
+pub fn pipeline<'g>(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, spirv: Option<&[u32]>) -> Result<Kernel<'g>, GpuError> {
+    if imp == PacketImpl::Subgroup && v.packet > gpu.info.subgroup_size as usize {
+        return Err(GpuError::Other(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
+    }
     let code = match spirv {
         Some(c) => c.to_vec(),
-        None => shader::compile(v, stats, gpu.info.shader_float64)?,
+        None => shader::compile(v, imp, stats, gpu.info.shader_float64)?,
     };
-    ComputePipeline::new(gpu, &v.name(stats), &code, BINDINGS, std::mem::size_of::<PushConstants>() as u32)
+    let pipe = ComputePipeline::new(gpu, &v.kernel_name(imp, stats), &code, BINDINGS, std::mem::size_of::<PushConstants>() as u32)?;
+    Ok(Kernel { pipe, variant: *v, imp, stats })
 }
 
 /// Hits (and counters, for a counting kernel) and the GPU time of each timed dispatch.
@@ -98,16 +122,18 @@ pub struct RunOutput {
 
 /// Dispatches `pipe` over `rays`: `warmup` untimed dispatches, then `repeat` timed ones
 /// (at least one dispatch in all). With `stats`, reads back the per-ray counters.
-pub fn run(gpu: &Gpu, bvh: &GpuBvh, pipe: &ComputePipeline, rays: &[Ray], warmup: usize, repeat: usize, stats: bool) -> Result<RunOutput, GpuError> {
+pub fn run(gpu: &Gpu, bvh: &GpuBvh, kernel: &Kernel, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError> {
+    let (pipe, stats) = (&kernel.pipe, kernel.stats);
+    let wg = kernel.variant.workgroup(kernel.imp);
     let n = rays.len();
     let ray_buf = Buffer::upload(gpu, "rays", bytemuck::cast_slice(rays))?;
     let out_usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
     let hits = Buffer::new(gpu, "hits", (n * 16) as u64, out_usage, MemoryLocation::GpuOnly)?;
-    let counters = Buffer::new(gpu, "counters", if stats { (n * 16) as u64 } else { 16 }, out_usage, MemoryLocation::GpuOnly)?;
+    let counters = Buffer::new(gpu, "counters", if stats { (n * 32) as u64 } else { 16 }, out_usage, MemoryLocation::GpuOnly)?;
     pipe.bind(&[&bvh.nodes, &bvh.tris, &bvh.ids, &ray_buf, &hits, &counters]);
     let mut push = bvh.push;
     push.ray_count = n as u32;
-    let groups = (n as u32).div_ceil(shader::LOCAL_SIZE);
+    let groups = (n as u32).div_ceil(wg);
     let timer = Timer::new(gpu)?;
     let mut times = Vec::with_capacity(repeat);
     for i in 0..(warmup + repeat).max(1) {
@@ -121,11 +147,11 @@ pub fn run(gpu: &Gpu, bvh: &GpuBvh, pipe: &ComputePipeline, rays: &[Ray], warmup
     }
     let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(n * 16)?);
     if let Some(bad) = hits.iter().position(|h| h.prim == -2) {
-        return Err(GpuError::Other(format!("{}: ray {bad} overflowed the traversal stack", pipe.name)));
+        return Err(GpuError::Other(format!("{}: ray {bad} overflowed the traversal stack", kernel.name())));
     }
     let counters = if stats {
-        let raw: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&counters.download(n * 16)?);
-        Some(raw.into_iter().map(|c| Counters { nodes: c[0], box_tests: c[1], tri_tests: c[2], reanchors: c[3] }).collect())
+        let raw: Vec<[u32; 8]> = bytemuck::pod_collect_to_vec(&counters.download(n * 32)?);
+        Some(raw.into_iter().map(|c| Counters { nodes: c[0], box_tests: c[1], tri_tests: c[2], reanchors: c[3], packet_nodes: c[4], active_lanes: c[5] }).collect())
     } else {
         None
     };
@@ -135,6 +161,7 @@ pub fn run(gpu: &Gpu, bvh: &GpuBvh, pipe: &ComputePipeline, rays: &[Ray], warmup
 /// Runs a debugging build of a kernel whose binding 5 is a float buffer of `dbg_floats`
 /// entries, and returns it.
 pub fn run_debug(gpu: &Gpu, bvh: &GpuBvh, pipe: &ComputePipeline, rays: &[Ray], dbg_floats: usize) -> Result<Vec<f32>, GpuError> {
+    const WG_SINGLE: u32 = 64;
     let n = rays.len();
     let ray_buf = Buffer::upload(gpu, "rays", bytemuck::cast_slice(rays))?;
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
@@ -144,7 +171,7 @@ pub fn run_debug(gpu: &Gpu, bvh: &GpuBvh, pipe: &ComputePipeline, rays: &[Ray], 
     let mut push = bvh.push;
     push.ray_count = n as u32;
     gpu.submit_and_wait(|cmd| {
-        pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(shader::LOCAL_SIZE));
+        pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(WG_SINGLE));
         pipe.barrier(cmd);
     })?;
     Ok(bytemuck::pod_collect_to_vec(&dbg.download(dbg_floats * 4)?))

@@ -179,130 +179,257 @@ pub fn trace_logged(bvh: &F16hBvh, ray: &Ray, log: Option<&mut Vec<[f32; 8]>>) -
     }
 }
 
-fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
-    let r = RayPre::new(ray);
-    let r16 = Ray16::new(&r);
-    let mut c = Counters { box_tests: 1, ..Default::default() };
-    let mut best = Closest::new(ray.tmax);
-    let root = &bvh.root;
-    let (near, far) = slab32(&r, root.box_lo, root.box_hi, r.tmin, r.tmax);
-    if !(near <= far) {
-        return (Hit::MISS, c);
+/// Per-ray state: fp32 ray constants, fp16 ray constants, closest hit, counters.
+struct Lane {
+    r: RayPre,
+    r16: Ray16,
+    best: Closest,
+    c: Counters,
+}
+
+impl Lane {
+    fn new(ray: &Ray) -> Lane {
+        let r = RayPre::new(ray);
+        Lane { r16: Ray16::new(&r), r, best: Closest::new(ray.tmax), c: Counters { box_tests: 1, ..Default::default() } }
     }
-    let rf = Frame { w: root.w, k: root.k };
-    let (o, e) = anchor(&r, &rf, near);
+
+    /// The root entry, or `None` when the ray misses the scene box.
+    fn root(&self, bvh: &F16hBvh) -> Option<Entry> {
+        let root = &bvh.root;
+        let (near, far) = slab32(&self.r, root.box_lo, root.box_hi, self.r.tmin, self.r.tmax);
+        if !(near <= far) {
+            return None;
+        }
+        let rf = Frame { w: root.w, k: root.k };
+        let (o, e) = anchor(&self.r, &rf, near);
+        Some(Entry { node: 0, frame: rf, o, e, tp: near, tlo: near })
+    }
+
+    fn test_leaf(&mut self, bvh: &F16hBvh, first: u32, count: u32) {
+        for i in first..first + count {
+            self.c.tri_tests += 1;
+            self.best.test(&self.r, &bvh.tris.verts[i as usize], bvh.tris.ids[i as usize] as i32);
+        }
+    }
+}
+
+/// Quantities fixed for one visit of one node by one ray.
+struct Visit {
+    mk: f32,
+    s_lim: f16,
+    lower: f16,
+    precise: bool,
+    w: f16,
+}
+
+fn visit(en: &Entry, lane: &Lane) -> Visit {
+    let mk = lane.r16.m * en.frame.k;
+    let s_max = S_BASE + en.e + 1.0;
+    let s_lim = up_f32(up32((lane.best.t - en.tp) * mk).min(s_max));
+    let sigma = up32((en.tp - en.tlo) * mk);
+    let lower = down_f32((-sigma).max(-s_max));
+    Visit { mk, s_lim, lower, precise: en.e <= EBIG, w: up_f32(en.e + en.e * TWO_M11 + W_MARGIN) }
+}
+
+/// The box test of one child: `Some((tn, tn_lb))` when the ray may touch it.
+#[inline]
+fn test_child(en: &Entry, lane: &Lane, v: &Visit, lo: [f16; 3], hi: [f16; 3]) -> Option<(f16, f16)> {
+    if !v.precise {
+        return Some((v.lower, v.lower));
+    }
+    let (tn, tn_lb, tf_ub) = slab16(&en.o, &lane.r16, v.w, lo, hi);
+    (tn_lb <= tf_ub && tf_ub >= v.lower && tn_lb <= v.s_lim).then_some((tn, tn_lb))
+}
+
+/// The stack entry of a hit inner child: its frame, and the origin moved into it in fp16
+/// (or re-anchored from the fp32 world ray when the bound grows too large).
+fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi: [f16; 3], tn: f16, tn_lb: f16) -> Entry {
+    let (r, r16, mk) = (&lane.r, &lane.r16, v.mk);
+    let cf = derive_child(&en.frame, lo, hi);
+    // Lower bound of the world parameter of anything that matters in the child.
+    let s_lo = tn_lb.max(v.lower).to_f32();
+    let q = s_lo / mk;
+    let tlo = ((en.tp + q) - (en.tp.abs() + q.abs()) * TWO_M21).max(en.tlo);
+    let s_e = tn.max(v.lower);
+    if v.precise && cf.r <= 32768.0 {
+        let r16c = f16::from_f32(cf.r);
+        let mut o2 = [f16::ZERO; 3];
+        let (mut emag, mut ecmag, mut omag) = (0f32, 0f32, 0f32);
+        let mut finite = true;
+        for a in 0..3 {
+            let ea = en.o[a] + s_e * r16.d[a];
+            let ec = ea - cf.c[a];
+            o2[a] = ec * r16c;
+            emag = emag.max(ea.to_f32().abs());
+            ecmag = ecmag.max(ec.to_f32().abs());
+            omag = omag.max(o2[a].to_f32().abs());
+            finite &= o2[a].is_finite();
+        }
+        let se = s_e.to_f32();
+        let step = se / mk;
+        let tp = en.tp + step;
+        let wmax = cf.frame.w.iter().fold(0f32, |m, x| m.max(x.abs()));
+        let mk2 = r16.m * cf.frame.k;
+        let e2 = (cf.r * (en.e + se.abs() * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
+            + wmax * TWO_M24 * cf.frame.k
+            + (en.tp.abs() + step.abs()) * TWO_M22 * mk2)
+            * (1.0 + TWO_M18);
+        if finite && omag <= OCAP && e2 <= EMAX {
+            return Entry { node: j, frame: cf.frame, o: o2, e: e2, tp, tlo };
+        }
+    }
+    lane.c.reanchors += 1;
+    let inv_k = 1.0 / en.frame.k;
+    let mut blo = [0f32; 3];
+    let mut bhi = [0f32; 3];
+    for a in 0..3 {
+        blo[a] = en.frame.w[a] + lo[a].to_f32() * inv_k;
+        bhi[a] = en.frame.w[a] + hi[a].to_f32() * inv_k;
+    }
+    let (tin, tout) = slab32(r, blo, bhi, f32::NEG_INFINITY, f32::INFINITY);
+    let tp = tin.min(tout).max(tlo);
+    let (o, e) = anchor(r, &cf.frame, tp);
+    Entry { node: j, frame: cf.frame, o, e, tp, tlo }
+}
+
+fn slot_box<N: NodeF16h>(n: &N, s: usize) -> ([f16; 3], [f16; 3]) {
+    ([n.lo(0, s), n.lo(1, s), n.lo(2, s)], [n.hi(0, s), n.hi(1, s), n.hi(2, s)])
+}
+
+fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
+    let mut lane = Lane::new(ray);
+    let Some(root) = lane.root(bvh) else { return (Hit::MISS, lane.c) };
     let mut stack: Vec<Entry> = Vec::with_capacity(64);
-    stack.push(Entry { node: 0, frame: rf, o, e, tp: near, tlo: near });
-    // (tn, tn_lb) per hit slot
+    stack.push(root);
     let mut hits = [((f16::ZERO, f16::ZERO), 0usize); 16];
-    let mut pending = [(0u32, Frame { w: [0.0; 3], k: 0.0 }, [f16::ZERO; 3], 0f32, 0f32, 0f32); 16];
+    let mut pending: Vec<Entry> = Vec::with_capacity(16);
     while let Some(en) = stack.pop() {
-        if en.tlo > best.t {
+        if en.tlo > lane.best.t {
             continue;
         }
-        c.nodes += 1;
+        lane.c.nodes += 1;
         if let Some(l) = log.as_deref_mut() {
-            l.push([en.node as f32, en.tlo, en.tp, en.e, en.o[0].to_f32(), en.o[1].to_f32(), en.o[2].to_f32(), best.t]);
+            l.push([en.node as f32, en.tlo, en.tp, en.e, en.o[0].to_f32(), en.o[1].to_f32(), en.o[2].to_f32(), lane.best.t]);
         }
         let n = &nodes[en.node as usize];
-        let mk = r16.m * en.frame.k;
-        let s_max = S_BASE + en.e + 1.0;
-        let s_lim = up_f32(up32((best.t - en.tp) * mk).min(s_max));
-        let sigma = up32((en.tp - en.tlo) * mk);
-        let lower = down_f32((-sigma).max(-s_max));
-        let precise = en.e <= EBIG;
-        let w = up_f32(en.e + en.e * TWO_M11 + W_MARGIN);
+        let v = visit(&en, &lane);
         let mut nh = 0;
         for s in 0..N::B {
             if n.child(s) == CHILD_EMPTY {
                 break;
             }
-            c.box_tests += 1;
-            if precise {
-                let lo = [n.lo(0, s), n.lo(1, s), n.lo(2, s)];
-                let hi = [n.hi(0, s), n.hi(1, s), n.hi(2, s)];
-                let (tn, tn_lb, tf_ub) = slab16(&en.o, &r16, w, lo, hi);
-                if tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= s_lim {
-                    hits[nh] = ((tn, tn_lb), s);
-                    nh += 1;
-                }
-            } else {
-                hits[nh] = ((lower, lower), s);
+            lane.c.box_tests += 1;
+            let (lo, hi) = slot_box(n, s);
+            if let Some(t) = test_child(&en, &lane, &v, lo, hi) {
+                hits[nh] = (t, s);
                 nh += 1;
             }
         }
         sort_hits(&mut hits[..nh], |t| t.0.to_f32());
-        let mut np = 0;
+        pending.clear();
         for &((tn, tn_lb), s) in &hits[..nh] {
             match decode_child(n.child(s)) {
-                ChildRef::Leaf { first, count } => {
-                    for i in first..first + count {
-                        c.tri_tests += 1;
-                        best.test(&r, &bvh.tris.verts[i as usize], bvh.tris.ids[i as usize] as i32);
-                    }
-                }
+                ChildRef::Leaf { first, count } => lane.test_leaf(bvh, first, count),
                 ChildRef::Inner(j) => {
-                    let lo = [n.lo(0, s), n.lo(1, s), n.lo(2, s)];
-                    let hi = [n.hi(0, s), n.hi(1, s), n.hi(2, s)];
-                    let cf = derive_child(&en.frame, lo, hi);
-                    // Lower bound of the world parameter of anything that matters in the child.
-                    let s_lo = tn_lb.max(lower).to_f32();
-                    let q = s_lo / mk;
-                    let tlo = ((en.tp + q) - (en.tp.abs() + q.abs()) * TWO_M21).max(en.tlo);
-                    let s_e = tn.max(lower);
-                    let mut moved = None;
-                    if precise && cf.r <= 32768.0 {
-                        let r16c = f16::from_f32(cf.r);
-                        let mut o2 = [f16::ZERO; 3];
-                        let (mut emag, mut ecmag, mut omag) = (0f32, 0f32, 0f32);
-                        let mut finite = true;
-                        for a in 0..3 {
-                            let ea = en.o[a] + s_e * r16.d[a];
-                            let ec = ea - cf.c[a];
-                            o2[a] = ec * r16c;
-                            emag = emag.max(ea.to_f32().abs());
-                            ecmag = ecmag.max(ec.to_f32().abs());
-                            omag = omag.max(o2[a].to_f32().abs());
-                            finite &= o2[a].is_finite();
-                        }
-                        let se = s_e.to_f32();
-                        let step = se / mk;
-                        let tp = en.tp + step;
-                        let wmax = cf.frame.w.iter().fold(0f32, |m, x| m.max(x.abs()));
-                        let mk2 = r16.m * cf.frame.k;
-                        let e2 = (cf.r * (en.e + se.abs() * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
-                            + wmax * TWO_M24 * cf.frame.k
-                            + (en.tp.abs() + step.abs()) * TWO_M22 * mk2)
-                            * (1.0 + TWO_M18);
-                        if finite && omag <= OCAP && e2 <= EMAX {
-                            moved = Some((o2, e2, tp));
-                        }
-                    }
-                    let (o2, e2, tp) = moved.unwrap_or_else(|| {
-                        c.reanchors += 1;
-                        let inv_k = 1.0 / en.frame.k;
-                        let mut blo = [0f32; 3];
-                        let mut bhi = [0f32; 3];
-                        for a in 0..3 {
-                            blo[a] = en.frame.w[a] + lo[a].to_f32() * inv_k;
-                            bhi[a] = en.frame.w[a] + hi[a].to_f32() * inv_k;
-                        }
-                        let (tin, tout) = slab32(&r, blo, bhi, f32::NEG_INFINITY, f32::INFINITY);
-                        let tp = tin.min(tout).max(tlo);
-                        let (o2, e2) = anchor(&r, &cf.frame, tp);
-                        (o2, e2, tp)
-                    });
-                    pending[np] = (j, cf.frame, o2, e2, tp, tlo);
-                    np += 1;
+                    let (lo, hi) = slot_box(n, s);
+                    pending.push(child_entry(&en, &mut lane, &v, j, lo, hi, tn, tn_lb));
                 }
             }
         }
-        for k in (0..np).rev() {
-            let (node, frame, o, e, tp, tlo) = pending[k];
-            stack.push(Entry { node, frame, o, e, tp, tlo });
-        }
+        stack.extend(pending.drain(..).rev());
     }
-    (best.hit(), c)
+    lane.c.packet_nodes = lane.c.nodes;
+    lane.c.active_lanes = lane.c.nodes;
+    (lane.best.hit(), lane.c)
+}
+
+/// Packet traversal of up to 64 rays (see [`super::packet`] for the rule); returns each
+/// ray's hit and counters, the packet's counters in the first ray's.
+pub fn trace_packet(bvh: &F16hBvh, rays: &[Ray]) -> Vec<(Hit, Counters)> {
+    match &bvh.nodes {
+        F16hNodes::B2(n) => packet_n(bvh, n, rays),
+        F16hNodes::B4(n) => packet_n(bvh, n, rays),
+        F16hNodes::B8(n) => packet_n(bvh, n, rays),
+        F16hNodes::B16(n) => packet_n(bvh, n, rays),
+    }
+}
+
+fn packet_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], rays: &[Ray]) -> Vec<(Hit, Counters)> {
+    let p = rays.len();
+    let mut lanes: Vec<Lane> = rays.iter().map(Lane::new).collect();
+    let roots: Vec<Option<Entry>> = lanes.iter().map(|l| l.root(bvh)).collect();
+    let (mut pnodes, mut active_sum) = (0u32, 0u32);
+    // One shared node sequence; per lane, its own entry (None: inactive for that node).
+    let mut stack: Vec<(u32, Vec<Option<Entry>>)> = Vec::new();
+    if roots.iter().any(|r| r.is_some()) {
+        stack.push((0, roots));
+    }
+    while let Some((ni, entries)) = stack.pop() {
+        let active: Vec<bool> = (0..p).map(|l| entries[l].as_ref().is_some_and(|e| e.tlo <= lanes[l].best.t)).collect();
+        if !active.iter().any(|&a| a) {
+            continue;
+        }
+        pnodes += 1;
+        active_sum += active.iter().filter(|&&a| a).count() as u32;
+        let n = &nodes[ni as usize];
+        let visits: Vec<Option<Visit>> = (0..p).map(|l| active[l].then(|| visit(entries[l].as_ref().unwrap(), &lanes[l]))).collect();
+        // per slot: per-lane results, packet key
+        let mut slots: Vec<(f32, usize, Vec<Option<(f16, f16)>>)> = Vec::new();
+        for s in 0..N::B {
+            if n.child(s) == CHILD_EMPTY {
+                break;
+            }
+            let (lo, hi) = slot_box(n, s);
+            let mut res = Vec::with_capacity(p);
+            let mut key = f32::INFINITY;
+            for l in 0..p {
+                let r = if active[l] {
+                    lanes[l].c.box_tests += 1;
+                    test_child(entries[l].as_ref().unwrap(), &lanes[l], visits[l].as_ref().unwrap(), lo, hi)
+                } else {
+                    None
+                };
+                if let Some((tn, _)) = r {
+                    key = key.min(tn.to_f32());
+                }
+                res.push(r);
+            }
+            if res.iter().any(|r| r.is_some()) {
+                slots.push((key, s, res));
+            }
+        }
+        super::packet::order(&mut slots);
+        let mut pending: Vec<(u32, Vec<Option<Entry>>)> = Vec::new();
+        for (_, s, res) in slots {
+            match decode_child(n.child(s)) {
+                ChildRef::Leaf { first, count } => {
+                    for l in 0..p {
+                        if res[l].is_some() {
+                            lanes[l].test_leaf(bvh, first, count);
+                        }
+                    }
+                }
+                ChildRef::Inner(j) => {
+                    let (lo, hi) = slot_box(n, s);
+                    let es = (0..p)
+                        .map(|l| res[l].map(|(tn, tn_lb)| child_entry(entries[l].as_ref().unwrap(), &mut lanes[l], visits[l].as_ref().unwrap(), j, lo, hi, tn, tn_lb)))
+                        .collect();
+                    pending.push((j, es));
+                }
+            }
+        }
+        // active lanes of this node count it as visited
+        for l in 0..p {
+            if active[l] {
+                lanes[l].c.nodes += 1;
+            }
+        }
+        stack.extend(pending.into_iter().rev());
+    }
+    let mut out: Vec<(Hit, Counters)> = lanes.into_iter().map(|l| (l.best.hit(), l.c)).collect();
+    out[0].1.packet_nodes = pnodes;
+    out[0].1.active_lanes = active_sum;
+    out
 }
 
 #[cfg(test)]

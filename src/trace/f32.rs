@@ -70,5 +70,96 @@ fn trace_n<N: NodeF32>(bvh: &F32Bvh, nodes: &[N], ray: &Ray) -> (Hit, Counters) 
             stack.push((inner[k], inner_t[k]));
         }
     }
+    c.packet_nodes = c.nodes;
+    c.active_lanes = c.nodes;
     (best.hit(), c)
+}
+
+/// Packet traversal of up to 64 rays (see [`super::packet`] for the rule); returns each
+/// ray's hit and counters, the packet's counters in the first ray's.
+pub fn trace_packet(bvh: &F32Bvh, rays: &[Ray]) -> Vec<(Hit, Counters)> {
+    match &bvh.nodes {
+        F32Nodes::B2(n) => packet_n(bvh, n, rays),
+        F32Nodes::B4(n) => packet_n(bvh, n, rays),
+        F32Nodes::B8(n) => packet_n(bvh, n, rays),
+        F32Nodes::B16(n) => packet_n(bvh, n, rays),
+    }
+}
+
+fn packet_n<N: NodeF32>(bvh: &F32Bvh, nodes: &[N], rays: &[Ray]) -> Vec<(Hit, Counters)> {
+    let p = rays.len();
+    let pre: Vec<RayPre> = rays.iter().map(RayPre::new).collect();
+    let mut best: Vec<Closest> = rays.iter().map(|r| Closest::new(r.tmax)).collect();
+    let mut c = vec![Counters { box_tests: 1, ..Default::default() }; p];
+    let (mut pnodes, mut active_sum) = (0u32, 0u32);
+    // Per lane: the entry distance of the node, or None (inactive).
+    let roots: Vec<Option<f32>> = pre
+        .iter()
+        .map(|r| {
+            let (near, far) = slab32(r, bvh.root_lo, bvh.root_hi, r.tmin, r.tmax);
+            (near <= far).then_some(near)
+        })
+        .collect();
+    let mut stack: Vec<(u32, Vec<Option<f32>>)> = Vec::new();
+    if roots.iter().any(|r| r.is_some()) {
+        stack.push((0, roots));
+    }
+    while let Some((ni, tns)) = stack.pop() {
+        let active: Vec<bool> = (0..p).map(|l| tns[l].is_some_and(|t| t <= best[l].t)).collect();
+        if !active.iter().any(|&a| a) {
+            continue;
+        }
+        pnodes += 1;
+        active_sum += active.iter().filter(|&&a| a).count() as u32;
+        let n = &nodes[ni as usize];
+        let mut slots: Vec<(f32, usize, Vec<Option<f32>>)> = Vec::new();
+        for s in 0..N::B {
+            if n.child(s) == CHILD_EMPTY {
+                break;
+            }
+            let lo = [n.lo(0, s), n.lo(1, s), n.lo(2, s)];
+            let hi = [n.hi(0, s), n.hi(1, s), n.hi(2, s)];
+            let mut key = f32::INFINITY;
+            let res: Vec<Option<f32>> = (0..p)
+                .map(|l| {
+                    if !active[l] {
+                        return None;
+                    }
+                    c[l].box_tests += 1;
+                    let (near, far) = slab32(&pre[l], lo, hi, pre[l].tmin, best[l].t);
+                    (near <= far).then(|| {
+                        key = key.min(near);
+                        near
+                    })
+                })
+                .collect();
+            if res.iter().any(|r| r.is_some()) {
+                slots.push((key, s, res));
+            }
+        }
+        super::packet::order(&mut slots);
+        let mut pending = Vec::new();
+        for (_, s, res) in slots {
+            match decode_child(n.child(s)) {
+                ChildRef::Leaf { first, count } => {
+                    for l in (0..p).filter(|&l| res[l].is_some()) {
+                        for i in first..first + count {
+                            c[l].tri_tests += 1;
+                            best[l].test(&pre[l], &bvh.tris.verts[i as usize], bvh.tris.ids[i as usize] as i32);
+                        }
+                    }
+                }
+                ChildRef::Inner(j) => pending.push((j, res)),
+            }
+        }
+        for l in 0..p {
+            if active[l] {
+                c[l].nodes += 1;
+            }
+        }
+        stack.extend(pending.into_iter().rev());
+    }
+    c[0].packet_nodes = pnodes;
+    c[0].active_lanes = active_sum;
+    best.iter().zip(c).map(|(b, c)| (b.hit(), c)).collect()
 }

@@ -13,6 +13,7 @@
 pub mod brute;
 pub mod f16h;
 pub mod f32;
+pub mod packet;
 pub mod tri;
 
 use crate::rays::Ray;
@@ -54,6 +55,11 @@ pub struct Counters {
     /// f16h only: child origins recomputed from the fp32 world ray because the fp16 origin
     /// move's error bound grew too large.
     pub reanchors: u32,
+    /// Packet counters, stored in the first ray of each packet (0 in the others): nodes the
+    /// packet visited, and the sum over those visits of the rays active for them.
+    /// Single-ray traversal: both equal `nodes`.
+    pub packet_nodes: u32,
+    pub active_lanes: u32,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -62,6 +68,8 @@ impl std::ops::AddAssign for Counters {
         self.box_tests += o.box_tests;
         self.tri_tests += o.tri_tests;
         self.reanchors += o.reanchors;
+        self.packet_nodes += o.packet_nodes;
+        self.active_lanes += o.active_lanes;
     }
 }
 

@@ -1,0 +1,208 @@
+#version 460
+// Packet traversal of the f16h layout: P rays, one shared node sequence (packet.glsl); each
+// ray keeps its own moved origin and error bound per stack level.
+// Mirrors src/trace/f16h.rs (trace_packet). Defines: B, P, WG, STACK_SIZE, STATS, HAS_F64,
+// PACKET_SUBGROUP.
+#define F16H 1
+#include "ray.glsl"
+#include "tri.glsl"
+#include "box.glsl"
+#include "frame.glsl"
+#include "packet.glsl"
+
+#include "node.glsl"
+#ifdef DEBUG_RAY
+layout(std430, set = 0, binding = 5) writeonly buffer Dbg { float dbg[]; };
+#endif
+
+// The "extra stack", per lane: node (shared), frame (w, k), origin in the node frame, its
+// error bound (-1: inactive for the node), the world parameter it stands for, and a lower
+// bound on what can still matter.
+uint st_node[STACK_SIZE];
+vec4 st_wk[STACK_SIZE];
+f16vec3 st_o[STACK_SIZE];
+float st_e[STACK_SIZE];
+float st_tp[STACK_SIZE];
+float st_tlo[STACK_SIZE];
+
+void main() {
+    uint i = packet_ray_index();
+    bool valid = i < pc.ray_count;
+    RayPre r = ray_pre(valid ? i : 0u);
+    float m = max(max(abs(r.d.x), abs(r.d.y)), abs(r.d.z));
+    f16vec3 d16, idir;
+    for (int a = 0; a < 3; a++) {
+        precise float x = r.d[a] / m;
+        d16[a] = abs(x) < (1.0 / 32768.0) ? H0 : float16_t(x);
+        precise float16_t inv = float16_t(1.0) / d16[a];
+        idir[a] = d16[a] == H0 ? HINF : inv;
+    }
+    uvec4 cnt = uvec4(0u, 1u, 0u, 0u);
+    uint pnodes = 0u, asum = 0u;
+    best_t = r.tmax; best_prim = NO_PRIM; best_u = 0.0; best_v = 0.0;
+    vec2 root = slab32(r, pc.box_lo.xyz, pc.box_hi.xyz, r.tmin, r.tmax);
+    bool root_hit = valid && root.x <= root.y;
+    bool overflow = false;
+    int sp = 0;
+    if (packet_any(root_hit)) {
+        f16vec3 o0 = f16vec3(H0);
+        float e0 = -1.0;
+        if (root_hit) e0 = anchor(r, pc.root_wk.xyz, pc.root_wk.w, root.x, o0);
+        st_node[0] = 0u; st_wk[0] = pc.root_wk; st_o[0] = o0; st_e[0] = e0; st_tp[0] = root.x; st_tlo[0] = root.x;
+        sp = 1;
+    }
+    while (sp > 0) {
+        sp--;
+        uint ni = st_node[sp];
+        vec3 fw = st_wk[sp].xyz;
+        float fk = st_wk[sp].w;
+        f16vec3 o = st_o[sp];
+        float e = st_e[sp];
+        float tp = st_tp[sp];
+        float tlo = st_tlo[sp];
+        bool act = e >= 0.0 && !(tlo > best_t);
+        uint nact = packet_add(act ? 1u : 0u);
+        if (nact == 0u) continue;
+        pnodes++;
+        asum += nact;
+        if (act) cnt.x++;
+        precise float mk = m * fk;
+        precise float s_max = S_BASE + e + 1.0;
+        precise float lim = (best_t - tp) * mk;
+        float16_t s_lim = up16(min(up32(lim), s_max));
+        precise float sg = (tp - tlo) * mk;
+        float sigma = up32(sg);
+        float16_t lower = down16(max(-sigma, -s_max));
+        bool prec = e <= EBIG;
+        precise float we = e + e * TWO_M11 + W_MARGIN;
+        float16_t w = up16(we);
+        uint mask = 0u;
+        float16_t h_tn[B];
+        float16_t h_lb[B];
+        float lt[B];
+        for (uint s = 0u; s < uint(B); s++) {
+            lt[s] = INF;
+            if (nodes[ni].child[s] == CHILD_EMPTY) break;
+            if (!act) continue;
+            cnt.y++;
+            float16_t tn, tn_lb;
+            bool hit;
+            if (prec) {
+                f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
+                f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
+                f16vec3 q = slab16(o, d16, idir, w, lo, hi);
+                tn = q.x; tn_lb = q.y;
+                hit = q.y <= q.z && q.z >= lower && q.y <= s_lim;
+            } else {
+                tn = lower; tn_lb = lower; hit = true;
+            }
+            if (hit) { mask |= 1u << s; h_tn[s] = tn; h_lb[s] = tn_lb; lt[s] = float(tn); }
+        }
+        uint any_mask = packet_or(mask);
+        float key[B];
+        for (uint s = 0u; s < uint(B); s++) {
+            key[s] = INF;
+            if ((any_mask & (1u << s)) != 0u) key[s] = packet_min(lt[s]);
+        }
+        uint order[B];
+        int n = packet_order(any_mask, key, order);
+        uint p_node[B];
+        vec4 p_wk[B];
+        f16vec3 p_o[B];
+        float p_e[B];
+        float p_tp[B];
+        float p_tlo[B];
+        int np = 0;
+        for (int k = 0; k < n; k++) {
+            uint s = order[k];
+            uint c = nodes[ni].child[s];
+            bool mine = (mask & (1u << s)) != 0u;
+            if ((c & LEAF_BIT) != 0u) {
+                if (mine) {
+                    uint first = c & 0x7ffffffu;
+                    uint count = ((c >> 27) & 15u) + 1u;
+                    for (uint t = first; t < first + count; t++) {
+                        cnt.z++;
+                        closest_test(r, t);
+                    }
+                }
+                continue;
+            }
+            p_node[np] = c;
+            p_e[np] = -1.0;
+            p_wk[np] = vec4(0.0); p_o[np] = f16vec3(H0); p_tp[np] = 0.0; p_tlo[np] = 0.0;
+            if (mine) {
+                f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
+                f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
+                f16vec3 cc; float cr; vec3 cw; float ck;
+                derive_child(fw, fk, lo, hi, cc, cr, cw, ck);
+                float16_t tn = h_tn[s];
+                float s_lo = float(max(h_lb[s], lower));
+                precise float q = s_lo / mk;
+                precise float tlo_c0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M21;
+                float tlo_c = max(tlo_c0, tlo);
+                float16_t s_e = max(tn, lower);
+                bool moved = false;
+                f16vec3 o2;
+                float e2;
+                float tp2;
+                if (prec && cr <= 32768.0) {
+                    float16_t r16c = float16_t(cr);
+                    float emag = 0.0, ecmag = 0.0, omag = 0.0;
+                    bool finite = true;
+                    for (int a = 0; a < 3; a++) {
+                        precise float16_t ea = o[a] + s_e * d16[a];
+                        precise float16_t ec = ea - cc[a];
+                        precise float16_t oa = ec * r16c;
+                        o2[a] = oa;
+                        emag = max(emag, abs(float(ea)));
+                        ecmag = max(ecmag, abs(float(ec)));
+                        omag = max(omag, abs(float(oa)));
+                        finite = finite && !isinf(oa) && !isnan(oa);
+                    }
+                    float se = float(s_e);
+                    precise float step_t = se / mk;
+                    precise float tpn = tp + step_t;
+                    float wmax = max(max(max(0.0, abs(cw.x)), abs(cw.y)), abs(cw.z));
+                    precise float mk2 = m * ck;
+                    precise float ee = (cr * (e + abs(se) * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
+                        + wmax * TWO_M24 * ck
+                        + (abs(tp) + abs(step_t)) * TWO_M22 * mk2)
+                        * (1.0 + TWO_M18);
+                    if (finite && omag <= OCAP && ee <= EMAX) {
+                        moved = true; e2 = ee; tp2 = tpn;
+                    }
+                }
+                if (!moved) {
+                    cnt.w++;
+                    precise float inv_k = 1.0 / fk;
+                    vec3 blo, bhi;
+                    for (int a = 0; a < 3; a++) {
+                        precise float bl = fw[a] + float(lo[a]) * inv_k;
+                        precise float bh = fw[a] + float(hi[a]) * inv_k;
+                        blo[a] = bl; bhi[a] = bh;
+                    }
+                    vec2 io = slab32(r, blo, bhi, -INF, INF);
+                    tp2 = max(min(io.x, io.y), tlo_c);
+                    e2 = anchor(r, cw, ck, tp2, o2);
+                }
+                p_wk[np] = vec4(cw, ck); p_o[np] = o2; p_e[np] = e2; p_tp[np] = tp2; p_tlo[np] = tlo_c;
+            }
+            np++;
+        }
+        for (int k = np - 1; k >= 0; k--) {
+            if (sp >= STACK_SIZE) { overflow = true; break; }
+            st_node[sp] = p_node[k]; st_wk[sp] = p_wk[k]; st_o[sp] = p_o[k];
+            st_e[sp] = p_e[k]; st_tp[sp] = p_tp[k]; st_tlo[sp] = p_tlo[k];
+            sp++;
+        }
+        if (overflow) break;
+    }
+    if (!valid) return;
+    if (overflow) hits[i] = Hit(0.0, -2, 0.0, 0.0);
+    else write_hit(i, best_t, best_prim, best_u, best_v);
+#ifdef STATS
+    counters[2u * i] = cnt;
+    counters[2u * i + 1u] = packet_lane() == 0u ? uvec4(pnodes, asum, 0u, 0u) : uvec4(0u);
+#endif
+}
