@@ -1,13 +1,14 @@
 //! GPU traversal throughput on the default Vulkan device: primary and ao rays at 512x512 on
-//! a shared scene, f32 and f16h, B = 4. Each variant is validated against the CPU reference
-//! first, then timed with timestamp queries: 2 warm-up dispatches, 10 timed; median, min, max.
+//! a shared scene, f32 and f16h, B = 4, packet sizes 1..64. Each variant is validated against
+//! the CPU reference first, then timed with timestamp queries: 2 warm-up dispatches, 10
+//! timed; median, min, max.
 //!
 //! `cargo bench --bench throughput [-- SCENE.obj]`
 
 use halftrace::encode::Layout;
 use halftrace::gpu::{traversal, ContextOptions, Gpu};
 use halftrace::pipeline::{make_rays, Encoded, RayKind, RayParams};
-use halftrace::variant::{PacketImpl, Variant};
+use halftrace::variant::Variant;
 use std::path::PathBuf;
 
 fn main() {
@@ -17,23 +18,25 @@ fn main() {
     let bin = halftrace::bvh::build_binary(&scene);
     let g = Gpu::new(&ContextOptions::default()).expect("no Vulkan device");
     println!("scene {} ({} triangles), device {} ({})", scene.name, scene.len(), g.info.name, g.info.driver);
-    println!("{:<10} {:<18} {:>8} {:>10} {:>10} {:>10} {:>9}", "rays", "variant", "count", "median ms", "min ms", "max ms", "Mrays/s");
+    println!("{:<10} {:<26} {:>8} {:>10} {:>10} {:>10} {:>9}", "rays", "variant", "count", "median ms", "min ms", "max ms", "Mrays/s");
     let params = RayParams { width: 512, height: 512, ..Default::default() };
     for kind in [RayKind::Primary, RayKind::Ao] {
         let rays = make_rays(&scene, &bin, &kind, &params).unwrap();
         for layout in Layout::ALL {
-            let v = Variant::new(layout, 4, 1);
-            let enc = Encoded::new(&scene, &bin, layout, 4).unwrap();
-            let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-            let pipe = traversal::pipeline(&g, &v, PacketImpl::Single, false, None).unwrap();
+          let enc = Encoded::new(&scene, &bin, layout, 4).unwrap();
+          let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+          let (cpu, _) = enc.trace(&rays);
+          for p in halftrace::variant::PACKETS {
+            let v = Variant::new(layout, 4, p);
+            let pipe = traversal::pipeline(&g, &v, traversal::choose_impl(&g, &v, None), false, None).unwrap();
             let out = traversal::run(&g, &gb, &pipe, &rays, 2, 10).unwrap();
-            let (cpu, _) = enc.trace(&rays);
             let bad = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&cpu[i])).count();
             assert_eq!(bad, 0, "{v} {kind}: {bad} rays differ from the CPU reference");
             let mut t = out.times_ms.clone();
             t.sort_by(f64::total_cmp);
             let med = t[t.len() / 2];
-            println!("{:<10} {:<18} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), v.to_string(), rays.len(), med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+            println!("{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), pipe.name(), rays.len(), med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+          }
         }
     }
 }
