@@ -8,7 +8,7 @@ set -euo pipefail
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 
-pkgs=(libvulkan-dev vulkan-tools libshaderc-dev glslang-dev spirv-tools vulkan-validationlayers pkg-config)
+pkgs=(libvulkan-dev vulkan-tools libshaderc-dev glslang-dev spirv-tools vulkan-validationlayers pkg-config fonts-dejavu-core git)
 
 missing=()
 for p in "${pkgs[@]}" mesa-vulkan-drivers; do

@@ -12,7 +12,9 @@ pub mod gpu;
 pub mod npy;
 pub mod pipeline;
 pub mod rays;
+pub mod report;
 pub mod scene;
+pub mod sweep;
 pub mod trace;
 pub mod variant;
 

@@ -36,12 +36,65 @@ enum Cmd {
     },
     /// List Vulkan devices and their fp16, 16-bit storage, subgroup and ray-query support.
     Devices,
+    /// Sweep scenes × ray kinds × layouts × B × P: validate, time, count, report.
+    Sweep(SweepArgs),
+    /// Re-render report.md and the plots from one or more sweep folders (merging them).
+    Report {
+        /// Sweep folders holding results.csv.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Where to write the report (default: the first folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Compile the default variant matrix and write one SPIR-V file per variant.
     Shaders {
         /// Output folder (e.g. spirv/).
         #[arg(long)]
         emit: PathBuf,
     },
+}
+
+#[derive(clap::Args)]
+struct SweepArgs {
+    /// TOML file with any of the keys of sweep.example.toml; flags override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Scene file (repeat for several).
+    #[arg(long)]
+    scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing, FILE.npy).
+    #[arg(long, value_delimiter = ',')]
+    rays: Vec<String>,
+    /// Layouts, comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    layouts: Vec<String>,
+    /// Branching factors swept at P = 1.
+    #[arg(long, value_delimiter = ',')]
+    branchings: Vec<usize>,
+    /// Packet sizes swept at B = --packet-branching.
+    #[arg(long, value_delimiter = ',')]
+    packets: Vec<usize>,
+    #[arg(long)]
+    packet_branching: Option<usize>,
+    #[arg(long)]
+    width: Option<u32>,
+    #[arg(long)]
+    height: Option<u32>,
+    #[arg(long)]
+    warmup: Option<usize>,
+    #[arg(long)]
+    repeat: Option<usize>,
+    #[arg(long)]
+    seed: Option<u64>,
+    #[arg(long)]
+    device: Option<String>,
+    /// Output folder (default reports/<UTC timestamp>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(clap::Args)]
@@ -259,6 +312,58 @@ fn devices() -> anyhow::Result<()> {
     Ok(())
 }
 
+fn sweep(a: SweepArgs) -> anyhow::Result<()> {
+    use halftrace::sweep::{self, Config};
+    let mut c = match &a.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default(),
+    };
+    if !a.scene.is_empty() {
+        c.scenes = a.scene.clone();
+    }
+    if !a.rays.is_empty() {
+        c.rays = a.rays.clone();
+    }
+    if !a.layouts.is_empty() {
+        c.layouts = a.layouts.clone();
+    }
+    if !a.branchings.is_empty() {
+        c.branchings = a.branchings.clone();
+    }
+    if !a.packets.is_empty() {
+        c.packets = a.packets.clone();
+    }
+    c.packet_branching = a.packet_branching.unwrap_or(c.packet_branching);
+    c.width = a.width.unwrap_or(c.width);
+    c.height = a.height.unwrap_or(c.height);
+    c.warmup = a.warmup.unwrap_or(c.warmup);
+    c.repeat = a.repeat.unwrap_or(c.repeat);
+    c.seed = a.seed.unwrap_or(c.seed);
+    if let Some(d) = &a.device {
+        c.device = d.clone();
+    }
+    c.check()?;
+    let out = a.out.clone().unwrap_or_else(sweep::default_out);
+    let t0 = Instant::now();
+    let s = sweep::run(&c, &out, a.quiet)?;
+    outln!("{} variants in {:.0} s; report: {}", s.rows, t0.elapsed().as_secs_f64(), s.out.join("report.md").display());
+    if !s.failed.is_empty() {
+        anyhow::bail!("{} variant(s) failed validation: {}", s.failed.len(), s.failed.join(", "));
+    }
+    Ok(())
+}
+
+fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
+    let mut rows = Vec::new();
+    for d in dirs {
+        rows.extend(halftrace::report::read_rows(d)?);
+    }
+    let out = out.cloned().unwrap_or_else(|| dirs[0].clone());
+    halftrace::report::render(&rows, &out, dirs)?;
+    outln!("{} rows from {} folder(s); report: {}", rows.len(), dirs.len(), out.join("report.md").display());
+    Ok(())
+}
+
 fn shaders(dir: &PathBuf) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (v, imp) in halftrace::variant::spirv_matrix() {
@@ -279,6 +384,8 @@ fn main() {
         Cmd::BvhStats { scene } => bvh_stats(&scene),
         Cmd::Devices => devices(),
         Cmd::Shaders { emit } => shaders(&emit),
+        Cmd::Sweep(a) => sweep(a),
+        Cmd::Report { dirs, out } => report(&dirs, out.as_ref()),
     };
     if let Err(e) = r {
         eprintln!("error: {e:#}");

@@ -1,0 +1,365 @@
+//! Sweep results: one [`Row`] per variant, written as CSV and JSON as they come, and the
+//! human-readable report (Markdown tables, plots, images) rendered from one or more result
+//! folders.
+
+use anyhow::Context;
+use plotters::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// One variant's results, with everything needed to read it alone months later.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Row {
+    pub scene: String,
+    pub triangles: usize,
+    pub rays: String,
+    pub ray_count: usize,
+    pub layout: String,
+    pub branching: usize,
+    pub packet: usize,
+    pub kernel: String,
+    pub device: String,
+    pub driver: String,
+    pub version: String,
+    pub commit: String,
+    /// `ok`, or `FAILED: …` when the variant disagreed with its CPU reference.
+    pub status: String,
+    pub mrays_median: f64,
+    pub mrays_min: f64,
+    pub mrays_max: f64,
+    pub ms_median: f64,
+    pub ms_min: f64,
+    pub ms_max: f64,
+    pub timed_dispatches: usize,
+    pub nodes_per_ray: f64,
+    pub box_tests_per_ray: f64,
+    pub tri_tests_per_ray: f64,
+    pub reanchors_per_ray: f64,
+    pub packet_nodes_per_packet: f64,
+    pub simd_utilisation: f64,
+    pub bvh_bytes: u64,
+    pub bytes_per_node: u64,
+    pub triangle_bytes: u64,
+    pub stack_bytes_per_ray: u64,
+    /// Bytes of node data fetched per ray: nodes visited × node bytes.
+    pub node_bytes_per_ray: f64,
+    pub differs_from_f32: usize,
+    pub false_misses: usize,
+    pub max_abs_dt: f64,
+}
+
+/// Appends rows to `results.csv` and rewrites `results.json` after each one, so an
+/// interrupted sweep keeps everything finished.
+pub struct Writer {
+    dir: PathBuf,
+    csv: csv::Writer<std::fs::File>,
+    rows: Vec<Row>,
+}
+
+impl Writer {
+    pub fn create(dir: &Path) -> anyhow::Result<Writer> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let p = dir.join("results.csv");
+        let f = std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))?;
+        Ok(Writer { dir: dir.into(), csv: csv::Writer::from_writer(f), rows: Vec::new() })
+    }
+
+    pub fn push(&mut self, row: Row) -> anyhow::Result<()> {
+        self.csv.serialize(&row)?;
+        self.csv.flush()?;
+        self.rows.push(row);
+        let p = self.dir.join("results.json");
+        std::fs::write(&p, serde_json::to_string_pretty(&self.rows)?).with_context(|| format!("writing {}", p.display()))?;
+        Ok(())
+    }
+
+    pub fn rows(&self) -> &[Row] {
+        &self.rows
+    }
+}
+
+/// Reads the rows of `DIR/results.csv`.
+pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
+    let p = dir.join("results.csv");
+    let mut r = csv::Reader::from_path(&p).with_context(|| format!("reading {}", p.display()))?;
+    r.deserialize().enumerate().map(|(i, x)| x.with_context(|| format!("{}: row {}", p.display(), i + 2))).collect()
+}
+
+/// f16h ÷ f32 ratios of one (device, scene, rays, B, P) pair of rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ratio {
+    pub device: String,
+    pub scene: String,
+    pub rays: String,
+    pub branching: usize,
+    pub packet: usize,
+    /// Time ratio (median ms), >1 means f16h is slower.
+    pub time: f64,
+    pub nodes: f64,
+    pub box_tests: f64,
+    pub tri_tests: f64,
+    pub bytes: f64,
+}
+
+/// Pairs f16h rows with the f32 row of the same device, scene, rays, B and P.
+pub fn ratios(rows: &[Row]) -> Vec<Ratio> {
+    let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok").collect();
+    let mut out = Vec::new();
+    for h in ok.iter().filter(|r| r.layout == "f16h") {
+        if let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching && f.packet == h.packet) {
+            let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+            out.push(Ratio {
+                device: h.device.clone(),
+                scene: h.scene.clone(),
+                rays: h.rays.clone(),
+                branching: h.branching,
+                packet: h.packet,
+                time: div(h.ms_median, f.ms_median),
+                nodes: div(h.nodes_per_ray, f.nodes_per_ray),
+                box_tests: div(h.box_tests_per_ray, f.box_tests_per_ray),
+                tri_tests: div(h.tri_tests_per_ray, f.tri_tests_per_ray),
+                bytes: div(h.bvh_bytes as f64, f.bvh_bytes as f64),
+            });
+        }
+    }
+    out
+}
+
+/// Mean of the ratios of each series point: (device, key) → (time, nodes, box, tri, bytes).
+fn series(r: &[Ratio], by_b: bool) -> BTreeMap<(String, usize), [f64; 5]> {
+    let mut acc: BTreeMap<(String, usize), ([f64; 5], usize)> = BTreeMap::new();
+    for x in r.iter().filter(|x| if by_b { x.packet == 1 } else { x.branching == 4 }) {
+        let k = (x.device.clone(), if by_b { x.branching } else { x.packet });
+        let e = acc.entry(k).or_insert(([0.0; 5], 0));
+        for (i, v) in [x.time, x.nodes, x.box_tests, x.tri_tests, x.bytes].into_iter().enumerate() {
+            e.0[i] += v;
+        }
+        e.1 += 1;
+    }
+    acc.into_iter().map(|(k, (s, n))| (k, s.map(|v| v / n as f64))).collect()
+}
+
+fn fmt(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else {
+        "–".into()
+    }
+}
+
+/// Renders `report.md` and the plots into `out` from `rows` (from one or more folders).
+pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out)?;
+    let r = ratios(rows);
+    let by_b = series(&r, true);
+    let by_p = series(&r, false);
+    let mut md = String::new();
+    md += "# halftrace sweep report\n\n";
+    md += &format!("Rendered from {} result row(s) in: {}.\n\n", rows.len(), sources.iter().map(|p| format!("`{}`", p.display())).collect::<Vec<_>>().join(", "));
+    let mut devices: Vec<(String, String)> = rows.iter().map(|r| (r.device.clone(), r.driver.clone())).collect();
+    devices.sort();
+    devices.dedup();
+    for (d, drv) in &devices {
+        md += &format!("- device **{d}**, driver {drv}\n");
+    }
+    let mut versions: Vec<String> = rows.iter().map(|r| format!("{} ({})", r.version, r.commit)).collect();
+    versions.sort();
+    versions.dedup();
+    md += &format!("- halftrace {}\n", versions.join(", "));
+    let failed: Vec<&Row> = rows.iter().filter(|r| r.status != "ok").collect();
+    md += &format!("- variants: {} ok, {} failed validation\n\n", rows.len() - failed.len(), failed.len());
+    for f in &failed {
+        md += &format!("**FAILED**: {} {} {}: {}\n\n", f.scene, f.rays, f.kernel, f.status);
+    }
+
+    md += "## Headline: f16h ÷ f32 (the seed's \"average differences to regular single-precision traversal\")\n\n";
+    md += "Means over scenes and ray kinds of the per-variant ratios; time is the median GPU time, work the per-ray counters, bytes the node arrays. Below 1: f16h is faster / does less / is smaller.\n\n";
+    md += "### By branching factor (single rays, P = 1)\n\n| device | B | time | nodes visited | box tests | triangle tests | node bytes |\n|---|---:|---:|---:|---:|---:|---:|\n";
+    for ((d, b), v) in &by_b {
+        md += &format!("| {d} | {b} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
+    }
+    md += "\n### By packet size (MBVH4, B = 4)\n\n| device | P | time | nodes visited | box tests | triangle tests | node bytes |\n|---|---:|---:|---:|---:|---:|---:|\n";
+    for ((d, p), v) in &by_p {
+        md += &format!("| {d} | {p} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
+    }
+    md += "\n![ratio vs B](ratio_vs_b.png) ![ratio vs P](ratio_vs_p.png)\n\n";
+    md += "## Every variant\n\n| device | scene | rays | kernel | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | node bytes | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+    for x in rows {
+        md += &format!(
+            "| {} | {} ({} tris) | {} ({}) | {} | {:.2} ({:.2}–{:.2}) | {:.3} | {:.2} | {:.2} | {:.2} | {:.3} | {:.1}% | {} | {} | {} | {} | {} | {:.3e} | {} |\n",
+            x.device, x.scene, x.triangles, x.rays, x.ray_count, x.kernel, x.mrays_median, x.mrays_min, x.mrays_max, x.ms_median, x.nodes_per_ray, x.box_tests_per_ray,
+            x.tri_tests_per_ray, x.reanchors_per_ray, 100.0 * x.simd_utilisation, x.bvh_bytes, x.bytes_per_node, x.stack_bytes_per_ray, x.differs_from_f32, x.false_misses, x.max_abs_dt, x.status
+        );
+    }
+    md += "\n![Mrays/s per variant](mrays.png) ![memory per layout and B](memory.png)\n";
+    let imgs: Vec<&str> = ["render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"].into_iter().filter(|f| out.join(f).exists()).collect();
+    if !imgs.is_empty() {
+        md += "\n## Images\n\nShaded primary render; nodes visited per pixel (f32, f16h; B = 4, P = 1; same colour scale); pixels whose f16h hit differs from f32 (white), black when none does.\n\n";
+        for i in imgs {
+            md += &format!("![{i}]({i}) ");
+        }
+        md += "\n";
+    }
+    let p = out.join("report.md");
+    std::fs::write(&p, md).with_context(|| format!("writing {}", p.display()))?;
+    plots(rows, &by_b, &by_p, out)
+}
+
+fn font() -> anyhow::Result<()> {
+    use std::sync::OnceLock;
+    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
+    DONE.get_or_init(|| {
+        let candidates = ["/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", "/usr/share/fonts/TTF/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"];
+        for c in candidates {
+            if let Ok(b) = std::fs::read(c) {
+                let leaked: &'static [u8] = Box::leak(b.into_boxed_slice());
+                return plotters::style::register_font("sans-serif", FontStyle::Normal, leaked).map_err(|_| format!("{c}: not a usable font"));
+            }
+        }
+        Err("no DejaVuSans.ttf found for plot labels (install fonts-dejavu-core: scripts/install-deps.sh)".into())
+    })
+    .clone()
+    .map_err(anyhow::Error::msg)
+}
+
+type Series = BTreeMap<(String, usize), [f64; 5]>;
+
+/// Draws a line chart of named series on both a PNG and an SVG.
+fn line_chart(out: &Path, name: &str, title: &str, xlabel: &str, ylabel: &str, xs: &[usize], lines: &[(String, Vec<(usize, f64)>)], log2x: bool) -> anyhow::Result<()> {
+    font()?;
+    let xmap = |x: usize| if log2x { (x as f64).log2() } else { x as f64 };
+    let (xmin, xmax) = xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(xmap(x)), b.max(xmap(x))));
+    let (xmin, xmax) = if xmin < xmax { (xmin, xmax) } else { (xmin - 1.0, xmin + 1.0) };
+    let ys: Vec<f64> = lines.iter().flat_map(|l| l.1.iter().map(|p| p.1)).filter(|y| y.is_finite()).collect();
+    let ymax = ys.iter().cloned().fold(0.0f64, f64::max).max(1.0) * 1.1;
+    macro_rules! draw {
+        ($root:expr) => {{
+            let root = $root;
+            root.fill(&WHITE)?;
+            let mut ch = ChartBuilder::on(&root)
+                .caption(title, ("sans-serif", 20))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(50)
+                .build_cartesian_2d((xmin - 0.3)..(xmax + 0.3), 0.0..ymax)?;
+            ch.configure_mesh()
+                .x_desc(xlabel)
+                .y_desc(ylabel)
+                .x_labels(xs.len().max(2))
+                .x_label_formatter(&|v| if log2x { format!("{}", 2f64.powf(*v).round()) } else { format!("{v:.0}") })
+                .draw()?;
+            let colours = [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(148, 103, 189), RGBColor(255, 127, 14), RGBColor(23, 190, 207)];
+            for (i, (label, pts)) in lines.iter().enumerate() {
+                let c = colours[i % colours.len()];
+                let pts: Vec<(f64, f64)> = pts.iter().filter(|p| p.1.is_finite()).map(|&(x, y)| (xmap(x), y)).collect();
+                ch.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?.label(label.clone()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+                ch.draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
+            }
+            ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).position(SeriesLabelPosition::UpperRight).draw()?;
+            root.present()?;
+        }};
+    }
+    let png = out.join(format!("{name}.png"));
+    draw!(BitMapBackend::new(&png, (800, 480)).into_drawing_area());
+    let svg = out.join(format!("{name}.svg"));
+    draw!(SVGBackend::new(&svg, (800, 480)).into_drawing_area());
+    Ok(())
+}
+
+fn ratio_lines(s: &Series) -> (Vec<usize>, Vec<(String, Vec<(usize, f64)>)>) {
+    let mut xs: Vec<usize> = s.keys().map(|k| k.1).collect();
+    xs.sort();
+    xs.dedup();
+    let mut devices: Vec<String> = s.keys().map(|k| k.0.clone()).collect();
+    devices.dedup();
+    let mut lines = Vec::new();
+    for d in &devices {
+        for (i, what) in [(0, "time"), (2, "box tests"), (1, "nodes visited")] {
+            let pts = s.iter().filter(|(k, _)| &k.0 == d).map(|(k, v)| (k.1, v[i])).collect();
+            let label = if devices.len() > 1 { format!("{what} ({d})") } else { what.to_string() };
+            lines.push((label, pts));
+        }
+    }
+    (xs, lines)
+}
+
+fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Result<()> {
+    let (xs, lines) = ratio_lines(by_b);
+    line_chart(out, "ratio_vs_b", "f16h / f32 by branching factor (P = 1)", "branching factor B", "f16h / f32", &xs, &lines, true)?;
+    let (xs, lines) = ratio_lines(by_p);
+    line_chart(out, "ratio_vs_p", "f16h / f32 by packet size (B = 4)", "packet size P", "f16h / f32", &xs, &lines, true)?;
+    // Mrays/s per variant: one line per (layout, series), x = B (P=1) or P (B=4).
+    let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok").collect();
+    let mut lines = Vec::new();
+    let mut xs = Vec::new();
+    for layout in ["f32", "f16h"] {
+        for kind in ok.iter().map(|r| r.rays.clone()).collect::<std::collections::BTreeSet<_>>() {
+            let mean = |f: &dyn Fn(&Row) -> bool| -> Vec<(usize, f64)> {
+                let mut m: BTreeMap<usize, (f64, usize)> = BTreeMap::new();
+                for r in ok.iter().filter(|r| r.layout == layout && r.rays == kind && f(r)) {
+                    let k = if r.packet == 1 { r.branching } else { r.packet };
+                    let e = m.entry(k).or_insert((0.0, 0));
+                    e.0 += r.mrays_median;
+                    e.1 += 1;
+                }
+                m.into_iter().map(|(k, (s, n))| (k, s / n as f64)).collect()
+            };
+            let pts = mean(&|r: &Row| r.packet == 1);
+            xs.extend(pts.iter().map(|p| p.0));
+            lines.push((format!("{layout} {kind}, by B (P=1)"), pts));
+            let pts = mean(&|r: &Row| r.branching == 4 && r.packet > 1);
+            if !pts.is_empty() {
+                xs.extend(pts.iter().map(|p| p.0));
+                lines.push((format!("{layout} {kind}, by P (B=4)"), pts));
+            }
+        }
+    }
+    xs.sort();
+    xs.dedup();
+    line_chart(out, "mrays", "Mrays/s per variant (mean over scenes)", "B (P = 1) or P (B = 4)", "Mrays/s", &xs, &lines, true)?;
+    // Memory per layout and B.
+    let mut lines = Vec::new();
+    let mut xs = Vec::new();
+    for layout in ["f32", "f16h"] {
+        let mut m: BTreeMap<usize, (f64, usize)> = BTreeMap::new();
+        for r in ok.iter().filter(|r| r.layout == layout && r.packet == 1) {
+            let e = m.entry(r.branching).or_insert((0.0, 0));
+            e.0 += r.bvh_bytes as f64 / 1024.0;
+            e.1 += 1;
+        }
+        let pts: Vec<(usize, f64)> = m.into_iter().map(|(k, (s, n))| (k, s / n as f64)).collect();
+        xs.extend(pts.iter().map(|p| p.0));
+        lines.push((format!("{layout} node bytes (KiB)"), pts));
+    }
+    xs.sort();
+    xs.dedup();
+    line_chart(out, "memory", "BVH node memory per layout and B (mean over scenes)", "branching factor B", "KiB", &xs, &lines, true)
+}
+
+/// Writes a heat map of a per-pixel value (pixel order of primary rays) with a fixed scale.
+pub fn heat_map(path: &Path, w: u32, h: u32, values: &[f64], max: f64) -> anyhow::Result<()> {
+    let mut img = image::RgbImage::new(w, h);
+    for (&(x, y), &v) in crate::rays::pixel_order(w, h).iter().zip(values) {
+        let t = if max > 0.0 { (v / max).clamp(0.0, 1.0) } else { 0.0 };
+        // black → blue → red → yellow
+        let c = if t < 0.33 {
+            [0.0, 0.0, t / 0.33]
+        } else if t < 0.66 {
+            [(t - 0.33) / 0.33, 0.0, 1.0 - (t - 0.33) / 0.33]
+        } else {
+            [1.0, (t - 0.66) / 0.34, 0.0]
+        };
+        img.put_pixel(x, y, image::Rgb(c.map(|v| (v * 255.0) as u8)));
+    }
+    img.save(path).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes a mask image: white where `mask` is set, black elsewhere.
+pub fn mask_image(path: &Path, w: u32, h: u32, mask: &[bool]) -> anyhow::Result<()> {
+    let mut img = image::RgbImage::new(w, h);
+    for (&(x, y), &m) in crate::rays::pixel_order(w, h).iter().zip(mask) {
+        img.put_pixel(x, y, image::Rgb(if m { [255; 3] } else { [0; 3] }));
+    }
+    img.save(path).with_context(|| format!("writing {}", path.display()))
+}

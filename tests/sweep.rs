@@ -1,0 +1,144 @@
+//! End to end: a small sweep on the default device (lavapipe in CI) writes every output,
+//! with one consistent row per variant; an interrupted sweep keeps its finished rows;
+//! `report` merges folders.
+
+use halftrace::report::{ratios, read_rows, Row};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("halftrace-sweep-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn teapot() -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/teapot.obj").display().to_string()
+}
+
+fn sweep(out: &Path, extra: &[&str]) -> std::process::Output {
+    let scene = teapot();
+    let mut args = vec!["sweep", "--quiet", "--scene", &scene, "--width", "24", "--height", "24", "--repeat", "3", "--warmup", "1", "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    Command::new(env!("CARGO_BIN_EXE_halftrace")).args(&args).output().unwrap()
+}
+
+#[test]
+fn small_sweep_writes_consistent_outputs() {
+    let out = tmp("small");
+    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h", "--branchings", "2,8", "--packets", "1,4,16"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["results.csv", "results.json", "report.md", "ratio_vs_b.png", "ratio_vs_b.svg", "ratio_vs_p.png", "ratio_vs_p.svg", "mrays.png", "mrays.svg", "memory.png", "memory.svg", "render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"] {
+        let p = out.join(f);
+        assert!(p.is_file() && std::fs::metadata(&p).unwrap().len() > 0, "{} missing or empty", p.display());
+        if f.ends_with(".png") {
+            image::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        }
+    }
+    // variants: 2 layouts × ({2, 8} at P=1 ∪ {1, 4, 16} at B=4) = 2 × 5, × 2 ray kinds
+    let rows = read_rows(&out).unwrap();
+    assert_eq!(rows.len(), 20);
+    let json: Vec<Row> = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(json, rows, "results.json and results.csv disagree");
+    // no empty field, one row per variant
+    let text = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    let mut rdr = csv::Reader::from_reader(text.as_bytes());
+    for rec in rdr.records() {
+        let rec = rec.unwrap();
+        assert!(rec.iter().all(|f| !f.is_empty()), "empty field in {rec:?}");
+    }
+    let mut keys: Vec<_> = rows.iter().map(|r| (r.rays.clone(), r.kernel.clone())).collect();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), rows.len(), "duplicate variant rows");
+    for r in &rows {
+        assert_eq!(r.status, "ok", "{}: {}", r.kernel, r.status);
+        let mrays = r.ray_count as f64 / r.ms_median / 1e3;
+        assert!((r.mrays_median - mrays).abs() <= 1e-9 * mrays, "{}: Mrays/s {} != rays / median time {}", r.kernel, r.mrays_median, mrays);
+        assert!(r.mrays_min <= r.mrays_median && r.mrays_median <= r.mrays_max, "{}", r.kernel);
+        assert_eq!(r.timed_dispatches, 3);
+        assert!(r.nodes_per_ray > 0.0 && r.box_tests_per_ray >= r.nodes_per_ray);
+        assert!(r.simd_utilisation > 0.0 && r.simd_utilisation <= 1.0);
+        assert_eq!((r.differs_from_f32, r.false_misses, r.max_abs_dt), (0, 0, 0.0), "{} differs from f32", r.kernel);
+        assert_eq!(r.bytes_per_node as usize, if r.layout == "f32" { 28 } else { 16 } * r.branching);
+        assert!(!r.commit.is_empty() && r.device.contains("llvmpipe") || !r.device.is_empty());
+    }
+    // The headline table is computed from the rows it shows.
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let rat = ratios(&rows);
+    assert_eq!(rat.len(), 10);
+    for b in [2usize, 4, 8] {
+        let xs: Vec<f64> = rat.iter().filter(|x| x.packet == 1 && x.branching == b).map(|x| x.time).collect();
+        assert_eq!(xs.len(), 2, "B={b}: one ratio per ray kind");
+        let mean = xs.iter().sum::<f64>() / 2.0;
+        let line = md.lines().find(|l| l.contains(&format!("| {b} | {mean:.3} |"))).unwrap_or_else(|| panic!("report.md has no B={b} row with time ratio {mean:.3}"));
+        for x in rat.iter().filter(|x| x.packet == 1 && x.branching == b) {
+            let f = rows.iter().find(|r| r.layout == "f32" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
+            let h = rows.iter().find(|r| r.layout == "f16h" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
+            assert_eq!(x.time, h.ms_median / f.ms_median);
+        }
+        let _ = line;
+    }
+    for p in [1usize, 4, 16] {
+        let xs: Vec<f64> = rat.iter().filter(|x| x.branching == 4 && x.packet == p).map(|x| x.time).collect();
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        assert!(md.contains(&format!("| {p} | {mean:.3} |")), "report.md has no P={p} row with time ratio {mean:.3}");
+    }
+}
+
+#[test]
+fn interrupted_sweep_keeps_finished_rows() {
+    let out = tmp("interrupt");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["sweep", "--quiet", "--scene", &teapot(), "--width", "96", "--height", "96", "--repeat", "5", "--out", out.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    let csv = out.join("results.csv");
+    let t0 = std::time::Instant::now();
+    loop {
+        let lines = std::fs::read_to_string(&csv).map(|t| t.lines().count()).unwrap_or(0);
+        if lines >= 3 {
+            break;
+        }
+        assert!(t0.elapsed().as_secs() < 300, "sweep produced no rows");
+        assert!(child.try_wait().unwrap().is_none(), "sweep ended before it could be interrupted");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let st = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(st.success());
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "the sweep should have been interrupted");
+    let rows = read_rows(&out).expect("rows written before the interrupt must parse");
+    assert!(rows.len() >= 2 && rows.len() < 36, "{} rows", rows.len());
+    assert!(rows.iter().all(|r| r.status == "ok" && r.mrays_median > 0.0));
+}
+
+#[test]
+fn report_merges_folders() {
+    let a = tmp("merge-a");
+    let b = tmp("merge-b");
+    assert!(sweep(&a, &["--rays", "primary", "--branchings", "4", "--packets", "1"]).status.success());
+    assert!(sweep(&b, &["--rays", "ao", "--branchings", "4", "--packets", "1"]).status.success());
+    let merged = tmp("merged");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", a.to_str().unwrap(), b.to_str().unwrap(), "--out", merged.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(merged.join("report.md")).unwrap();
+    assert!(md.contains("Rendered from 4 result row(s)"), "{md}");
+    assert!(md.contains("| primary (") && md.contains("| ao ("));
+    assert!(merged.join("ratio_vs_b.svg").is_file());
+    let e = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", "/nonexistent/dir"]).output().unwrap();
+    assert!(!e.status.success() && String::from_utf8_lossy(&e.stderr).contains("/nonexistent/dir/results.csv"));
+}
+
+#[test]
+fn bad_sweep_configs_are_clear_errors() {
+    let bad = std::env::temp_dir().join(format!("halftrace-bad-{}.toml", std::process::id()));
+    for (text, want) in [("layouts = [\"f8\"]\n", "unknown layout 'f8'"), ("packets = [3]\n", "packets: 3"), ("colour = 1\n", "unknown field `colour`"), ("branchings = [5]\n", "branching factor 5")] {
+        std::fs::write(&bad, text).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--config", bad.to_str().unwrap(), "--out", tmp("bad").to_str().unwrap()]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(want) && err.contains(bad.to_str().unwrap()) && !err.contains("panicked"), "{text}: {err}");
+    }
+    let example = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("sweep.example.toml");
+    assert_eq!(halftrace::sweep::Config::load(&example).unwrap(), halftrace::sweep::Config::default(), "sweep.example.toml documents the defaults");
+}
