@@ -69,3 +69,59 @@ float anchor(RayPre r, vec3 w, float k, float t, out f16vec3 o) {
     precise float e = (mag * k * TWO_M23 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
     return e;
 }
+
+// The stack entry of a hit inner child (mirrors f16h::child_entry): its frame, and the origin
+// moved into it in fp16, or re-anchored from the fp32 world ray when the bound grows too large
+// (counted in `reanchors`).
+void child_entry(RayPre r, float m, f16vec3 d16, vec3 fw, float fk, f16vec3 o, float e, float tp, float tlo,
+                 float mk, float16_t lower, bool prec, f16vec3 lo, f16vec3 hi, float16_t tn, float16_t tn_lb,
+                 inout uint reanchors, out vec4 wk, out f16vec3 o2, out float e2, out float tp2, out float tlo_c) {
+    f16vec3 cc; float cr; vec3 cw; float ck;
+    derive_child(fw, fk, lo, hi, cc, cr, cw, ck);
+    wk = vec4(cw, ck);
+    float s_lo = float(max(tn_lb, lower));
+    precise float q = s_lo / mk;
+    precise float tlo_c0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M21;
+    tlo_c = max(tlo_c0, tlo);
+    float16_t s_e = max(tn, lower);
+    if (prec && cr <= 32768.0) {
+        float16_t r16c = float16_t(cr);
+        float emag = 0.0, ecmag = 0.0, omag = 0.0;
+        bool finite = true;
+        for (int a = 0; a < 3; a++) {
+            precise float16_t ea = o[a] + s_e * d16[a];
+            precise float16_t ec = ea - cc[a];
+            precise float16_t oa = ec * r16c;
+            o2[a] = oa;
+            emag = max(emag, abs(float(ea)));
+            ecmag = max(ecmag, abs(float(ec)));
+            omag = max(omag, abs(float(oa)));
+            finite = finite && !isinf(oa) && !isnan(oa);
+        }
+        float se = float(s_e);
+        precise float step_t = se / mk;
+        precise float tpn = tp + step_t;
+        float wmax = max(max(max(0.0, abs(cw.x)), abs(cw.y)), abs(cw.z));
+        precise float mk2 = m * ck;
+        precise float ee = (cr * (e + abs(se) * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
+            + wmax * TWO_M24 * ck
+            + (abs(tp) + abs(step_t)) * TWO_M22 * mk2)
+            * (1.0 + TWO_M18);
+        if (finite && omag <= OCAP && ee <= EMAX) {
+            e2 = ee;
+            tp2 = tpn;
+            return;
+        }
+    }
+    reanchors++;
+    precise float inv_k = 1.0 / fk;
+    vec3 blo, bhi;
+    for (int a = 0; a < 3; a++) {
+        precise float bl = fw[a] + float(lo[a]) * inv_k;
+        precise float bh = fw[a] + float(hi[a]) * inv_k;
+        blo[a] = bl; bhi[a] = bh;
+    }
+    vec2 io = slab32(r, blo, bhi, -INF, INF);
+    tp2 = max(min(io.x, io.y), tlo_c);
+    e2 = anchor(r, cw, ck, tp2, o2);
+}

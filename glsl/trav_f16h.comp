@@ -120,59 +120,9 @@ void main() {
                 }
                 f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
                 f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
-                f16vec3 cc; float cr; vec3 cw; float ck;
-                derive_child(fw, fk, lo, hi, cc, cr, cw, ck);
-                float16_t tn = h_tn[k];
-                float s_lo = float(max(h_lb[k], lower));
-                precise float q = s_lo / mk;
-                precise float tlo_c0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M21;
-                float tlo_c = max(tlo_c0, tlo);
-                float16_t s_e = max(tn, lower);
-                bool moved = false;
-                f16vec3 o2;
-                float e2;
-                float tp2;
-                if (prec && cr <= 32768.0) {
-                    float16_t r16c = float16_t(cr);
-                    float emag = 0.0, ecmag = 0.0, omag = 0.0;
-                    bool finite = true;
-                    for (int a = 0; a < 3; a++) {
-                        precise float16_t ea = o[a] + s_e * d16[a];
-                        precise float16_t ec = ea - cc[a];
-                        precise float16_t oa = ec * r16c;
-                        o2[a] = oa;
-                        emag = max(emag, abs(float(ea)));
-                        ecmag = max(ecmag, abs(float(ec)));
-                        omag = max(omag, abs(float(oa)));
-                        finite = finite && !isinf(oa) && !isnan(oa);
-                    }
-                    float se = float(s_e);
-                    precise float step_t = se / mk;
-                    precise float tpn = tp + step_t;
-                    float wmax = max(max(max(0.0, abs(cw.x)), abs(cw.y)), abs(cw.z));
-                    precise float mk2 = m * ck;
-                    precise float ee = (cr * (e + abs(se) * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
-                        + wmax * TWO_M24 * ck
-                        + (abs(tp) + abs(step_t)) * TWO_M22 * mk2)
-                        * (1.0 + TWO_M18);
-                    if (finite && omag <= OCAP && ee <= EMAX) {
-                        moved = true; e2 = ee; tp2 = tpn;
-                    }
-                }
-                if (!moved) {
-                    cnt.w++;
-                    precise float inv_k = 1.0 / fk;
-                    vec3 blo, bhi;
-                    for (int a = 0; a < 3; a++) {
-                        precise float bl = fw[a] + float(lo[a]) * inv_k;
-                        precise float bh = fw[a] + float(hi[a]) * inv_k;
-                        blo[a] = bl; bhi[a] = bh;
-                    }
-                    vec2 io = slab32(r, blo, bhi, -INF, INF);
-                    tp2 = max(min(io.x, io.y), tlo_c);
-                    e2 = anchor(r, cw, ck, tp2, o2);
-                }
-                p_node[np] = c; p_wk[np] = vec4(cw, ck); p_o[np] = o2; p_e[np] = e2; p_tp[np] = tp2; p_tlo[np] = tlo_c;
+                child_entry(r, m, d16, fw, fk, o, e, tp, tlo, mk, lower, prec, lo, hi, h_tn[k], h_lb[k],
+                            cnt.w, p_wk[np], p_o[np], p_e[np], p_tp[np], p_tlo[np]);
+                p_node[np] = c;
                 np++;
             }
             for (int k = np - 1; k >= 0; k--) {

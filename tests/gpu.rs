@@ -217,6 +217,15 @@ fn raw_spirv_modules_are_checked_then_validated_and_timed() {
     let truncated = tmp("truncated.spv");
     let good = std::fs::read(&repo_spv).unwrap();
     std::fs::write(&truncated, &good[..good.len() / 2 / 4 * 4 + 4]).unwrap();
+    // Cut exactly after an instruction in the middle: still not a complete module.
+    let words: Vec<u32> = bytemuck::pod_collect_to_vec(&good);
+    let (mut i, mut cut) = (5, 5);
+    while i < words.len() / 2 {
+        cut = i;
+        i += (words[i] >> 16) as usize;
+    }
+    let clean_cut = tmp("clean_cut.spv");
+    std::fs::write(&clean_cut, bytemuck::cast_slice::<u32, u8>(&words[..cut])).unwrap();
     let odd = tmp("odd.spv");
     std::fs::write(&odd, &good[..good.len() - 1]).unwrap();
     // A valid module with the wrong interface.
@@ -229,7 +238,7 @@ fn raw_spirv_modules_are_checked_then_validated_and_timed() {
     .unwrap();
     let wrong_p = tmp("wrong.spv");
     std::fs::write(&wrong_p, bytemuck::cast_slice(&wrong)).unwrap();
-    for (p, what) in [(&garbage, "bad magic"), (&truncated, "malformed instruction"), (&odd, "multiple of 4"), (&wrong_p, "binding 9")] {
+    for (p, what) in [(&garbage, "bad magic"), (&truncated, "truncated or malformed"), (&clean_cut, "does not end with OpFunctionEnd"), (&odd, "multiple of 4"), (&wrong_p, "binding 9")] {
         let (ok, _, err) = cli(&["trace", "--scene", sc, "--spirv", p.to_str().unwrap()]);
         assert!(!ok, "{what}");
         assert!(err.contains(p.to_str().unwrap()) && err.contains(what) && !err.contains("panicked"), "{what}: {err}");

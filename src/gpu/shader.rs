@@ -78,11 +78,12 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
     let mut sets = std::collections::HashMap::new();
     let mut binds = std::collections::HashMap::new();
     let mut entry_ids = Vec::new();
+    let mut last_op = 0;
     while i < words.len() {
         let wc = (words[i] >> 16) as usize;
         let op = words[i] & 0xffff;
         if wc == 0 || i + wc > words.len() {
-            return Err(format!("malformed instruction at word {i}"));
+            return Err(format!("truncated or malformed: the instruction at word {i} runs past the end"));
         }
         let ops = &words[i + 1..i + wc];
         match op {
@@ -103,7 +104,11 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
             59 if ops.len() >= 3 && ops[2] == 9 => itf.push_constants = true,
             _ => {}
         }
+        last_op = op;
         i += wc;
+    }
+    if last_op != 56 {
+        return Err("truncated or malformed: the module does not end with OpFunctionEnd".into());
     }
     let mut b: Vec<(u32, u32)> = binds.iter().map(|(id, b)| (*sets.get(id).unwrap_or(&0), *b)).collect();
     b.sort();
