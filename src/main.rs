@@ -95,6 +95,9 @@ struct SweepArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Treat a device feature as missing (testing), e.g. rayQuery.
+    #[arg(long, hide = true)]
+    mask_feature: Vec<String>,
 }
 
 #[derive(clap::Args)]
@@ -102,7 +105,7 @@ struct TraceArgs {
     /// OBJ or .obj.gz scene.
     #[arg(long)]
     scene: PathBuf,
-    /// Node layout: f32 or f16h.
+    /// Node layout: f32, f16h, or rq (the driver's acceleration structure and ray queries).
     #[arg(long, default_value = "f16h")]
     layout: String,
     /// Branching factor: 2, 4, 8 or 16.
@@ -168,7 +171,41 @@ fn load_scene(path: &PathBuf) -> anyhow::Result<scene::Scene> {
     Ok(s)
 }
 
+/// `trace --layout rq`: the driver's acceleration structure and ray queries.
+fn trace_rq(a: &TraceArgs) -> anyhow::Result<()> {
+    let kind: RayKind = a.rays.parse()?;
+    let camera = a.camera.as_deref().map(Camera::parse).transpose()?;
+    anyhow::ensure!(a.backend.as_deref() != Some("cpu"), "--layout rq runs on the GPU only");
+    let scene = load_scene(&a.scene)?;
+    let bin = bvh::build_binary(&scene);
+    let params = RayParams { width: a.width, height: a.height, camera, seed: a.seed, ..Default::default() };
+    let rays = pipeline::make_rays(&scene, &bin, &kind, &params)?;
+    let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
+    let g = gpu::Gpu::new(&opts)?;
+    outln!("scene {} ({} triangles), layout rq, rays {kind}: {} rays; device {} ({})", scene.name, scene.len(), rays.len(), g.info.name, g.info.driver);
+    let rq = gpu::rq::RqScene::build(&g, &scene)?;
+    outln!("acceleration structures: {} bytes (driver size query), built in {:.2} ms", rq.bytes, rq.build_ms);
+    let pipe = gpu::rq::pipeline(&g)?;
+    let out = gpu::rq::run(&g, &rq, &pipe, &rays, a.warmup, a.repeat.max(1))?;
+    let f = Encoded::new(&scene, &bin, Layout::F32, 4)?;
+    let (ref_hits, _) = f.trace(&rays);
+    let agree = halftrace::trace::agreement(&out.hits, &ref_hits);
+    outln!("agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)", 100.0 * agree.rate(), agree.agree, agree.total);
+    let mut t = out.times_ms.clone();
+    t.sort_by(f64::total_cmp);
+    let med = t[t.len() / 2];
+    outln!("time over {} dispatches after {} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.len(), a.warmup, med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+    if let Some(p) = &a.out {
+        npy::write_hits(p, &out.hits)?;
+        outln!("hits written to {}", p.display());
+    }
+    Ok(())
+}
+
 fn trace(a: TraceArgs) -> anyhow::Result<()> {
+    if a.layout == "rq" {
+        return trace_rq(&a);
+    }
     let layout: Layout = a.layout.parse()?;
     bvh::check_branching(a.branching).context("--branching")?;
     let kind: RayKind = a.rays.parse()?;
@@ -345,7 +382,7 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     c.check()?;
     let out = a.out.clone().unwrap_or_else(sweep::default_out);
     let t0 = Instant::now();
-    let s = sweep::run(&c, &out, a.quiet)?;
+    let s = sweep::run(&c, &out, a.quiet, &a.mask_feature)?;
     outln!("{} variants in {:.0} s; report: {}", s.rows, t0.elapsed().as_secs_f64(), s.out.join("report.md").display());
     if !s.failed.is_empty() {
         anyhow::bail!("{} variant(s) failed validation: {}", s.failed.len(), s.failed.join(", "));

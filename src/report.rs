@@ -38,7 +38,10 @@ pub struct Row {
     pub reanchors_per_ray: f64,
     pub packet_nodes_per_packet: f64,
     pub simd_utilisation: f64,
+    /// Node bytes of our BVH; for `rq`, the driver's acceleration-structure bytes.
     pub bvh_bytes: u64,
+    /// BVH build (binary SAH + collapse + encode) or, for `rq`, the driver's build, ms.
+    pub build_ms: f64,
     pub bytes_per_node: u64,
     pub triangle_bytes: u64,
     pub stack_bytes_per_ray: u64,
@@ -167,10 +170,16 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     versions.sort();
     versions.dedup();
     md += &format!("- halftrace {}\n", versions.join(", "));
-    let failed: Vec<&Row> = rows.iter().filter(|r| r.status != "ok").collect();
-    md += &format!("- variants: {} ok, {} failed validation\n\n", rows.len() - failed.len(), failed.len());
+    let failed: Vec<&Row> = rows.iter().filter(|r| r.status.starts_with("FAILED")).collect();
+    let skipped: Vec<&Row> = rows.iter().filter(|r| r.status.starts_with("skipped")).collect();
+    md += &format!("- variants: {} ok, {} failed validation, {} skipped\n\n", rows.len() - failed.len() - skipped.len(), failed.len(), skipped.len());
     for f in &failed {
         md += &format!("**FAILED**: {} {} {}: {}\n\n", f.scene, f.rays, f.kernel, f.status);
+    }
+    let mut skip_lines: Vec<String> = skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status)).collect();
+    skip_lines.dedup();
+    for l in skip_lines {
+        md += &format!("Skipped: {l}\n\n");
     }
 
     md += "## Headline: f16h ÷ f32 (the seed's \"average differences to regular single-precision traversal\")\n\n";
@@ -184,12 +193,26 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
         md += &format!("| {d} | {p} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
     }
     md += "\n![ratio vs B](ratio_vs_b.png) ![ratio vs P](ratio_vs_p.png)\n\n";
-    md += "## Every variant\n\n| device | scene | rays | kernel | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | node bytes | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+    let rq: Vec<&Row> = rows.iter().filter(|r| r.layout == "rq" && r.status == "ok").collect();
+    if !rq.is_empty() {
+        md += "## Against the driver's ray queries (`rq`) on the same device\n\nMrays/s of each variant ÷ Mrays/s of `rq` for the same scene and rays (above 1: faster than the driver). `rq` builds its acceleration structure in the driver (prefer fast trace); its size and build time are in its row.\n\n| device | scene | rays | kernel | Mrays/s | ÷ rq |\n|---|---|---|---|---:|---:|\n";
+        for x in rows.iter().filter(|r| r.status == "ok") {
+            if let Some(q) = rq.iter().find(|q| q.device == x.device && q.scene == x.scene && q.rays == x.rays) {
+                md += &format!("| {} | {} | {} | {} | {:.2} | {:.3} |\n", x.device, x.scene, x.rays, x.kernel, x.mrays_median, x.mrays_median / q.mrays_median);
+            }
+        }
+        md += "\n";
+    }
+    md += "## Every variant\n\nFor `rq`, B, P and the work counters do not apply (shown as –); its bytes are the driver's acceleration structures, and ≠ f32 counts rays whose prim differs and whose t is not within 1e-5 relative.\n\n| device | scene | rays | kernel | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | BVH bytes | build ms | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
     for x in rows {
+        let na = x.layout == "rq";
+        let c = |v: String| if na { "–".to_string() } else { v };
         md += &format!(
-            "| {} | {} ({} tris) | {} ({}) | {} | {:.2} ({:.2}–{:.2}) | {:.3} | {:.2} | {:.2} | {:.2} | {:.3} | {:.1}% | {} | {} | {} | {} | {} | {:.3e} | {} |\n",
-            x.device, x.scene, x.triangles, x.rays, x.ray_count, x.kernel, x.mrays_median, x.mrays_min, x.mrays_max, x.ms_median, x.nodes_per_ray, x.box_tests_per_ray,
-            x.tri_tests_per_ray, x.reanchors_per_ray, 100.0 * x.simd_utilisation, x.bvh_bytes, x.bytes_per_node, x.stack_bytes_per_ray, x.differs_from_f32, x.false_misses, x.max_abs_dt, x.status
+            "| {} | {} ({} tris) | {} ({}) | {} | {:.2} ({:.2}–{:.2}) | {:.3} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.3e} | {} |\n",
+            x.device, x.scene, x.triangles, x.rays, x.ray_count, x.kernel, x.mrays_median, x.mrays_min, x.mrays_max, x.ms_median,
+            c(format!("{:.2}", x.nodes_per_ray)), c(format!("{:.2}", x.box_tests_per_ray)), c(format!("{:.2}", x.tri_tests_per_ray)), c(format!("{:.3}", x.reanchors_per_ray)),
+            c(format!("{:.1}%", 100.0 * x.simd_utilisation)), x.bvh_bytes, x.build_ms, c(x.bytes_per_node.to_string()), c(x.stack_bytes_per_ray.to_string()),
+            x.differs_from_f32, x.false_misses, x.max_abs_dt, x.status
         );
     }
     md += "\n![Mrays/s per variant](mrays.png) ![memory per layout and B](memory.png)\n";

@@ -22,7 +22,7 @@ pub struct Config {
     pub scenes: Vec<PathBuf>,
     /// primary, ao, diffuse, grazing or FILE.npy.
     pub rays: Vec<String>,
-    /// f32, f16h.
+    /// f32, f16h, rq (the driver's ray queries; skipped on devices without them).
     pub layouts: Vec<String>,
     /// Branching factors swept at P = 1.
     pub branchings: Vec<usize>,
@@ -46,7 +46,7 @@ impl Default for Config {
         Config {
             scenes: vec![PathBuf::from(DEFAULT_SCENE)],
             rays: vec!["primary".into(), "ao".into()],
-            layouts: vec!["f32".into(), "f16h".into()],
+            layouts: vec!["f32".into(), "f16h".into(), "rq".into()],
             branchings: bvh::BRANCHINGS.to_vec(),
             packets: PACKETS.to_vec(),
             packet_branching: 4,
@@ -75,7 +75,7 @@ impl Config {
         for r in &self.rays {
             r.parse::<RayKind>()?;
         }
-        for l in &self.layouts {
+        for l in self.layouts.iter().filter(|l| *l != "rq") {
             l.parse::<Layout>()?;
         }
         for &b in self.branchings.iter().chain([&self.packet_branching]) {
@@ -92,7 +92,7 @@ impl Config {
     /// The variants: every layout × (B series at P = 1 ∪ P series at `packet_branching`).
     pub fn variants(&self) -> Vec<Variant> {
         let mut v = Vec::new();
-        for l in &self.layouts {
+        for l in self.layouts.iter().filter(|l| *l != "rq") {
             let layout: Layout = l.parse().unwrap();
             for &b in &self.branchings {
                 v.push(Variant::new(layout, b, 1));
@@ -124,15 +124,18 @@ pub struct Summary {
     pub out: PathBuf,
 }
 
-/// Runs a sweep, writing `results.csv`/`.json` as it goes, then the report.
-pub fn run(cfg: &Config, out: &Path, quiet: bool) -> anyhow::Result<Summary> {
+/// Runs a sweep, writing `results.csv`/`.json` as it goes, then the report. `mask`: device
+/// features to treat as missing (testing).
+pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Result<Summary> {
     cfg.check()?;
-    let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), ..Default::default() };
+    let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), ..Default::default() };
     let g = gpu::Gpu::new(&opts)?;
     let mut writer = report::Writer::create(out)?;
     let variants = cfg.variants();
     let kinds: Vec<RayKind> = cfg.rays.iter().map(|r| r.parse().unwrap()).collect();
-    let total = (cfg.scenes.len() * kinds.len() * variants.len()) as u64;
+    let with_rq = cfg.layouts.iter().any(|l| l == "rq");
+    let total = (cfg.scenes.len() * kinds.len() * (variants.len() + with_rq as usize)) as u64;
+    let rq_pipe = if with_rq && g.info.ray_query { Some(gpu::rq::pipeline(&g)?) } else { None };
     let bar = if quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(total) };
     bar.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} ETA {eta}] {msg}").unwrap());
     let mut kernels: HashMap<(Variant, bool), traversal::Kernel> = HashMap::new();
@@ -144,23 +147,31 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool) -> anyhow::Result<Summary> {
         for w in &scene.warnings {
             bar.suspend(|| eprintln!("warning: {w}"));
         }
+        let t_build = std::time::Instant::now();
         let bin = bvh::build_binary(&scene);
+        let binary_ms = t_build.elapsed().as_secs_f64() * 1e3;
+        let rq_scene = match &rq_pipe {
+            Some(_) => Some(gpu::rq::RqScene::build(&g, &scene)?),
+            None => None,
+        };
         let params = RayParams { width: cfg.width, height: cfg.height, camera: None, seed: cfg.seed, ..Default::default() };
         let f32_ref = Encoded::new(&scene, &bin, Layout::F32, 4)?;
         for kind in &kinds {
             let rays = make_rays(&scene, &bin, kind, &params)?;
             let (ref_hits, _) = f32_ref.trace(&rays);
-            let mut encoded: HashMap<(Layout, usize), (Encoded, traversal::GpuBvh)> = HashMap::new();
+            let mut encoded: HashMap<(Layout, usize), (Encoded, traversal::GpuBvh, f64)> = HashMap::new();
             let mut images: HashMap<Layout, (Vec<Hit>, Vec<f64>)> = HashMap::new();
             for v in &variants {
                 bar.set_message(format!("{} {kind} {}", scene.name, v));
                 let key = (v.layout, v.branching);
                 if !encoded.contains_key(&key) {
+                    let t0 = std::time::Instant::now();
                     let enc = Encoded::new(&scene, &bin, v.layout, v.branching)?;
+                    let ms = binary_ms + t0.elapsed().as_secs_f64() * 1e3;
                     let gb = traversal::GpuBvh::upload(&g, &enc).with_context(|| v.to_string())?;
-                    encoded.insert(key, (enc, gb));
+                    encoded.insert(key, (enc, gb, ms));
                 }
-                let (enc, gb) = &encoded[&key];
+                let (enc, gb, build_ms) = &encoded[&key];
                 let imp = traversal::choose_impl(&g, v, None);
                 for stats in [false, true] {
                     if let std::collections::hash_map::Entry::Vacant(e) = kernels.entry((*v, stats)) {
@@ -231,6 +242,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool) -> anyhow::Result<Summary> {
                     packet_nodes_per_packet: counters.iter().map(|c| c.packet_nodes as f64).sum::<f64>() / packets_n,
                     simd_utilisation: packet::simd_utilisation(&counters, v.packet),
                     bvh_bytes: enc.node_bytes() as u64,
+                    build_ms: *build_ms,
                     bytes_per_node: node_size as u64,
                     triangle_bytes: match enc {
                         Encoded::F32(e) => e.tris.bytes() as u64,
@@ -247,6 +259,75 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool) -> anyhow::Result<Summary> {
                 }
                 bar.inc(1);
             }
+            if with_rq {
+                bar.set_message(format!("{} {kind} {}", scene.name, gpu::rq::KERNEL));
+                let base = |status: String| Row {
+                    scene: scene.name.clone(),
+                    triangles: scene.len(),
+                    rays: kind.to_string(),
+                    ray_count: rays.len(),
+                    layout: "rq".into(),
+                    branching: 0,
+                    packet: 0,
+                    kernel: gpu::rq::KERNEL.into(),
+                    device: g.info.name.clone(),
+                    driver: g.info.driver.clone(),
+                    version: version.clone(),
+                    commit: commit.clone(),
+                    status,
+                    mrays_median: 0.0,
+                    mrays_min: 0.0,
+                    mrays_max: 0.0,
+                    ms_median: 0.0,
+                    ms_min: 0.0,
+                    ms_max: 0.0,
+                    timed_dispatches: 0,
+                    nodes_per_ray: 0.0,
+                    box_tests_per_ray: 0.0,
+                    tri_tests_per_ray: 0.0,
+                    reanchors_per_ray: 0.0,
+                    packet_nodes_per_packet: 0.0,
+                    simd_utilisation: 0.0,
+                    bvh_bytes: 0,
+                    build_ms: 0.0,
+                    bytes_per_node: 0,
+                    triangle_bytes: 0,
+                    stack_bytes_per_ray: 0,
+                    node_bytes_per_ray: 0.0,
+                    differs_from_f32: 0,
+                    false_misses: 0,
+                    max_abs_dt: 0.0,
+                };
+                let row = match (&rq_pipe, &rq_scene) {
+                    (Some(pipe), Some(rs)) => {
+                        let o = gpu::rq::run(&g, rs, pipe, &rays, cfg.warmup, cfg.repeat)?;
+                        let mut t = o.times_ms.clone();
+                        t.sort_by(f64::total_cmp);
+                        let med = t[t.len() / 2];
+                        let n = rays.len().max(1) as f64;
+                        let a = crate::trace::agreement(&o.hits, &ref_hits);
+                        Row {
+                            mrays_median: n / med / 1e3,
+                            mrays_min: n / t[t.len() - 1] / 1e3,
+                            mrays_max: n / t[0] / 1e3,
+                            ms_median: med,
+                            ms_min: t[0],
+                            ms_max: t[t.len() - 1],
+                            timed_dispatches: t.len(),
+                            bvh_bytes: rs.bytes,
+                            build_ms: rs.build_ms,
+                            triangle_bytes: (scene.len() * 36) as u64,
+                            differs_from_f32: a.total - a.agree,
+                            false_misses: a.false_misses,
+                            max_abs_dt: a.max_abs_dt,
+                            ..base("ok".into())
+                        }
+                    }
+                    _ => base("skipped: the device has no VK_KHR_ray_query / VK_KHR_acceleration_structure".into()),
+                };
+                writer.push(row)?;
+                bar.inc(1);
+            }
             if si == 0 && *kind == RayKind::Primary {
                 write_images(out, &scene, &rays, &ref_hits, &images, cfg.width, cfg.height)?;
             }
@@ -254,6 +335,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool) -> anyhow::Result<Summary> {
     }
     bar.finish_and_clear();
     drop(kernels);
+    drop(rq_pipe);
     report::render(writer.rows(), out, &[out.to_path_buf()])?;
     Ok(Summary { rows: writer.rows().len(), failed, out: out.into() })
 }

@@ -26,7 +26,7 @@ fn sweep(out: &Path, extra: &[&str]) -> std::process::Output {
 #[test]
 fn small_sweep_writes_consistent_outputs() {
     let out = tmp("small");
-    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h", "--branchings", "2,8", "--packets", "1,4,16"]);
+    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h,rq", "--branchings", "2,8", "--packets", "1,4,16"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for f in ["results.csv", "results.json", "report.md", "ratio_vs_b.png", "ratio_vs_b.svg", "ratio_vs_p.png", "ratio_vs_p.svg", "mrays.png", "mrays.svg", "memory.png", "memory.svg", "render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"] {
         let p = out.join(f);
@@ -35,9 +35,9 @@ fn small_sweep_writes_consistent_outputs() {
             image::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         }
     }
-    // variants: 2 layouts × ({2, 8} at P=1 ∪ {1, 4, 16} at B=4) = 2 × 5, × 2 ray kinds
+    // variants: 2 layouts × ({2, 8} at P=1 ∪ {1, 4, 16} at B=4) = 2 × 5, plus rq, × 2 ray kinds
     let rows = read_rows(&out).unwrap();
-    assert_eq!(rows.len(), 20);
+    assert_eq!(rows.len(), 22);
     let json: Vec<Row> = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     assert_eq!(json, rows, "results.json and results.csv disagree");
     // no empty field, one row per variant
@@ -57,6 +57,12 @@ fn small_sweep_writes_consistent_outputs() {
         assert!((r.mrays_median - mrays).abs() <= 1e-9 * mrays, "{}: Mrays/s {} != rays / median time {}", r.kernel, r.mrays_median, mrays);
         assert!(r.mrays_min <= r.mrays_median && r.mrays_median <= r.mrays_max, "{}", r.kernel);
         assert_eq!(r.timed_dispatches, 3);
+        assert!(r.build_ms > 0.0 && r.bvh_bytes > 0);
+        if r.layout == "rq" {
+            assert_eq!((r.branching, r.packet), (0, 0), "B and P do not apply to rq");
+            assert!(r.differs_from_f32 == 0 && r.false_misses == 0, "rq disagrees with f32 on the teapot");
+            continue;
+        }
         assert!(r.nodes_per_ray > 0.0 && r.box_tests_per_ray >= r.nodes_per_ray);
         assert!(r.simd_utilisation > 0.0 && r.simd_utilisation <= 1.0);
         assert_eq!((r.differs_from_f32, r.false_misses, r.max_abs_dt), (0, 0, 0.0), "{} differs from f32", r.kernel);
@@ -123,7 +129,8 @@ fn report_merges_folders() {
     let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", a.to_str().unwrap(), b.to_str().unwrap(), "--out", merged.to_str().unwrap()]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(merged.join("report.md")).unwrap();
-    assert!(md.contains("Rendered from 4 result row(s)"), "{md}");
+    assert!(md.contains("Rendered from 6 result row(s)"), "{md}");
+    assert!(md.contains("÷ rq"), "the rq comparison table is missing");
     assert!(md.contains("| primary (") && md.contains("| ao ("));
     assert!(merged.join("ratio_vs_b.svg").is_file());
     let e = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", "/nonexistent/dir"]).output().unwrap();

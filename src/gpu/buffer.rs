@@ -52,6 +52,21 @@ impl<'g> Buffer<'g> {
         Ok(dst)
     }
 
+    /// The buffer's device address (needs SHADER_DEVICE_ADDRESS usage).
+    pub fn address(&self) -> vk::DeviceAddress {
+        unsafe { self.gpu.device.get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(self.raw)) }
+    }
+
+    /// A device-local buffer with `usage` (plus transfer destination) filled through a staging copy.
+    pub fn upload_with(gpu: &'g Gpu, name: &str, data: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer<'g>, GpuError> {
+        let dst = Buffer::new(gpu, name, data.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
+        let mut staging = Buffer::new(gpu, &format!("{name} (staging)"), data.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        staging.write(data)?;
+        let n = data.len() as u64;
+        gpu.submit_and_wait(|cmd| unsafe { gpu.device.cmd_copy_buffer(cmd, staging.raw, dst.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n }]) })?;
+        Ok(dst)
+    }
+
     /// Copies bytes into a host-visible buffer.
     pub fn write(&mut self, data: &[u8]) -> Result<(), GpuError> {
         let name = self.name.clone();

@@ -40,7 +40,7 @@ pub struct ContextOptions {
     /// integrated, else virtual, else CPU (lavapipe), else anything.
     pub device: Option<String>,
     /// Feature names to treat as missing (tests of the error path): `shaderFloat16`,
-    /// `storageBuffer16BitAccess`.
+    /// `storageBuffer16BitAccess`, `shaderFloat64`, `rayQuery`.
     pub mask_features: Vec<String>,
     /// Enable VK_LAYER_KHRONOS_validation if installed (also `HALFTRACE_VALIDATION=1`).
     pub validation: bool,
@@ -51,7 +51,8 @@ pub struct ContextOptions {
 /// An open Vulkan device with its queue, allocator and command pool.
 pub struct Gpu {
     _entry: ash::Entry,
-    instance: ash::Instance,
+    pub(crate) instance: ash::Instance,
+    pub(crate) physical: vk::PhysicalDevice,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *mut Mutex<Vec<String>>)>,
     pub(crate) device: ash::Device,
     pub(crate) queue: vk::Queue,
@@ -102,16 +103,25 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
         let props = instance.get_physical_device_properties(pd);
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
-        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11).push_next(&mut v12);
-        instance.get_physical_device_features2(pd, &mut f2);
-        let f64ok = f2.features.shader_float64 == vk::TRUE;
+        let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
+        let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+        let exts0 = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
+        let has0 = |n: &CStr| exts0.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|x| x == n));
+        let rq_exts = has0(ash::khr::ray_query::NAME) && has0(ash::khr::acceleration_structure::NAME) && has0(ash::khr::deferred_host_operations::NAME);
+        let f64ok = {
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11).push_next(&mut v12);
+            if rq_exts {
+                f2 = f2.push_next(&mut asf).push_next(&mut rqf);
+            }
+            instance.get_physical_device_features2(pd, &mut f2);
+            f2.features.shader_float64 == vk::TRUE
+        };
+        let rq_ok = rq_exts && asf.acceleration_structure == vk::TRUE && rqf.ray_query == vk::TRUE && v12.buffer_device_address == vk::TRUE;
         let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
         let mut drv = vk::PhysicalDeviceDriverProperties::default();
         let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
         let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut sub).push_next(&mut drv).push_next(&mut fc);
         instance.get_physical_device_properties2(pd, &mut p2);
-        let exts = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
-        let has = |n: &CStr| exts.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|x| x == n));
         let qf = instance.get_physical_device_queue_family_properties(pd);
         let timestamps = qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
         let v = props.api_version;
@@ -129,7 +139,7 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
             storage_16bit: v11.storage_buffer16_bit_access == vk::TRUE,
             shader_float64: f64ok,
             subgroup_size: sub.subgroup_size,
-            ray_query: has(ash::khr::ray_query::NAME) && has(ash::khr::acceleration_structure::NAME),
+            ray_query: rq_ok,
             max_storage_buffer: props.limits.max_storage_buffer_range as u64,
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps,
@@ -235,6 +245,7 @@ impl Gpu {
                 "shaderFloat16" => info.shader_float16 = false,
                 "storageBuffer16BitAccess" => info.storage_16bit = false,
                 "shaderFloat64" => info.shader_float64 = false,
+                "rayQuery" => info.ray_query = false,
                 other => return Err((GpuError::Other(format!("unknown feature to mask: '{other}'")), debug)),
             }
         }
@@ -260,10 +271,18 @@ impl Gpu {
         let qfi = qfs.iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0).unwrap() as u32;
         let prio = [1.0f32];
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
+        let rq = info.ray_query && !opts.mask_features.iter().any(|m| m == "rayQuery");
+        info.ray_query = rq;
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(true);
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(true);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(true).buffer_device_address(rq);
+        let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
+        let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let base = vk::PhysicalDeviceFeatures::default().shader_float64(info.shader_float64);
-        let dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).enabled_features(&base).push_next(&mut v11).push_next(&mut v12);
+        let ext_names = [ash::khr::acceleration_structure::NAME.as_ptr(), ash::khr::ray_query::NAME.as_ptr(), ash::khr::deferred_host_operations::NAME.as_ptr()];
+        let mut dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).enabled_features(&base).push_next(&mut v11).push_next(&mut v12);
+        if rq {
+            dinfo = dinfo.enabled_extension_names(&ext_names).push_next(&mut asf).push_next(&mut rqf);
+        }
         let device = tryd!(unsafe { instance.create_device(physical, &dinfo, None) }.vk("vkCreateDevice"));
         let queue = unsafe { device.get_device_queue(qfi, 0) };
         let pool = match unsafe { device.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(qfi).flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER), None) } {
@@ -278,7 +297,7 @@ impl Gpu {
             device: device.clone(),
             physical_device: physical,
             debug_settings: Default::default(),
-            buffer_device_address: false,
+            buffer_device_address: rq,
             allocation_sizes: Default::default(),
         }) {
             Ok(a) => a,
@@ -290,7 +309,7 @@ impl Gpu {
                 return Err((GpuError::Other(format!("creating the allocator: {e}")), debug));
             }
         };
-        Ok(Gpu { _entry: entry, instance, debug, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info, validation_enabled: use_layer })
+        Ok(Gpu { _entry: entry, instance, physical, debug, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info, validation_enabled: use_layer })
     }
 
     /// Bytes currently allocated through the allocator (0 once every buffer is dropped).

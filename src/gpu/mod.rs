@@ -6,6 +6,7 @@
 pub mod buffer;
 pub mod context;
 pub mod pipeline;
+pub mod rq;
 pub mod shader;
 pub mod timer;
 pub mod traversal;

@@ -17,7 +17,13 @@ pub struct ComputePipeline<'g> {
 }
 
 impl<'g> ComputePipeline<'g> {
+    /// A pipeline whose `bindings` are all storage buffers.
     pub fn new(gpu: &'g Gpu, name: &str, spirv: &[u32], bindings: u32, push_size: u32) -> Result<ComputePipeline<'g>, GpuError> {
+        Self::new_typed(gpu, name, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size)
+    }
+
+    /// A pipeline with one descriptor of the given type per binding.
+    pub fn new_typed(gpu: &'g Gpu, name: &str, spirv: &[u32], types: &[vk::DescriptorType], push_size: u32) -> Result<ComputePipeline<'g>, GpuError> {
         let d = &gpu.device;
         let mut p = ComputePipeline {
             gpu,
@@ -33,8 +39,10 @@ impl<'g> ComputePipeline<'g> {
         // Every object created is destroyed by Drop, even when a later step fails.
         unsafe {
             p.module = d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(spirv), None).vk("vkCreateShaderModule")?;
-            let b: Vec<vk::DescriptorSetLayoutBinding> = (0..bindings)
-                .map(|i| vk::DescriptorSetLayoutBinding::default().binding(i).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::COMPUTE))
+            let b: Vec<vk::DescriptorSetLayoutBinding> = types
+                .iter()
+                .enumerate()
+                .map(|(i, t)| vk::DescriptorSetLayoutBinding::default().binding(i as u32).descriptor_type(*t).descriptor_count(1).stage_flags(vk::ShaderStageFlags::COMPUTE))
                 .collect();
             p.dsl = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&b), None).vk("vkCreateDescriptorSetLayout")?;
             let dsls = [p.dsl];
@@ -43,7 +51,13 @@ impl<'g> ComputePipeline<'g> {
             let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(p.module).name(c"main");
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout)];
             p.pipeline = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None).map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
-            let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: bindings }];
+            let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
+            for t in types {
+                match sizes.iter_mut().find(|s| s.ty == *t) {
+                    Some(s) => s.descriptor_count += 1,
+                    None => sizes.push(vk::DescriptorPoolSize { ty: *t, descriptor_count: 1 }),
+                }
+            }
             p.pool = d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None).vk("vkCreateDescriptorPool")?;
             p.set = d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&dsls)).vk("vkAllocateDescriptorSets")?[0];
         }
@@ -52,13 +66,28 @@ impl<'g> ComputePipeline<'g> {
 
     /// Points binding i at `buffers[i]`.
     pub fn bind(&self, buffers: &[&Buffer]) {
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers.iter().map(|b| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }]).collect();
+        let pairs: Vec<(u32, &Buffer)> = buffers.iter().enumerate().map(|(i, b)| (i as u32, *b)).collect();
+        self.bind_at(&pairs);
+    }
+
+    /// Points each (binding, buffer) pair's storage-buffer binding at the buffer.
+    pub fn bind_at(&self, buffers: &[(u32, &Buffer)]) {
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers.iter().map(|(_, b)| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }]).collect();
         let writes: Vec<vk::WriteDescriptorSet> = infos
             .iter()
-            .enumerate()
-            .map(|(i, info)| vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(i as u32).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info))
+            .zip(buffers)
+            .map(|(info, (i, _))| vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(*i).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info))
             .collect();
         unsafe { self.gpu.device.update_descriptor_sets(&writes, &[]) };
+    }
+
+    /// Points an acceleration-structure binding at `tlas`.
+    pub fn bind_acceleration_structure(&self, binding: u32, tlas: vk::AccelerationStructureKHR) {
+        let ases = [tlas];
+        let mut asw = vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(&ases);
+        let mut w = vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(binding).descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR).push_next(&mut asw);
+        w.descriptor_count = 1;
+        unsafe { self.gpu.device.update_descriptor_sets(&[w], &[]) };
     }
 
     /// Records a dispatch of `groups` workgroups (split over x and y past 65535).

@@ -16,6 +16,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("packet.glsl", include_str!("../../glsl/packet.glsl")),
     ("trav_f32_packet.comp", include_str!("../../glsl/trav_f32_packet.comp")),
     ("trav_f16h_packet.comp", include_str!("../../glsl/trav_f16h_packet.comp")),
+    ("trav_rq.comp", include_str!("../../glsl/trav_rq.comp")),
 ];
 
 fn source(name: &str) -> Option<&'static str> {

@@ -188,6 +188,47 @@ pub fn slab32(r: &RayPre, lo: [f32; 3], hi: [f32; 3], t0: f32, t1: f32) -> (f32,
     (near, far)
 }
 
+/// How many rays of one result agree with a reference: same hit/miss, and the same `prim` or,
+/// where triangles tie or share edges, `t` within 1e-5 relative.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Agreement {
+    pub agree: usize,
+    pub total: usize,
+    pub false_misses: usize,
+    pub max_abs_dt: f64,
+}
+
+impl Agreement {
+    pub fn rate(&self) -> f64 {
+        if self.total == 0 {
+            1.0
+        } else {
+            self.agree as f64 / self.total as f64
+        }
+    }
+}
+
+pub fn agreement(got: &[Hit], reference: &[Hit]) -> Agreement {
+    let mut a = Agreement { agree: 0, total: got.len(), false_misses: 0, max_abs_dt: 0.0 };
+    for (g, r) in got.iter().zip(reference) {
+        let ok = match (g.is_hit(), r.is_hit()) {
+            (false, false) => true,
+            (true, true) => {
+                let dt = (g.t as f64 - r.t as f64).abs();
+                a.max_abs_dt = a.max_abs_dt.max(dt);
+                g.prim == r.prim || dt <= 1e-5 * (r.t as f64).abs().max(f64::MIN_POSITIVE)
+            }
+            (false, true) => {
+                a.false_misses += 1;
+                false
+            }
+            (true, false) => false,
+        };
+        a.agree += ok as usize;
+    }
+    a
+}
+
 /// Traces a batch of rays in parallel with `f`, keeping input order.
 pub fn trace_all<F>(rays: &[Ray], f: F) -> (Vec<Hit>, Vec<Counters>)
 where
