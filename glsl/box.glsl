@@ -72,4 +72,54 @@ f16vec3 slab16(f16vec3 o, f16vec3 d16, f16vec3 idir, float16_t w, f16vec3 lo, f1
     precise float16_t tf_ub = tf * (tf > H0 ? LO_UP : LO_DOWN);
     return f16vec3(tn, tn_lb, tf_ub);
 }
+
+// Origin type: fp32 in the fp32 math mode, fp16 otherwise.
+#ifdef MATH_F32
+#define OVEC vec3
+#define OCONV(x) (x)
+#else
+#define OVEC f16vec3
+#define OCONV(x) float16_t(x)
+#endif
+
+// The box test in the variant's math mode, as fp32 (tn, tn_lb, tf_ub) (src/trace/f16h.rs, slab).
+vec3 slab_math(OVEC o, f16vec3 d16, f16vec3 idir, vec3 idir32, float16_t w, f16vec3 lo, f16vec3 hi) {
+#if !defined(MATH_F32) && !defined(MATH_MIXED)
+    return vec3(slab16(o, d16, idir, w, lo, hi));
+#else
+    float tn = -INF;
+    float tf = INF;
+    for (int a = 0; a < 3; a++) {
+        float t0, t1;
+#ifdef MATH_MIXED
+        precise float16_t la = (lo[a] - o[a]) - w;
+        precise float16_t ha = (hi[a] - o[a]) + w;
+        bool inside = la <= H0 && ha >= H0;
+        precise float16_t x16 = la * idir[a];
+        precise float16_t y16 = ha * idir[a];
+        float x = float(x16);
+        float y = float(y16);
+#else
+        float w32 = float(w);
+        precise float la = (float(lo[a]) - o[a]) - w32;
+        precise float ha = (float(hi[a]) - o[a]) + w32;
+        bool inside = la <= 0.0 && ha >= 0.0;
+        precise float x = la * idir32[a];
+        precise float y = ha * idir32[a];
+#endif
+        if (d16[a] == H0) {
+            t0 = inside ? -INF : INF;
+            t1 = inside ? INF : -INF;
+        } else {
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+        tn = max(tn, t0);
+        tf = min(tf, t1);
+    }
+    precise float tn_lb = tn * (tn > 0.0 ? (1.0 - 1.0 / 256.0) : (1.0 + 1.0 / 256.0));
+    precise float tf_ub = tf * (tf > 0.0 ? (1.0 + 1.0 / 256.0) : (1.0 - 1.0 / 256.0));
+    return vec3(tn, tn_lb, tf_ub);
+#endif
+}
 #endif

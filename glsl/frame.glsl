@@ -50,7 +50,7 @@ void derive_child(vec3 pw, float pk, f16vec3 lo, f16vec3 hi, out f16vec3 c, out 
 }
 
 // Origin at world parameter t in frame (w, k), fp32 then fp16, clamped to +-OCAP; returns the error bound.
-float anchor(RayPre r, vec3 w, float k, float t, out f16vec3 o) {
+float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
     float mag = 0.0;
     float clampd = 0.0;
     float lmax = 0.0;
@@ -64,7 +64,7 @@ float anchor(RayPre r, vec3 w, float k, float t, out f16vec3 o) {
         precise float cd = abs(l - lc);
         clampd = max(clampd, cd);
         lmax = max(lmax, abs(lc));
-        o[a] = float16_t(lc);
+        o[a] = OCONV(lc);
     }
     precise float e = (mag * k * TWO_M23 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
     return e;
@@ -73,32 +73,38 @@ float anchor(RayPre r, vec3 w, float k, float t, out f16vec3 o) {
 // The stack entry of a hit inner child (mirrors f16h::child_entry): its frame, and the origin
 // moved into it in fp16, or re-anchored from the fp32 world ray when the bound grows too large
 // (counted in `reanchors`).
-void child_entry(RayPre r, float m, f16vec3 d16, vec3 fw, float fk, f16vec3 o, float e, float tp, float tlo,
-                 float mk, float16_t lower, bool prec, f16vec3 lo, f16vec3 hi, float16_t tn, float16_t tn_lb,
-                 inout uint reanchors, out vec4 wk, out f16vec3 o2, out float e2, out float tp2, out float tlo_c) {
+void child_entry(RayPre r, float m, f16vec3 d16, vec3 fw, float fk, OVEC o, float e, float tp, float tlo,
+                 float mk, float lower, bool prec, f16vec3 lo, f16vec3 hi, float tn, float tn_lb,
+                 inout uint reanchors, out vec4 wk, out OVEC o2, out float e2, out float tp2, out float tlo_c) {
     f16vec3 cc; float cr; vec3 cw; float ck;
     derive_child(fw, fk, lo, hi, cc, cr, cw, ck);
     wk = vec4(cw, ck);
-    float s_lo = float(max(tn_lb, lower));
+    float s_lo = max(tn_lb, lower);
     precise float q = s_lo / mk;
     precise float tlo_c0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M21;
     tlo_c = max(tlo_c0, tlo);
-    float16_t s_e = max(tn, lower);
+    float se = max(tn, lower);
     if (prec && cr <= 32768.0) {
-        float16_t r16c = float16_t(cr);
         float emag = 0.0, ecmag = 0.0, omag = 0.0;
         bool finite = true;
         for (int a = 0; a < 3; a++) {
+#ifdef MATH_F32
+            precise float ea = o[a] + se * float(d16[a]);
+            precise float ec = ea - float(cc[a]);
+            precise float oa = ec * cr;
+#else
+            float16_t s_e = float16_t(se);
+            float16_t r16c = float16_t(cr);
             precise float16_t ea = o[a] + s_e * d16[a];
             precise float16_t ec = ea - cc[a];
             precise float16_t oa = ec * r16c;
+#endif
             o2[a] = oa;
             emag = max(emag, abs(float(ea)));
             ecmag = max(ecmag, abs(float(ec)));
             omag = max(omag, abs(float(oa)));
             finite = finite && !isinf(oa) && !isnan(oa);
         }
-        float se = float(s_e);
         precise float step_t = se / mk;
         precise float tpn = tp + step_t;
         float wmax = max(max(max(0.0, abs(cw.x)), abs(cw.y)), abs(cw.z));

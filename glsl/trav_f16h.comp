@@ -18,7 +18,7 @@ layout(std430, set = 0, binding = 5) writeonly buffer Dbg { float dbg[]; };
 // the world parameter it stands for, and a lower bound on what can still matter.
 uint st_node[STACK_SIZE];
 vec4 st_wk[STACK_SIZE];
-f16vec3 st_o[STACK_SIZE];
+OVEC st_o[STACK_SIZE];
 float st_e[STACK_SIZE];
 float st_tp[STACK_SIZE];
 float st_tlo[STACK_SIZE];
@@ -30,11 +30,14 @@ void main() {
     // Ray16
     float m = max(max(abs(r.d.x), abs(r.d.y)), abs(r.d.z));
     f16vec3 d16, idir;
+    vec3 idir32;
     for (int a = 0; a < 3; a++) {
         precise float x = r.d[a] / m;
         d16[a] = abs(x) < (1.0 / 32768.0) ? H0 : float16_t(x);
         precise float16_t inv = float16_t(1.0) / d16[a];
         idir[a] = d16[a] == H0 ? HINF : inv;
+        precise float inv32 = 1.0 / float(d16[a]);
+        idir32[a] = d16[a] == H0 ? INF : inv32;
     }
     uvec4 cnt = uvec4(0u, 1u, 0u, 0u);
     best_t = r.tmax; best_prim = NO_PRIM; best_u = 0.0; best_v = 0.0;
@@ -42,7 +45,7 @@ void main() {
     bool overflow = false;
     if (root.x <= root.y) {
         int sp = 1;
-        f16vec3 o0;
+        OVEC o0;
         float e0 = anchor(r, pc.root_wk.xyz, pc.root_wk.w, root.x, o0);
         st_node[0] = 0u; st_wk[0] = pc.root_wk; st_o[0] = o0; st_e[0] = e0; st_tp[0] = root.x; st_tlo[0] = root.x;
         while (sp > 0) {
@@ -50,7 +53,7 @@ void main() {
             uint ni = st_node[sp];
             vec3 fw = st_wk[sp].xyz;
             float fk = st_wk[sp].w;
-            f16vec3 o = st_o[sp];
+            OVEC o = st_o[sp];
             float e = st_e[sp];
             float tp = st_tp[sp];
             float tlo = st_tlo[sp];
@@ -73,27 +76,27 @@ void main() {
             bool prec = e <= EBIG;
             precise float we = e + e * TWO_M11 + W_MARGIN;
             float16_t w = up16(we);
-            float16_t h_tn[B];
-            float16_t h_lb[B];
+            float h_tn[B];
+            float h_lb[B];
             uint h_s[B];
             int nh = 0;
             for (uint s = 0u; s < uint(B); s++) {
                 if (nodes[ni].child[s] == CHILD_EMPTY) break;
                 cnt.y++;
-                float16_t tn, tn_lb;
+                float tn, tn_lb;
                 bool hit;
                 if (prec) {
                     f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
                     f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
-                    f16vec3 q = slab16(o, d16, idir, w, lo, hi);
+                    vec3 q = slab_math(o, d16, idir, idir32, w, lo, hi);
                     tn = q.x; tn_lb = q.y;
-                    hit = q.y <= q.z && q.z >= lower && q.y <= s_lim;
+                    hit = q.y <= q.z && q.z >= float(lower) && q.y <= float(s_lim);
                 } else {
-                    tn = lower; tn_lb = lower; hit = true;
+                    tn = float(lower); tn_lb = float(lower); hit = true;
                 }
                 if (hit) {
                     int j = nh;
-                    while (j > 0 && float(h_tn[j - 1]) > float(tn)) { h_tn[j] = h_tn[j - 1]; h_lb[j] = h_lb[j - 1]; h_s[j] = h_s[j - 1]; j--; }
+                    while (j > 0 && h_tn[j - 1] > tn) { h_tn[j] = h_tn[j - 1]; h_lb[j] = h_lb[j - 1]; h_s[j] = h_s[j - 1]; j--; }
                     h_tn[j] = tn; h_lb[j] = tn_lb; h_s[j] = s;
                     nh++;
                 }
@@ -101,7 +104,7 @@ void main() {
             // children to push, in hit order
             uint p_node[B];
             vec4 p_wk[B];
-            f16vec3 p_o[B];
+            OVEC p_o[B];
             float p_e[B];
             float p_tp[B];
             float p_tlo[B];
@@ -120,7 +123,7 @@ void main() {
                 }
                 f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
                 f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
-                child_entry(r, m, d16, fw, fk, o, e, tp, tlo, mk, lower, prec, lo, hi, h_tn[k], h_lb[k],
+                child_entry(r, m, d16, fw, fk, o, e, tp, tlo, mk, float(lower), prec, lo, hi, h_tn[k], h_lb[k],
                             cnt.w, p_wk[np], p_o[np], p_e[np], p_tp[np], p_tlo[np]);
                 p_node[np] = c;
                 np++;

@@ -20,7 +20,7 @@ layout(std430, set = 0, binding = 5) writeonly buffer Dbg { float dbg[]; };
 // bound on what can still matter.
 uint st_node[STACK_SIZE];
 vec4 st_wk[STACK_SIZE];
-f16vec3 st_o[STACK_SIZE];
+OVEC st_o[STACK_SIZE];
 float st_e[STACK_SIZE];
 float st_tp[STACK_SIZE];
 float st_tlo[STACK_SIZE];
@@ -31,11 +31,14 @@ void main() {
     RayPre r = ray_pre(valid ? i : 0u);
     float m = max(max(abs(r.d.x), abs(r.d.y)), abs(r.d.z));
     f16vec3 d16, idir;
+    vec3 idir32;
     for (int a = 0; a < 3; a++) {
         precise float x = r.d[a] / m;
         d16[a] = abs(x) < (1.0 / 32768.0) ? H0 : float16_t(x);
         precise float16_t inv = float16_t(1.0) / d16[a];
         idir[a] = d16[a] == H0 ? HINF : inv;
+        precise float inv32 = 1.0 / float(d16[a]);
+        idir32[a] = d16[a] == H0 ? INF : inv32;
     }
     uvec4 cnt = uvec4(0u, 1u, 0u, 0u);
     uint pnodes = 0u, asum = 0u;
@@ -45,7 +48,7 @@ void main() {
     bool overflow = false;
     int sp = 0;
     if (packet_any(root_hit)) {
-        f16vec3 o0 = f16vec3(H0);
+        OVEC o0 = OVEC(0.0);
         float e0 = -1.0;
         if (root_hit) e0 = anchor(r, pc.root_wk.xyz, pc.root_wk.w, root.x, o0);
         st_node[0] = 0u; st_wk[0] = pc.root_wk; st_o[0] = o0; st_e[0] = e0; st_tp[0] = root.x; st_tlo[0] = root.x;
@@ -56,7 +59,7 @@ void main() {
         uint ni = st_node[sp];
         vec3 fw = st_wk[sp].xyz;
         float fk = st_wk[sp].w;
-        f16vec3 o = st_o[sp];
+        OVEC o = st_o[sp];
         float e = st_e[sp];
         float tp = st_tp[sp];
         float tlo = st_tlo[sp];
@@ -77,26 +80,26 @@ void main() {
         precise float we = e + e * TWO_M11 + W_MARGIN;
         float16_t w = up16(we);
         uint mask = 0u;
-        float16_t h_tn[B];
-        float16_t h_lb[B];
+        float h_tn[B];
+        float h_lb[B];
         float lt[B];
         for (uint s = 0u; s < uint(B); s++) {
             lt[s] = INF;
             if (nodes[ni].child[s] == CHILD_EMPTY) break;
             if (!act) continue;
             cnt.y++;
-            float16_t tn, tn_lb;
+            float tn, tn_lb;
             bool hit;
             if (prec) {
                 f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
                 f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
-                f16vec3 q = slab16(o, d16, idir, w, lo, hi);
+                vec3 q = slab_math(o, d16, idir, idir32, w, lo, hi);
                 tn = q.x; tn_lb = q.y;
-                hit = q.y <= q.z && q.z >= lower && q.y <= s_lim;
+                hit = q.y <= q.z && q.z >= float(lower) && q.y <= float(s_lim);
             } else {
-                tn = lower; tn_lb = lower; hit = true;
+                tn = float(lower); tn_lb = float(lower); hit = true;
             }
-            if (hit) { mask |= 1u << s; h_tn[s] = tn; h_lb[s] = tn_lb; lt[s] = float(tn); }
+            if (hit) { mask |= 1u << s; h_tn[s] = tn; h_lb[s] = tn_lb; lt[s] = tn; }
         }
         uint any_mask = packet_or(mask);
         float key[B];
@@ -108,7 +111,7 @@ void main() {
         int n = packet_order(any_mask, key, order);
         uint p_node[B];
         vec4 p_wk[B];
-        f16vec3 p_o[B];
+        OVEC p_o[B];
         float p_e[B];
         float p_tp[B];
         float p_tlo[B];
@@ -130,11 +133,11 @@ void main() {
             }
             p_node[np] = c;
             p_e[np] = -1.0;
-            p_wk[np] = vec4(0.0); p_o[np] = f16vec3(H0); p_tp[np] = 0.0; p_tlo[np] = 0.0;
+            p_wk[np] = vec4(0.0); p_o[np] = OVEC(0.0); p_tp[np] = 0.0; p_tlo[np] = 0.0;
             if (mine) {
                 f16vec3 lo = f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]);
                 f16vec3 hi = f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]);
-                child_entry(r, m, d16, fw, fk, o, e, tp, tlo, mk, lower, prec, lo, hi, h_tn[s], h_lb[s],
+                child_entry(r, m, d16, fw, fk, o, e, tp, tlo, mk, float(lower), prec, lo, hi, h_tn[s], h_lb[s],
                             cnt.w, p_wk[np], p_o[np], p_e[np], p_tp[np], p_tlo[np]);
             }
             np++;

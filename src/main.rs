@@ -35,7 +35,14 @@ enum Cmd {
         scene: PathBuf,
     },
     /// List Vulkan devices and their fp16, 16-bit storage, subgroup and ray-query support.
-    Devices,
+    Devices {
+        /// Also measure raw fp16 vs fp32 throughput of sub, mul, min, max, compare.
+        #[arg(long)]
+        bench: bool,
+        /// Device to benchmark (index or name substring; default: the default device).
+        #[arg(long)]
+        device: Option<String>,
+    },
     /// Sweep scenes × ray kinds × layouts × B × P: validate, time, count, report.
     Sweep(SweepArgs),
     /// Re-render report.md and the plots from one or more sweep folders (merging them).
@@ -77,6 +84,9 @@ struct SweepArgs {
     packets: Vec<usize>,
     #[arg(long)]
     packet_branching: Option<usize>,
+    /// f16h math modes, comma-separated: f16, f32, mixed.
+    #[arg(long, value_delimiter = ',')]
+    maths: Vec<String>,
     #[arg(long)]
     width: Option<u32>,
     #[arg(long)]
@@ -114,6 +124,9 @@ struct TraceArgs {
     /// Rays per packet: 1, 4, 8, 16, 32 or 64.
     #[arg(long, default_value_t = 1)]
     packet: usize,
+    /// f16h arithmetic: f16 (the seed), f32 (fp16 nodes, fp32 tests), mixed.
+    #[arg(long, default_value = "f16")]
+    math: String,
     /// Packet implementation: subgroup or shared (default: subgroup when P fits the device's
     /// subgroup, else shared memory).
     #[arg(long)]
@@ -218,7 +231,8 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let rays = pipeline::make_rays(&scene, &bin, &kind, &params)?;
     let enc = Encoded::new(&scene, &bin, layout, a.branching)?;
     anyhow::ensure!(halftrace::variant::PACKETS.contains(&a.packet), "--packet {}: use one of 1, 4, 8, 16, 32, 64", a.packet);
-    let variant = Variant::new(layout, a.branching, a.packet);
+    let math: halftrace::variant::Math = a.math.parse().map_err(anyhow::Error::msg).context("--math")?;
+    let variant = Variant::new(layout, a.branching, a.packet).with_math(math);
     let force_impl = match a.packet_impl.as_deref() {
         None => None,
         Some("subgroup") => Some(PacketImpl::Subgroup),
@@ -242,7 +256,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     outln!("scene {} ({} triangles), variant {variant}, rays {kind}: {} rays", scene.name, scene.len(), rays.len());
     let (hits, counters) = if backend == "cpu" {
         let t1 = Instant::now();
-        let (hits, counters) = enc.trace_packets(&rays, a.packet);
+        let (hits, counters) = enc.trace_variant(&rays, a.packet, variant.math);
         let secs = t1.elapsed().as_secs_f64();
         outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
         (hits, Some(counters))
@@ -258,7 +272,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let kname = kernel.name();
         let out = gpu::traversal::run(&g, &bvh_gpu, &kernel, &rays, a.warmup, a.repeat.max(1)).with_context(|| kname.clone())?;
         // Correctness before speed: the CPU reference of the same layout and packet size.
-        let (ref_hits, ref_counters) = enc.trace_packets(&rays, a.packet);
+        let (ref_hits, ref_counters) = enc.trace_variant(&rays, a.packet, variant.math);
         let bad: Vec<usize> = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&ref_hits[i])).collect();
         if let Some(&i) = bad.first() {
             anyhow::bail!("{kname}{}: {} of {} rays differ from the CPU reference; first: ray {i} {:?}: gpu {:?}, cpu {:?}",
@@ -335,16 +349,26 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn devices() -> anyhow::Result<()> {
+fn devices(bench: bool, device: Option<String>) -> anyhow::Result<()> {
     let list = gpu::list_devices()?;
     if list.is_empty() {
         outln!("no Vulkan devices");
     }
-    for d in list {
+    for d in &list {
         outln!(
             "{}: {} ({}), Vulkan {}, driver {}\n   shaderFloat16 {}, storageBuffer16BitAccess {}, shaderFloat64 {}, subgroup size {}, ray query {}, max storage buffer {} MiB",
             d.index, d.name, d.kind, d.api_version, d.driver, d.shader_float16, d.storage_16bit, d.shader_float64, d.subgroup_size, d.ray_query, d.max_storage_buffer >> 20
         );
+    }
+    if bench {
+        let g = gpu::Gpu::new(&gpu::ContextOptions { device, ..Default::default() })?;
+        let b = gpu::bench::run(&g, 65536, 512, 5)?;
+        outln!("\nraw arithmetic on {} ({}): G operations/s, median of 5", b.device, b.driver);
+        outln!("{:<9} {:>10} {:>10} {:>12}", "op", "fp16", "fp32", "fp16:fp32");
+        for o in &b.ops {
+            outln!("{:<9} {:>10.2} {:>10.2} {:>12.3}", o.op, o.fp16_gops, o.fp32_gops, o.ratio);
+        }
+        outln!("fp16:fp32 ratio (geometric mean): {:.3}", b.fp16_ratio);
     }
     Ok(())
 }
@@ -369,6 +393,9 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     }
     if !a.packets.is_empty() {
         c.packets = a.packets.clone();
+    }
+    if !a.maths.is_empty() {
+        c.maths = a.maths.clone();
     }
     c.packet_branching = a.packet_branching.unwrap_or(c.packet_branching);
     c.width = a.width.unwrap_or(c.width);
@@ -419,7 +446,7 @@ fn main() {
     let r = match cli.cmd {
         Cmd::Trace(a) => trace(a),
         Cmd::BvhStats { scene } => bvh_stats(&scene),
-        Cmd::Devices => devices(),
+        Cmd::Devices { bench, device } => devices(bench, device),
         Cmd::Shaders { emit } => shaders(&emit),
         Cmd::Sweep(a) => sweep(a),
         Cmd::Report { dirs, out } => report(&dirs, out.as_ref()),

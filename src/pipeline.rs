@@ -140,14 +140,19 @@ impl Encoded {
         }
     }
 
-    /// Traces rays in packets of `p` on the CPU reference of this layout (p = 1: single rays).
+    /// Traces rays in packets of `p` on the CPU reference of this layout (p = 1: single rays),
+    /// f16h in its fp16 math mode.
     pub fn trace_packets(&self, rays: &[Ray], p: usize) -> (Vec<Hit>, Vec<Counters>) {
-        if p == 1 {
-            return self.trace(rays);
-        }
-        match self {
-            Encoded::F32(e) => trace::packet::trace_f32(e, rays, p),
-            Encoded::F16h(e) => trace::packet::trace_f16h(e, rays, p),
+        self.trace_variant(rays, p, trace::f16h::Math::F16)
+    }
+
+    /// Traces rays in packets of `p` with an f16h math mode (ignored by f32).
+    pub fn trace_variant(&self, rays: &[Ray], p: usize, math: trace::f16h::Math) -> (Vec<Hit>, Vec<Counters>) {
+        match (self, p) {
+            (Encoded::F32(e), 1) => trace::trace_all(rays, |r| trace::f32::trace(e, r)),
+            (Encoded::F16h(e), 1) => trace::trace_all(rays, |r| trace::f16h::trace_math(e, r, math)),
+            (Encoded::F32(e), _) => trace::packet::trace_f32(e, rays, p),
+            (Encoded::F16h(e), _) => trace::packet::trace_f16h(e, rays, p, math),
         }
     }
 

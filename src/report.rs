@@ -16,6 +16,8 @@ pub struct Row {
     pub rays: String,
     pub ray_count: usize,
     pub layout: String,
+    /// f16h math mode (f16, f32, mixed); `f32` for the f32 layout, `n/a` for rq.
+    pub math: String,
     pub branching: usize,
     pub packet: usize,
     pub kernel: String,
@@ -50,6 +52,9 @@ pub struct Row {
     pub differs_from_f32: usize,
     pub false_misses: usize,
     pub max_abs_dt: f64,
+    /// The device's raw fp16:fp32 arithmetic throughput ratio (`devices --bench`, geometric
+    /// mean over sub, mul, min, max, compare), measured once per sweep.
+    pub device_fp16_ratio: f64,
 }
 
 /// Appends rows to `results.csv` and rewrites `results.json` after each one, so an
@@ -105,11 +110,12 @@ pub struct Ratio {
     pub bytes: f64,
 }
 
-/// Pairs f16h rows with the f32 row of the same device, scene, rays, B and P.
+/// Pairs f16h rows in the seed's fp16 math with the f32 row of the same device, scene, rays,
+/// B and P.
 pub fn ratios(rows: &[Row]) -> Vec<Ratio> {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok").collect();
     let mut out = Vec::new();
-    for h in ok.iter().filter(|r| r.layout == "f16h") {
+    for h in ok.iter().filter(|r| r.layout == "f16h" && r.math == "f16") {
         if let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching && f.packet == h.packet) {
             let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
             out.push(Ratio {
@@ -127,6 +133,40 @@ pub fn ratios(rows: &[Row]) -> Vec<Ratio> {
         }
     }
     out
+}
+
+/// The storage vs arithmetic table: per (device, B, P), Mrays/s of f16h in each math mode ÷
+/// Mrays/s of f32 (means over scenes and rays), node bytes fetched per ray, and the device's
+/// raw fp16:fp32 ratio.
+fn separated_effects(rows: &[Row]) -> String {
+    let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok").collect();
+    let mut acc: BTreeMap<(String, usize, usize), BTreeMap<String, (f64, usize)>> = BTreeMap::new();
+    let mut bytes: BTreeMap<(String, usize, usize, String), (f64, usize)> = BTreeMap::new();
+    let mut raw: BTreeMap<String, f64> = BTreeMap::new();
+    for h in ok.iter().filter(|r| r.layout == "f16h") {
+        if let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching && f.packet == h.packet) {
+            let e = acc.entry((h.device.clone(), h.branching, h.packet)).or_default().entry(h.math.clone()).or_insert((0.0, 0));
+            e.0 += h.mrays_median / f.mrays_median;
+            e.1 += 1;
+            for r in [h, f] {
+                let k = (r.device.clone(), r.branching, r.packet, if r.layout == "f32" { "f32".to_string() } else { format!("f16h/{}", r.math) });
+                let b = bytes.entry(k).or_insert((0.0, 0));
+                b.0 += r.node_bytes_per_ray;
+                b.1 += 1;
+            }
+        }
+        raw.insert(h.device.clone(), h.device_fp16_ratio);
+    }
+    if acc.is_empty() {
+        return String::new();
+    }
+    let mut md = String::from("## Storage vs arithmetic: f16h math modes ÷ f32 (Mrays/s)\n\nf16 = the seed (fp16 box tests and origin moves); f32 = the same fp16 nodes widened on load, fp32 arithmetic; mixed = fp16 differences and products, fp32 min/max/compare. Above 1: faster than f32. Node bytes per ray = nodes visited × node bytes. Raw fp16:fp32 = the device's own arithmetic ratio (`halftrace devices --bench`).\n\n| device | B | P | f16 ÷ f32 | f32 ÷ f32 | mixed ÷ f32 | node bytes/ray f32 | f16h/f16 | f16h/f32 | raw fp16:fp32 |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for ((d, b, p), m) in &acc {
+        let get = |k: &str| m.get(k).map(|(s, n)| fmt(s / *n as f64)).unwrap_or_else(|| "–".into());
+        let by = |k: &str| bytes.get(&(d.clone(), *b, *p, k.to_string())).map(|(s, n)| format!("{:.0}", s / *n as f64)).unwrap_or_else(|| "–".into());
+        md += &format!("| {d} | {b} | {p} | {} | {} | {} | {} | {} | {} | {} |\n", get("f16"), get("f32"), get("mixed"), by("f32"), by("f16h/f16"), by("f16h/f32"), fmt(raw[d]));
+    }
+    md + "\n"
 }
 
 /// Mean of the ratios of each series point: (device, key) → (time, nodes, box, tri, bytes).
@@ -193,6 +233,7 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
         md += &format!("| {d} | {p} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
     }
     md += "\n![ratio vs B](ratio_vs_b.png) ![ratio vs P](ratio_vs_p.png)\n\n";
+    md += &separated_effects(rows);
     let rq: Vec<&Row> = rows.iter().filter(|r| r.layout == "rq" && r.status == "ok").collect();
     if !rq.is_empty() {
         md += "## Against the driver's ray queries (`rq`) on the same device\n\nMrays/s of each variant ÷ Mrays/s of `rq` for the same scene and rays (above 1: faster than the driver). `rq` builds its acceleration structure in the driver (prefer fast trace); its size and build time are in its row.\n\n| device | scene | rays | kernel | Mrays/s | ÷ rq |\n|---|---|---|---|---:|---:|\n";

@@ -8,7 +8,7 @@ use crate::gpu::{self, traversal};
 use crate::pipeline::{make_rays, Encoded, RayKind, RayParams};
 use crate::report::{self, Row};
 use crate::trace::{packet, Hit};
-use crate::variant::{stack_entries, Variant, PACKETS};
+use crate::variant::{stack_entries, Math, Variant, PACKETS};
 use anyhow::Context;
 use serde::Deserialize;
 use std::collections::HashMap;
@@ -28,6 +28,8 @@ pub struct Config {
     pub branchings: Vec<usize>,
     /// Packet sizes swept at B = `packet_branching`.
     pub packets: Vec<usize>,
+    /// f16h math modes: f16 (the seed), f32 (fp16 nodes, fp32 tests), mixed.
+    pub maths: Vec<String>,
     pub packet_branching: usize,
     pub width: u32,
     pub height: u32,
@@ -49,6 +51,7 @@ impl Default for Config {
             layouts: vec!["f32".into(), "f16h".into(), "rq".into()],
             branchings: bvh::BRANCHINGS.to_vec(),
             packets: PACKETS.to_vec(),
+            maths: vec!["f16".into(), "f32".into()],
             packet_branching: 4,
             width: 256,
             height: 256,
@@ -84,6 +87,9 @@ impl Config {
         for &p in &self.packets {
             anyhow::ensure!(PACKETS.contains(&p), "packets: {p} is not one of 1, 4, 8, 16, 32, 64");
         }
+        for m in &self.maths {
+            m.parse::<Math>().map_err(anyhow::Error::msg).context("maths")?;
+        }
         anyhow::ensure!(self.repeat >= 1, "repeat must be at least 1");
         anyhow::ensure!(self.width > 0 && self.height > 0, "width and height must be positive");
         Ok(())
@@ -94,11 +100,14 @@ impl Config {
         let mut v = Vec::new();
         for l in self.layouts.iter().filter(|l| *l != "rq") {
             let layout: Layout = l.parse().unwrap();
-            for &b in &self.branchings {
-                v.push(Variant::new(layout, b, 1));
-            }
-            for &p in &self.packets {
-                v.push(Variant::new(layout, self.packet_branching, p));
+            let maths: Vec<Math> = if layout == Layout::F16h { self.maths.iter().map(|m| m.parse().unwrap()).collect() } else { vec![Math::F32] };
+            for math in maths {
+                for &b in &self.branchings {
+                    v.push(Variant::new(layout, b, 1).with_math(math));
+                }
+                for &p in &self.packets {
+                    v.push(Variant::new(layout, self.packet_branching, p).with_math(math));
+                }
             }
         }
         v.sort();
@@ -131,6 +140,8 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
     let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), ..Default::default() };
     let g = gpu::Gpu::new(&opts)?;
     let mut writer = report::Writer::create(out)?;
+    let dev_bench = gpu::bench::run(&g, 16384, 256, 3)?;
+    std::fs::write(out.join("device_bench.json"), serde_json::to_string_pretty(&dev_bench)?)?;
     let variants = cfg.variants();
     let kinds: Vec<RayKind> = cfg.rays.iter().map(|r| r.parse().unwrap()).collect();
     let with_rq = cfg.layouts.iter().any(|l| l == "rq");
@@ -181,7 +192,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                 let (timed, counting) = (&kernels[&(*v, false)], &kernels[&(*v, true)]);
                 let name = timed.name();
                 // Correctness before speed.
-                let (cpu_hits, cpu_counters) = enc.trace_packets(&rays, v.packet);
+                let (cpu_hits, cpu_counters) = enc.trace_variant(&rays, v.packet, v.math);
                 let out = traversal::run(&g, gb, timed, &rays, cfg.warmup, cfg.repeat).with_context(|| name.clone())?;
                 let stats_run = traversal::run(&g, gb, counting, &rays, 0, 1).with_context(|| counting.name())?;
                 let counters = stats_run.counters.unwrap();
@@ -220,6 +231,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                     rays: kind.to_string(),
                     ray_count: rays.len(),
                     layout: v.layout.to_string(),
+                    math: v.math.name().into(),
                     branching: v.branching,
                     packet: v.packet,
                     kernel: name.clone(),
@@ -253,8 +265,9 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                     differs_from_f32: differ,
                     false_misses: false_miss,
                     max_abs_dt: max_dt,
+                    device_fp16_ratio: dev_bench.fp16_ratio,
                 })?;
-                if si == 0 && *kind == RayKind::Primary && v.branching == 4 && v.packet == 1 {
+                if si == 0 && *kind == RayKind::Primary && v.branching == 4 && v.packet == 1 && v.math != Math::Mixed && (v.layout == Layout::F32 || v.math == Math::F16) {
                     images.insert(v.layout, (out.hits.clone(), counters.iter().map(|c| c.nodes as f64).collect()));
                 }
                 bar.inc(1);
@@ -267,6 +280,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                     rays: kind.to_string(),
                     ray_count: rays.len(),
                     layout: "rq".into(),
+                    math: "n/a".into(),
                     branching: 0,
                     packet: 0,
                     kernel: gpu::rq::KERNEL.into(),
@@ -297,6 +311,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                     differs_from_f32: 0,
                     false_misses: 0,
                     max_abs_dt: 0.0,
+                    device_fp16_ratio: dev_bench.fp16_ratio,
                 };
                 let row = match (&rq_pipe, &rq_scene) {
                     (Some(pipe), Some(rs)) => {

@@ -3,6 +3,7 @@
 
 use crate::bvh::BRANCHINGS;
 use crate::encode::Layout;
+pub use crate::trace::f16h::Math;
 
 /// One traversal kernel configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -11,6 +12,8 @@ pub struct Variant {
     pub branching: usize,
     /// Rays per packet (1 = single-ray traversal).
     pub packet: usize,
+    /// f16h arithmetic (the f32 layout always has `Math::F32`).
+    pub math: Math,
 }
 
 pub use crate::trace::packet::PACKETS;
@@ -51,17 +54,29 @@ pub fn stack_entries(b: usize) -> usize {
 }
 
 impl Variant {
+    /// A variant in its layout's default math (f16h: the seed's fp16 math).
     pub fn new(layout: Layout, branching: usize, packet: usize) -> Variant {
-        Variant { layout, branching, packet }
+        let math = if layout == Layout::F32 { Math::F32 } else { Math::F16 };
+        Variant { layout, branching, packet, math }
     }
 
-    /// The kernel's name: `trav_{layout}_b{B}_p{P}`, then `_subgroup` for the subgroup packet
-    /// implementation and `_stats` for the counting kernel. Packets of P > 1 without a suffix
-    /// use shared memory (portable to any subgroup size).
+    /// The same variant with another f16h math mode (no effect on f32).
+    pub fn with_math(mut self, math: Math) -> Variant {
+        if self.layout == Layout::F16h {
+            self.math = math;
+        }
+        self
+    }
+
+    /// The kernel's name: `trav_{layout}[_{math}]_b{B}_p{P}` (math m16, m32 or mix for f16h),
+    /// then `_subgroup` for the subgroup packet implementation and `_stats` for the counting
+    /// kernel. Packets of P > 1 without a suffix use shared memory (portable to any subgroup
+    /// size).
     pub fn kernel_name(&self, imp: PacketImpl, stats: bool) -> String {
         format!(
-            "trav_{}_b{}_p{}{}{}",
+            "trav_{}{}_b{}_p{}{}{}",
             self.layout.name(),
+            if self.layout == Layout::F16h { format!("_{}", self.math.tag()) } else { String::new() },
             self.branching,
             self.packet,
             if imp == PacketImpl::Subgroup { "_subgroup" } else { "" },
@@ -91,16 +106,19 @@ impl Variant {
         }
     }
 
-    /// The default matrix (the seed's two series): every layout with B ∈ {2, 4, 8, 16} at
-    /// P = 1, and P ∈ {4, 8, 16, 32, 64} at B = 4.
+    /// The default matrix (the seed's two series): every layout (f16h in every math mode) with
+    /// B ∈ {2, 4, 8, 16} at P = 1, and P ∈ {4, 8, 16, 32, 64} at B = 4.
     pub fn matrix() -> Vec<Variant> {
         let mut v = Vec::new();
         for layout in Layout::ALL {
-            for b in BRANCHINGS {
-                v.push(Variant::new(layout, b, 1));
-            }
-            for p in PACKETS.into_iter().filter(|&p| p > 1) {
-                v.push(Variant::new(layout, 4, p));
+            let maths: &[Math] = if layout == Layout::F16h { &Math::ALL } else { &[Math::F32] };
+            for &math in maths {
+                for b in BRANCHINGS {
+                    v.push(Variant::new(layout, b, 1).with_math(math));
+                }
+                for p in PACKETS.into_iter().filter(|&p| p > 1) {
+                    v.push(Variant::new(layout, 4, p).with_math(math));
+                }
             }
         }
         v
@@ -126,6 +144,13 @@ impl Variant {
         ];
         if imp == PacketImpl::Subgroup {
             d.push(("PACKET_SUBGROUP".into(), "1".into()));
+        }
+        if self.layout == Layout::F16h {
+            match self.math {
+                Math::F32 => d.push(("MATH_F32".into(), "1".into())),
+                Math::Mixed => d.push(("MATH_MIXED".into(), "1".into())),
+                Math::F16 => {}
+            }
         }
         if stats {
             d.push(("STATS".into(), "1".into()));

@@ -12,7 +12,7 @@ use halftrace::gpu::pipeline::ComputePipeline;
 use halftrace::gpu::{shader, traversal, ContextOptions, Gpu, GpuError};
 use halftrace::pipeline::Encoded;
 use halftrace::rays::Ray;
-use halftrace::variant::{PacketImpl, Variant};
+use halftrace::variant::{Math, PacketImpl, Variant};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -40,13 +40,17 @@ fn every_variant_equals_the_cpu_reference_on_every_scene() {
         let sets = ray_sets(&p, 40, 1000);
         for layout in Layout::ALL {
             for b in BRANCHINGS {
-                let v = Variant::new(layout, b, 1);
-                let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
-                let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+              let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
+              let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+              let maths: &[Math] = if layout == Layout::F16h { &Math::ALL } else { &[Math::F32] };
+              for &math in maths {
+                let v = Variant::new(layout, b, 1).with_math(math);
                 let timed = traversal::pipeline(&g, &v, PacketImpl::Single, false, None).unwrap();
                 let stats = traversal::pipeline(&g, &v, PacketImpl::Single, true, None).unwrap();
                 for (kind, rays) in &sets {
-                    let (hits, counters) = enc.trace(rays);
+                    let (hits, counters) = enc.trace_variant(rays, 1, math);
+                    let f32_hits = if layout == Layout::F32 { hits.clone() } else { Encoded::new(&p.scene, &p.bin, Layout::F32, b).unwrap().trace(rays).0 };
+                    assert_same_hits(&format!("{} {v} {kind}: CPU reference vs f32", p.scene.name), rays, &f32_hits, &hits);
                     let what = format!("{} {v} {kind}", p.scene.name);
                     let a = traversal::run(&g, &gb, &timed, rays, 0, 1).unwrap();
                     assert_same_hits(&format!("{what} (timed kernel) vs CPU"), rays, &hits, &a.hits);
@@ -58,6 +62,7 @@ fn every_variant_equals_the_cpu_reference_on_every_scene() {
                     }
                     checked += rays.len();
                 }
+              }
             }
         }
     }
@@ -202,7 +207,7 @@ fn cli(args: &[&str]) -> (bool, String, String) {
 fn raw_spirv_modules_are_checked_then_validated_and_timed() {
     let scene = scenes_dir().join("teapot.obj");
     let sc = scene.to_str().unwrap();
-    let repo_spv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv/trav_f16h_b4_p1.spv");
+    let repo_spv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv/trav_f16h_m16_b4_p1.spv");
     // A correct module (the built-in one, from spirv/) runs through validation and timing.
     let (ok, out, err) = cli(&["trace", "--scene", sc, "--layout", "f16h", "--branching", "4", "--width", "32", "--height", "32", "--repeat", "2", "--spirv", repo_spv.to_str().unwrap()]);
     assert!(ok, "{err}");
@@ -210,7 +215,7 @@ fn raw_spirv_modules_are_checked_then_validated_and_timed() {
     // A module for the other layout gives wrong hits: caught by validation, naming the variant.
     let other = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv/trav_f32_b4_p1.spv");
     let (ok, _, err) = cli(&["trace", "--scene", sc, "--layout", "f16h", "--branching", "4", "--width", "32", "--height", "32", "--spirv", other.to_str().unwrap()]);
-    assert!(!ok && err.contains("trav_f16h_b4_p1 (custom SPIR-V)") && err.contains("differ from the CPU reference"), "{err}");
+    assert!(!ok && err.contains("trav_f16h_m16_b4_p1 (custom SPIR-V)") && err.contains("differ from the CPU reference"), "{err}");
 
     let garbage = tmp("garbage.spv");
     std::fs::write(&garbage, b"definitely not spir-v!!!").unwrap();
@@ -271,7 +276,8 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             assert!(on_disk == bytemuck::cast_slice::<u32, u8>(&fresh), "{} is stale against glsl/; run `halftrace shaders --emit spirv/`", p.display());
             let val = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&p).output().expect("spirv-val (package spirv-tools) is required");
             assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
-            if v.layout == Layout::F16h {
+            // The fp16 math modes must really compute in float16_t (m32 widens on purpose).
+            if v.layout == Layout::F16h && v.math != Math::F32 {
                 let ins = instructions(&fresh);
                 assert!(ins.iter().any(|(op, o)| *op == 17 && o[0] == 9), "{name}: no Float16 capability");
                 let mut f16: Vec<u32> = ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
@@ -300,13 +306,17 @@ fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
     for layout in Layout::ALL {
         for b in BRANCHINGS {
             for p in PACKETS.into_iter().filter(|&p| p > 1) {
-                let v = Variant::new(layout, b, p);
-                let mut imps = vec![halftrace::variant::PacketImpl::Shared];
-                if p <= g.info.subgroup_size as usize {
-                    imps.push(halftrace::variant::PacketImpl::Subgroup);
-                }
-                for imp in imps {
-                    kernels.push((traversal::pipeline(&g, &v, imp, false, None).unwrap(), traversal::pipeline(&g, &v, imp, true, None).unwrap()));
+                let maths: &[Math] = if layout == Layout::F16h { &Math::ALL } else { &[Math::F32] };
+                for &math in maths {
+                    let v = Variant::new(layout, b, p).with_math(math);
+                    let mut imps = vec![halftrace::variant::PacketImpl::Shared];
+                    // every P on the portable kernel; the subgroup kernel where it fits (seed's math)
+                    if p <= g.info.subgroup_size as usize && math != Math::Mixed {
+                        imps.push(halftrace::variant::PacketImpl::Subgroup);
+                    }
+                    for imp in imps {
+                        kernels.push((traversal::pipeline(&g, &v, imp, false, None).unwrap(), traversal::pipeline(&g, &v, imp, true, None).unwrap()));
+                    }
                 }
             }
         }
@@ -314,7 +324,7 @@ fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
     let mut checked = 0usize;
     for path in all_scenes() {
         let p = prepare(&path);
-        let sets = ray_sets(&p, 16, 200);
+        let sets = ray_sets(&p, 12, 120);
         for layout in Layout::ALL {
             for b in BRANCHINGS {
                 let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
@@ -324,7 +334,7 @@ fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
                     let pk = timed.variant.packet;
                     for ((kind, rays), want) in sets.iter().zip(&single) {
                         let what = format!("{} {} {kind}", p.scene.name, timed.name());
-                        let (cpu_hits, cpu_counters) = enc.trace_packets(rays, pk);
+                        let (cpu_hits, cpu_counters) = enc.trace_variant(rays, pk, timed.variant.math);
                         assert_same_hits(&format!("{what}: CPU packet reference vs single-ray"), rays, want, &cpu_hits);
                         let a = traversal::run(&g, &gb, timed, rays, 0, 1).unwrap();
                         assert_same_hits(&format!("{what} vs single-ray"), rays, want, &a.hits);

@@ -26,10 +26,11 @@ fn f32_traversal_equals_brute_force() {
 }
 
 #[test]
-fn f16h_equals_f32_on_every_scene_b_and_ray_kind() {
+fn f16h_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
+    use halftrace::trace::f16h::Math;
     let mut total = 0usize;
-    let mut reanchors = 0u64;
-    let mut boxes = [0u64; 2];
+    let mut reanchors = [0u64; 3];
+    let mut boxes = [0u64; 4];
     for path in all_scenes() {
         let p = prepare(&path);
         let sets = ray_sets(&p, 48, 1500);
@@ -38,16 +39,25 @@ fn f16h_equals_f32_on_every_scene_b_and_ray_kind() {
             let h = Encoded::new(&p.scene, &p.bin, Layout::F16h, b).unwrap();
             for (kind, rays) in &sets {
                 let (hf, cf) = f.trace(rays);
-                let (hh, ch) = h.trace(rays);
-                assert_same_hits(&format!("{} f16h B={b} {kind} vs f32", p.scene.name), rays, &hf, &hh);
-                total += rays.len();
-                reanchors += ch.iter().map(|c| c.reanchors as u64).sum::<u64>();
                 boxes[0] += cf.iter().map(|c| c.box_tests as u64).sum::<u64>();
-                boxes[1] += ch.iter().map(|c| c.box_tests as u64).sum::<u64>();
+                for (m, math) in Math::ALL.into_iter().enumerate() {
+                    let (hh, ch) = h.trace_variant(rays, 1, math);
+                    assert_same_hits(&format!("{} f16h/{} B={b} {kind} vs f32", p.scene.name, math.tag()), rays, &hf, &hh);
+                    reanchors[m] += ch.iter().map(|c| c.reanchors as u64).sum::<u64>();
+                    boxes[m + 1] += ch.iter().map(|c| c.box_tests as u64).sum::<u64>();
+                }
+                total += rays.len();
             }
         }
     }
-    eprintln!("f16h == f32 on {total} rays; f16h/f32 box tests {:.3}; re-anchors per ray {:.3}", boxes[1] as f64 / boxes[0] as f64, reanchors as f64 / total as f64);
+    for (m, math) in Math::ALL.into_iter().enumerate() {
+        eprintln!(
+            "f16h/{} == f32 on {total} rays; box tests vs f32 {:.3}; re-anchors per ray {:.3}",
+            math.tag(),
+            boxes[m + 1] as f64 / boxes[0] as f64,
+            reanchors[m] as f64 / total as f64
+        );
+    }
 }
 
 #[test]

@@ -26,18 +26,22 @@ fn sweep(out: &Path, extra: &[&str]) -> std::process::Output {
 #[test]
 fn small_sweep_writes_consistent_outputs() {
     let out = tmp("small");
-    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h,rq", "--branchings", "2,8", "--packets", "1,4,16"]);
+    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h,rq", "--maths", "f16,f32,mixed", "--branchings", "2,8", "--packets", "1,4,16"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for f in ["results.csv", "results.json", "report.md", "ratio_vs_b.png", "ratio_vs_b.svg", "ratio_vs_p.png", "ratio_vs_p.svg", "mrays.png", "mrays.svg", "memory.png", "memory.svg", "render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"] {
+    for f in ["results.csv", "results.json", "device_bench.json", "report.md", "ratio_vs_b.png", "ratio_vs_b.svg", "ratio_vs_p.png", "ratio_vs_p.svg", "mrays.png", "mrays.svg", "memory.png", "memory.svg", "render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"] {
         let p = out.join(f);
         assert!(p.is_file() && std::fs::metadata(&p).unwrap().len() > 0, "{} missing or empty", p.display());
         if f.ends_with(".png") {
             image::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         }
     }
-    // variants: 2 layouts × ({2, 8} at P=1 ∪ {1, 4, 16} at B=4) = 2 × 5, plus rq, × 2 ray kinds
+    // variants: ({2, 8} at P=1 ∪ {1, 4, 16} at B=4) = 5, for f32 and for f16h in 3 math
+    // modes, plus rq: 21, × 2 ray kinds
     let rows = read_rows(&out).unwrap();
-    assert_eq!(rows.len(), 22);
+    assert_eq!(rows.len(), 42);
+    let bench: halftrace::gpu::bench::DeviceBench = serde_json::from_str(&std::fs::read_to_string(out.join("device_bench.json")).unwrap()).unwrap();
+    assert_eq!(bench.ops.len(), 5);
+    assert!(bench.fp16_ratio > 0.0 && rows.iter().all(|r| r.device_fp16_ratio == bench.fp16_ratio));
     let json: Vec<Row> = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     assert_eq!(json, rows, "results.json and results.csv disagree");
     // no empty field, one row per variant
@@ -48,6 +52,7 @@ fn small_sweep_writes_consistent_outputs() {
         assert!(rec.iter().all(|f| !f.is_empty()), "empty field in {rec:?}");
     }
     let mut keys: Vec<_> = rows.iter().map(|r| (r.rays.clone(), r.kernel.clone())).collect();
+    assert!(rows.iter().any(|r| r.kernel == "trav_f16h_m32_b8_p1") && rows.iter().any(|r| r.kernel.starts_with("trav_f16h_mix_b4_p16")));
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), rows.len(), "duplicate variant rows");
@@ -69,10 +74,25 @@ fn small_sweep_writes_consistent_outputs() {
         assert_eq!(r.bytes_per_node as usize, if r.layout == "f32" { 28 } else { 16 } * r.branching);
         assert!(!r.commit.is_empty() && r.device.contains("llvmpipe") || !r.device.is_empty());
     }
-    // The headline table is computed from the rows it shows.
+    // The headline table is computed from the rows it shows (f16h in the seed's fp16 math).
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("Storage vs arithmetic"), "separated-effects table missing");
+    for b in [2usize, 8] {
+        for (math, col) in [("f16", 0usize), ("f32", 1), ("mixed", 2)] {
+            let xs: Vec<f64> = ["primary", "ao"].iter().map(|k| {
+                let h = rows.iter().find(|r| r.layout == "f16h" && r.math == math && r.rays == *k && r.branching == b && r.packet == 1).unwrap();
+                let f = rows.iter().find(|r| r.layout == "f32" && r.rays == *k && r.branching == b && r.packet == 1).unwrap();
+                h.mrays_median / f.mrays_median
+            }).collect();
+            let mean = (xs[0] + xs[1]) / 2.0;
+            let line = md.lines().find(|l| l.starts_with("| llvmpipe") && l.contains(&format!(" | {b} | 1 | "))).expect("separated-effects row");
+            let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+            assert_eq!(cells[4 + col], format!("{mean:.3}"), "B={b} {math}: {line}");
+        }
+    }
     let rat = ratios(&rows);
     assert_eq!(rat.len(), 10);
+    assert!(rat.iter().all(|x| rows.iter().any(|r| r.layout == "f16h" && r.math == "f16" && r.branching == x.branching && r.packet == x.packet)));
     for b in [2usize, 4, 8] {
         let xs: Vec<f64> = rat.iter().filter(|x| x.packet == 1 && x.branching == b).map(|x| x.time).collect();
         assert_eq!(xs.len(), 2, "B={b}: one ratio per ray kind");
@@ -80,7 +100,7 @@ fn small_sweep_writes_consistent_outputs() {
         let line = md.lines().find(|l| l.contains(&format!("| {b} | {mean:.3} |"))).unwrap_or_else(|| panic!("report.md has no B={b} row with time ratio {mean:.3}"));
         for x in rat.iter().filter(|x| x.packet == 1 && x.branching == b) {
             let f = rows.iter().find(|r| r.layout == "f32" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
-            let h = rows.iter().find(|r| r.layout == "f16h" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
+            let h = rows.iter().find(|r| r.layout == "f16h" && r.math == "f16" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
             assert_eq!(x.time, h.ms_median / f.ms_median);
         }
         let _ = line;
@@ -129,7 +149,7 @@ fn report_merges_folders() {
     let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", a.to_str().unwrap(), b.to_str().unwrap(), "--out", merged.to_str().unwrap()]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(merged.join("report.md")).unwrap();
-    assert!(md.contains("Rendered from 6 result row(s)"), "{md}");
+    assert!(md.contains("Rendered from 8 result row(s)"), "{md}");
     assert!(md.contains("÷ rq"), "the rq comparison table is missing");
     assert!(md.contains("| primary (") && md.contains("| ao ("));
     assert!(merged.join("ratio_vs_b.svg").is_file());

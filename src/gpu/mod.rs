@@ -3,6 +3,7 @@
 //! (GLSL → SPIR-V, interface checks), [`pipeline`], [`timer`] (timestamp queries), and
 //! [`traversal`] (uploading a BVH and dispatching a traversal variant).
 
+pub mod bench;
 pub mod buffer;
 pub mod context;
 pub mod pipeline;

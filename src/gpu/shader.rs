@@ -17,6 +17,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("trav_f32_packet.comp", include_str!("../../glsl/trav_f32_packet.comp")),
     ("trav_f16h_packet.comp", include_str!("../../glsl/trav_f16h_packet.comp")),
     ("trav_rq.comp", include_str!("../../glsl/trav_rq.comp")),
+    ("bench.comp", include_str!("../../glsl/bench.comp")),
 ];
 
 fn source(name: &str) -> Option<&'static str> {

@@ -62,12 +62,56 @@ const TWO_M22: f32 = 1.0 / 4_194_304.0;
 const TWO_M23: f32 = 1.0 / 8_388_608.0;
 const TWO_M24: f32 = 1.0 / 16_777_216.0;
 
-/// One stack entry (see the module docs).
+/// Arithmetic of the f16h box tests and origin moves (the nodes are fp16 in every mode).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Math {
+    /// The seed: box tests and origin moves in fp16.
+    F16,
+    /// fp16 nodes widened to fp32 on load; box tests and origin moves in fp32.
+    F32,
+    /// fp16 differences and products; fp32 min/max, widening and comparisons; fp16 origin moves.
+    Mixed,
+}
+
+impl Math {
+    pub const ALL: [Math; 3] = [Math::F16, Math::F32, Math::Mixed];
+    /// Name in flags and configs: f16, f32, mixed.
+    pub fn name(self) -> &'static str {
+        match self {
+            Math::F16 => "f16",
+            Math::F32 => "f32",
+            Math::Mixed => "mixed",
+        }
+    }
+    /// Tag in kernel names: m16, m32, mix.
+    pub fn tag(self) -> &'static str {
+        match self {
+            Math::F16 => "m16",
+            Math::F32 => "m32",
+            Math::Mixed => "mix",
+        }
+    }
+}
+
+impl std::str::FromStr for Math {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Math, String> {
+        match s {
+            "f16" | "m16" => Ok(Math::F16),
+            "f32" | "m32" => Ok(Math::F32),
+            "mixed" | "mix" => Ok(Math::Mixed),
+            o => Err(format!("unknown math mode '{o}' (use f16, f32 or mixed)")),
+        }
+    }
+}
+
+/// One stack entry (see the module docs). The origin is held in fp32; in the fp16 modes its
+/// values are fp16 numbers (exactly representable).
 #[derive(Clone, Copy, Debug)]
 pub struct Entry {
     pub node: u32,
     pub frame: Frame,
-    pub o: [f16; 3],
+    pub o: [f32; 3],
     pub e: f32,
     pub tp: f32,
     pub tlo: f32,
@@ -81,6 +125,8 @@ pub struct Ray16 {
     pub m: f32,
     pub d: [f16; 3],
     pub idir: [f16; 3],
+    /// 1 / d16 in fp32 (the fp32 math mode's reciprocal).
+    pub idir32: [f32; 3],
 }
 
 /// Direction components (after normalising the largest to ±1) below this are treated as 0.
@@ -91,21 +137,23 @@ impl Ray16 {
         let m = r.d.abs().max_element();
         let mut d = [f16::ZERO; 3];
         let mut idir = [f16::ZERO; 3];
+        let mut idir32 = [0f32; 3];
         for a in 0..3 {
             let x = r.d[a] / m;
             d[a] = if x.abs() < D_FLUSH { f16::ZERO } else { f16::from_f32(x) };
             // fp16 division (correctly rounded), not an f32 round trip a compiler may fold.
             idir[a] = if d[a] == f16::ZERO { f16::INFINITY } else { f16::ONE / d[a] };
+            idir32[a] = if d[a] == f16::ZERO { f32::INFINITY } else { 1.0 / d[a].to_f32() };
         }
-        Ray16 { m, d, idir }
+        Ray16 { m, d, idir, idir32 }
     }
 }
 
 /// Places the origin at world parameter `t` in frame `f`, computed in fp32 and rounded to
 /// fp16, clamped to ±OCAP; returns it with its error bound (fp32 rounding of the point and the
 /// frame map, the clamp distance, the fp16 rounding).
-pub fn anchor(r: &RayPre, f: &Frame, t: f32) -> ([f16; 3], f32) {
-    let mut o = [f16::ZERO; 3];
+pub fn anchor(r: &RayPre, f: &Frame, t: f32, math: Math) -> ([f32; 3], f32) {
+    let mut o = [0f32; 3];
     let mut mag = 0f32;
     let mut clampd = 0f32;
     let mut lmax = 0f32;
@@ -117,7 +165,8 @@ pub fn anchor(r: &RayPre, f: &Frame, t: f32) -> ([f16; 3], f32) {
         let lc = l.clamp(-OCAP, OCAP);
         clampd = clampd.max((l - lc).abs());
         lmax = lmax.max(lc.abs());
-        o[a] = f16::from_f32(lc);
+        // fp32 math keeps the fp32 origin; the bound below covers the fp16 rounding anyway.
+        o[a] = if math == Math::F32 { lc } else { f16::from_f32(lc).to_f32() };
     }
     let e = (mag * f.k * TWO_M23 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
     (o, e)
@@ -154,6 +203,61 @@ pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> 
     (tn, tn_lb, tf_ub)
 }
 
+/// The box test of one child in the given math mode, as fp32 values (exact conversions of the
+/// fp16 results in the fp16 mode, so comparisons are unchanged): (tn, tn_lb, tf_ub).
+#[inline]
+pub fn slab(math: Math, o: &[f32; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f32, f32, f32) {
+    match math {
+        Math::F16 => {
+            let (a, b, c) = slab16(&o.map(f16::from_f32), r16, w, lo, hi);
+            (a.to_f32(), b.to_f32(), c.to_f32())
+        }
+        Math::Mixed | Math::F32 => {
+            let mut tn = f32::NEG_INFINITY;
+            let mut tf = f32::INFINITY;
+            let w32 = w.to_f32();
+            for a in 0..3 {
+                let (t0, t1) = if math == Math::Mixed {
+                    let o16 = f16::from_f32(o[a]);
+                    let la = (lo[a] - o16) - w;
+                    let ha = (hi[a] - o16) + w;
+                    if r16.d[a] == f16::ZERO {
+                        parallel(la <= f16::ZERO && ha >= f16::ZERO)
+                    } else {
+                        let (x, y) = ((la * r16.idir[a]).to_f32(), (ha * r16.idir[a]).to_f32());
+                        (x.min(y), x.max(y))
+                    }
+                } else {
+                    let la = (lo[a].to_f32() - o[a]) - w32;
+                    let ha = (hi[a].to_f32() - o[a]) + w32;
+                    if r16.d[a] == f16::ZERO {
+                        parallel(la <= 0.0 && ha >= 0.0)
+                    } else {
+                        let (x, y) = (la * r16.idir32[a], ha * r16.idir32[a]);
+                        (x.min(y), x.max(y))
+                    }
+                };
+                tn = tn.max(t0);
+                tf = tf.min(t1);
+            }
+            const DOWN: f32 = 1.0 - 1.0 / 256.0;
+            const UP: f32 = 1.0 + 1.0 / 256.0;
+            let tn_lb = tn * if tn > 0.0 { DOWN } else { UP };
+            let tf_ub = tf * if tf > 0.0 { UP } else { DOWN };
+            (tn, tn_lb, tf_ub)
+        }
+    }
+}
+
+#[inline]
+fn parallel(inside: bool) -> (f32, f32) {
+    if inside {
+        (f32::NEG_INFINITY, f32::INFINITY)
+    } else {
+        (f32::INFINITY, f32::NEG_INFINITY)
+    }
+}
+
 /// Rounds an fp32 value computed with a few roundings up to a safe upper bound.
 #[inline]
 fn up32(x: f32) -> f32 {
@@ -164,18 +268,28 @@ fn up32(x: f32) -> f32 {
     }
 }
 
+/// The seed's mode (fp16 math).
 pub fn trace(bvh: &F16hBvh, ray: &Ray) -> (Hit, Counters) {
-    trace_logged(bvh, ray, None)
+    trace_math(bvh, ray, Math::F16)
+}
+
+pub fn trace_math(bvh: &F16hBvh, ray: &Ray, math: Math) -> (Hit, Counters) {
+    match &bvh.nodes {
+        F16hNodes::B2(n) => trace_n(bvh, n, ray, math, None),
+        F16hNodes::B4(n) => trace_n(bvh, n, ray, math, None),
+        F16hNodes::B8(n) => trace_n(bvh, n, ray, math, None),
+        F16hNodes::B16(n) => trace_n(bvh, n, ray, math, None),
+    }
 }
 
 /// [`trace`], optionally logging every visited node as
 /// `[node, tlo, tp, e, o.x, o.y, o.z, t_closest]` (debugging the shader against this code).
 pub fn trace_logged(bvh: &F16hBvh, ray: &Ray, log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
     match &bvh.nodes {
-        F16hNodes::B2(n) => trace_n(bvh, n, ray, log),
-        F16hNodes::B4(n) => trace_n(bvh, n, ray, log),
-        F16hNodes::B8(n) => trace_n(bvh, n, ray, log),
-        F16hNodes::B16(n) => trace_n(bvh, n, ray, log),
+        F16hNodes::B2(n) => trace_n(bvh, n, ray, Math::F16, log),
+        F16hNodes::B4(n) => trace_n(bvh, n, ray, Math::F16, log),
+        F16hNodes::B8(n) => trace_n(bvh, n, ray, Math::F16, log),
+        F16hNodes::B16(n) => trace_n(bvh, n, ray, Math::F16, log),
     }
 }
 
@@ -185,12 +299,13 @@ struct Lane {
     r16: Ray16,
     best: Closest,
     c: Counters,
+    math: Math,
 }
 
 impl Lane {
-    fn new(ray: &Ray) -> Lane {
+    fn new(ray: &Ray, math: Math) -> Lane {
         let r = RayPre::new(ray);
-        Lane { r16: Ray16::new(&r), r, best: Closest::new(ray.tmax), c: Counters { box_tests: 1, ..Default::default() } }
+        Lane { r16: Ray16::new(&r), r, best: Closest::new(ray.tmax), c: Counters { box_tests: 1, ..Default::default() }, math }
     }
 
     /// The root entry, or `None` when the ray misses the scene box.
@@ -201,7 +316,7 @@ impl Lane {
             return None;
         }
         let rf = Frame { w: root.w, k: root.k };
-        let (o, e) = anchor(&self.r, &rf, near);
+        let (o, e) = anchor(&self.r, &rf, near, self.math);
         Some(Entry { node: 0, frame: rf, o, e, tp: near, tlo: near })
     }
 
@@ -233,39 +348,47 @@ fn visit(en: &Entry, lane: &Lane) -> Visit {
 
 /// The box test of one child: `Some((tn, tn_lb))` when the ray may touch it.
 #[inline]
-fn test_child(en: &Entry, lane: &Lane, v: &Visit, lo: [f16; 3], hi: [f16; 3]) -> Option<(f16, f16)> {
+fn test_child(en: &Entry, lane: &Lane, v: &Visit, lo: [f16; 3], hi: [f16; 3]) -> Option<(f32, f32)> {
+    let lower = v.lower.to_f32();
     if !v.precise {
-        return Some((v.lower, v.lower));
+        return Some((lower, lower));
     }
-    let (tn, tn_lb, tf_ub) = slab16(&en.o, &lane.r16, v.w, lo, hi);
-    (tn_lb <= tf_ub && tf_ub >= v.lower && tn_lb <= v.s_lim).then_some((tn, tn_lb))
+    let (tn, tn_lb, tf_ub) = slab(lane.math, &en.o, &lane.r16, v.w, lo, hi);
+    (tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= v.s_lim.to_f32()).then_some((tn, tn_lb))
 }
 
 /// The stack entry of a hit inner child: its frame, and the origin moved into it in fp16
 /// (or re-anchored from the fp32 world ray when the bound grows too large).
-fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi: [f16; 3], tn: f16, tn_lb: f16) -> Entry {
-    let (r, r16, mk) = (&lane.r, &lane.r16, v.mk);
+fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi: [f16; 3], tn: f32, tn_lb: f32) -> Entry {
+    let (r, r16, mk, math) = (&lane.r, &lane.r16, v.mk, lane.math);
     let cf = derive_child(&en.frame, lo, hi);
+    let lower = v.lower.to_f32();
     // Lower bound of the world parameter of anything that matters in the child.
-    let s_lo = tn_lb.max(v.lower).to_f32();
+    let s_lo = tn_lb.max(lower);
     let q = s_lo / mk;
     let tlo = ((en.tp + q) - (en.tp.abs() + q.abs()) * TWO_M21).max(en.tlo);
-    let s_e = tn.max(v.lower);
+    let se = tn.max(lower);
     if v.precise && cf.r <= 32768.0 {
-        let r16c = f16::from_f32(cf.r);
-        let mut o2 = [f16::ZERO; 3];
+        let mut o2 = [0f32; 3];
         let (mut emag, mut ecmag, mut omag) = (0f32, 0f32, 0f32);
         let mut finite = true;
         for a in 0..3 {
-            let ea = en.o[a] + s_e * r16.d[a];
-            let ec = ea - cf.c[a];
-            o2[a] = ec * r16c;
-            emag = emag.max(ea.to_f32().abs());
-            ecmag = ecmag.max(ec.to_f32().abs());
-            omag = omag.max(o2[a].to_f32().abs());
-            finite &= o2[a].is_finite();
+            let (ea, ec, oa) = if math == Math::F32 {
+                let ea = en.o[a] + se * r16.d[a].to_f32();
+                let ec = ea - cf.c[a].to_f32();
+                (ea, ec, ec * cf.r)
+            } else {
+                let s_e = f16::from_f32(se);
+                let ea = f16::from_f32(en.o[a]) + s_e * r16.d[a];
+                let ec = ea - cf.c[a];
+                (ea.to_f32(), ec.to_f32(), (ec * f16::from_f32(cf.r)).to_f32())
+            };
+            o2[a] = oa;
+            emag = emag.max(ea.abs());
+            ecmag = ecmag.max(ec.abs());
+            omag = omag.max(oa.abs());
+            finite &= oa.is_finite();
         }
-        let se = s_e.to_f32();
         let step = se / mk;
         let tp = en.tp + step;
         let wmax = cf.frame.w.iter().fold(0f32, |m, x| m.max(x.abs()));
@@ -288,7 +411,7 @@ fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi:
     }
     let (tin, tout) = slab32(r, blo, bhi, f32::NEG_INFINITY, f32::INFINITY);
     let tp = tin.min(tout).max(tlo);
-    let (o, e) = anchor(r, &cf.frame, tp);
+    let (o, e) = anchor(r, &cf.frame, tp, math);
     Entry { node: j, frame: cf.frame, o, e, tp, tlo }
 }
 
@@ -296,12 +419,12 @@ fn slot_box<N: NodeF16h>(n: &N, s: usize) -> ([f16; 3], [f16; 3]) {
     ([n.lo(0, s), n.lo(1, s), n.lo(2, s)], [n.hi(0, s), n.hi(1, s), n.hi(2, s)])
 }
 
-fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
-    let mut lane = Lane::new(ray);
+fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, math: Math, mut log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
+    let mut lane = Lane::new(ray, math);
     let Some(root) = lane.root(bvh) else { return (Hit::MISS, lane.c) };
     let mut stack: Vec<Entry> = Vec::with_capacity(64);
     stack.push(root);
-    let mut hits = [((f16::ZERO, f16::ZERO), 0usize); 16];
+    let mut hits = [((0f32, 0f32), 0usize); 16];
     let mut pending: Vec<Entry> = Vec::with_capacity(16);
     while let Some(en) = stack.pop() {
         if en.tlo > lane.best.t {
@@ -309,7 +432,7 @@ fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&
         }
         lane.c.nodes += 1;
         if let Some(l) = log.as_deref_mut() {
-            l.push([en.node as f32, en.tlo, en.tp, en.e, en.o[0].to_f32(), en.o[1].to_f32(), en.o[2].to_f32(), lane.best.t]);
+            l.push([en.node as f32, en.tlo, en.tp, en.e, en.o[0], en.o[1], en.o[2], lane.best.t]);
         }
         let n = &nodes[en.node as usize];
         let v = visit(&en, &lane);
@@ -325,7 +448,7 @@ fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&
                 nh += 1;
             }
         }
-        sort_hits(&mut hits[..nh], |t| t.0.to_f32());
+        sort_hits(&mut hits[..nh], |t| t.0);
         pending.clear();
         for &((tn, tn_lb), s) in &hits[..nh] {
             match decode_child(n.child(s)) {
@@ -345,18 +468,18 @@ fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, mut log: Option<&
 
 /// Packet traversal of up to 64 rays (see [`super::packet`] for the rule); returns each
 /// ray's hit and counters, the packet's counters in the first ray's.
-pub fn trace_packet(bvh: &F16hBvh, rays: &[Ray]) -> Vec<(Hit, Counters)> {
+pub fn trace_packet(bvh: &F16hBvh, rays: &[Ray], math: Math) -> Vec<(Hit, Counters)> {
     match &bvh.nodes {
-        F16hNodes::B2(n) => packet_n(bvh, n, rays),
-        F16hNodes::B4(n) => packet_n(bvh, n, rays),
-        F16hNodes::B8(n) => packet_n(bvh, n, rays),
-        F16hNodes::B16(n) => packet_n(bvh, n, rays),
+        F16hNodes::B2(n) => packet_n(bvh, n, rays, math),
+        F16hNodes::B4(n) => packet_n(bvh, n, rays, math),
+        F16hNodes::B8(n) => packet_n(bvh, n, rays, math),
+        F16hNodes::B16(n) => packet_n(bvh, n, rays, math),
     }
 }
 
-fn packet_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], rays: &[Ray]) -> Vec<(Hit, Counters)> {
+fn packet_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], rays: &[Ray], math: Math) -> Vec<(Hit, Counters)> {
     let p = rays.len();
-    let mut lanes: Vec<Lane> = rays.iter().map(Lane::new).collect();
+    let mut lanes: Vec<Lane> = rays.iter().map(|r| Lane::new(r, math)).collect();
     let roots: Vec<Option<Entry>> = lanes.iter().map(|l| l.root(bvh)).collect();
     let (mut pnodes, mut active_sum) = (0u32, 0u32);
     // One shared node sequence; per lane, its own entry (None: inactive for that node).
@@ -374,7 +497,7 @@ fn packet_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], rays: &[Ray]) -> Vec<(Hit, 
         let n = &nodes[ni as usize];
         let visits: Vec<Option<Visit>> = (0..p).map(|l| active[l].then(|| visit(entries[l].as_ref().unwrap(), &lanes[l]))).collect();
         // per slot: per-lane results, packet key
-        let mut slots: Vec<(f32, usize, Vec<Option<(f16, f16)>>)> = Vec::new();
+        let mut slots: Vec<(f32, usize, Vec<Option<(f32, f32)>>)> = Vec::new();
         for s in 0..N::B {
             if n.child(s) == CHILD_EMPTY {
                 break;
@@ -390,7 +513,7 @@ fn packet_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], rays: &[Ray]) -> Vec<(Hit, 
                     None
                 };
                 if let Some((tn, _)) = r {
-                    key = key.min(tn.to_f32());
+                    key = key.min(tn);
                 }
                 res.push(r);
             }

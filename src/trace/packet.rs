@@ -42,8 +42,8 @@ pub fn trace_f32(bvh: &F32Bvh, rays: &[Ray], p: usize) -> (Vec<Hit>, Vec<Counter
     trace_packets(rays, p, |r| super::f32::trace_packet(bvh, r))
 }
 
-pub fn trace_f16h(bvh: &F16hBvh, rays: &[Ray], p: usize) -> (Vec<Hit>, Vec<Counters>) {
-    trace_packets(rays, p, |r| super::f16h::trace_packet(bvh, r))
+pub fn trace_f16h(bvh: &F16hBvh, rays: &[Ray], p: usize, math: super::f16h::Math) -> (Vec<Hit>, Vec<Counters>) {
+    trace_packets(rays, p, |r| super::f16h::trace_packet(bvh, r, math))
 }
 
 /// Share of active rays per visited packet node: Σ active / (Σ packet visits · P).
