@@ -32,10 +32,8 @@ fn main() {
             let out = traversal::run(&g, &gb, &pipe, &rays, 2, 10).unwrap();
             let bad = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&cpu[i])).count();
             assert_eq!(bad, 0, "{v} {kind}: {bad} rays differ from the CPU reference");
-            let mut t = out.times_ms.clone();
-            t.sort_by(f64::total_cmp);
-            let med = t[t.len() / 2];
-            println!("{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), pipe.name(), rays.len(), med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+            let t = halftrace::report::Timing::of(&out.times_ms);
+            println!("{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), pipe.name(), rays.len(), t.median, t.min, t.max, t.mrays(rays.len()).0);
           }
         }
     }

@@ -184,6 +184,12 @@ fn load_scene(path: &PathBuf) -> anyhow::Result<scene::Scene> {
     Ok(s)
 }
 
+fn print_timing(times_ms: &[f64], warmup: usize, rays: usize) -> anyhow::Result<()> {
+    let t = halftrace::report::Timing::of(times_ms);
+    outln!("time over {} dispatches after {warmup} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.count, t.median, t.min, t.max, t.mrays(rays).0);
+    Ok(())
+}
+
 /// `trace --layout rq`: the driver's acceleration structure and ray queries.
 fn trace_rq(a: &TraceArgs) -> anyhow::Result<()> {
     let kind: RayKind = a.rays.parse()?;
@@ -204,10 +210,7 @@ fn trace_rq(a: &TraceArgs) -> anyhow::Result<()> {
     let (ref_hits, _) = f.trace(&rays);
     let agree = halftrace::trace::agreement(&out.hits, &ref_hits);
     outln!("agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)", 100.0 * agree.rate(), agree.agree, agree.total);
-    let mut t = out.times_ms.clone();
-    t.sort_by(f64::total_cmp);
-    let med = t[t.len() / 2];
-    outln!("time over {} dispatches after {} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.len(), a.warmup, med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+    print_timing(&out.times_ms, a.warmup, rays.len())?;
     if let Some(p) = &a.out {
         npy::write_hits(p, &out.hits)?;
         outln!("hits written to {}", p.display());
@@ -278,11 +281,8 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
             anyhow::bail!("{kname}{}: {} of {} rays differ from the CPU reference; first: ray {i} {:?}: gpu {:?}, cpu {:?}",
                 if a.spirv.is_some() { " (custom SPIR-V)" } else { "" }, bad.len(), rays.len(), rays[i], out.hits[i], ref_hits[i]);
         }
-        let mut t = out.times_ms.clone();
-        t.sort_by(f64::total_cmp);
-        let med = t[t.len() / 2];
         outln!("kernel {kname}: validated against the CPU reference ({} rays identical)", rays.len());
-        outln!("time over {} dispatches after {} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.len(), a.warmup, med, t[0], t[t.len() - 1], rays.len() as f64 / med / 1e3);
+        print_timing(&out.times_ms, a.warmup, rays.len())?;
         let counters = if a.stats {
             let sk = gpu::traversal::pipeline(&g, &variant, imp, true, None)?;
             let so = gpu::traversal::run(&g, &bvh_gpu, &sk, &rays, 0, 1)?;

@@ -57,6 +57,30 @@ pub struct Row {
     pub device_fp16_ratio: f64,
 }
 
+/// Median, min and max of repeated timings (ms).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Timing {
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+    pub count: usize,
+}
+
+impl Timing {
+    /// Summarises at least one timing.
+    pub fn of(times_ms: &[f64]) -> Timing {
+        let mut t = times_ms.to_vec();
+        t.sort_by(f64::total_cmp);
+        Timing { median: t[t.len() / 2], min: t[0], max: t[t.len() - 1], count: t.len() }
+    }
+
+    /// Mrays/s of `rays` at the median, the slowest and the fastest timing.
+    pub fn mrays(&self, rays: usize) -> (f64, f64, f64) {
+        let n = rays.max(1) as f64;
+        (n / self.median / 1e3, n / self.max / 1e3, n / self.min / 1e3)
+    }
+}
+
 /// Appends rows to `results.csv` and rewrites `results.json` after each one, so an
 /// interrupted sweep keeps everything finished.
 pub struct Writer {

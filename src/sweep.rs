@@ -206,10 +206,8 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                     bar.suspend(|| eprintln!("error: {} {kind} {name}: {status}", scene.name));
                     failed.push(format!("{} {kind} {name}", scene.name));
                 }
-                let mut t = out.times_ms.clone();
-                t.sort_by(f64::total_cmp);
-                let med = t[t.len() / 2];
-                let n = rays.len().max(1) as f64;
+                let t = report::Timing::of(&out.times_ms);
+                let (mr_med, mr_min, mr_max) = t.mrays(rays.len());
                 let m = crate::pipeline::mean_counters(&counters);
                 let (mut differ, mut false_miss, mut max_dt) = (0usize, 0usize, 0f64);
                 for (h, r) in out.hits.iter().zip(&ref_hits) {
@@ -240,13 +238,13 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                     version: version.clone(),
                     commit: commit.clone(),
                     status,
-                    mrays_median: n / med / 1e3,
-                    mrays_min: n / t[t.len() - 1] / 1e3,
-                    mrays_max: n / t[0] / 1e3,
-                    ms_median: med,
-                    ms_min: t[0],
-                    ms_max: t[t.len() - 1],
-                    timed_dispatches: t.len(),
+                    mrays_median: mr_med,
+                    mrays_min: mr_min,
+                    mrays_max: mr_max,
+                    ms_median: t.median,
+                    ms_min: t.min,
+                    ms_max: t.max,
+                    timed_dispatches: t.count,
                     nodes_per_ray: m[0],
                     box_tests_per_ray: m[1],
                     tri_tests_per_ray: m[2],
@@ -316,19 +314,17 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
                 let row = match (&rq_pipe, &rq_scene) {
                     (Some(pipe), Some(rs)) => {
                         let o = gpu::rq::run(&g, rs, pipe, &rays, cfg.warmup, cfg.repeat)?;
-                        let mut t = o.times_ms.clone();
-                        t.sort_by(f64::total_cmp);
-                        let med = t[t.len() / 2];
-                        let n = rays.len().max(1) as f64;
+                        let t = report::Timing::of(&o.times_ms);
+                        let (mrays_median, mrays_min, mrays_max) = t.mrays(rays.len());
                         let a = crate::trace::agreement(&o.hits, &ref_hits);
                         Row {
-                            mrays_median: n / med / 1e3,
-                            mrays_min: n / t[t.len() - 1] / 1e3,
-                            mrays_max: n / t[0] / 1e3,
-                            ms_median: med,
-                            ms_min: t[0],
-                            ms_max: t[t.len() - 1],
-                            timed_dispatches: t.len(),
+                            mrays_median,
+                            mrays_min,
+                            mrays_max,
+                            ms_median: t.median,
+                            ms_min: t.min,
+                            ms_max: t.max,
+                            timed_dispatches: t.count,
                             bvh_bytes: rs.bytes,
                             build_ms: rs.build_ms,
                             triangle_bytes: (scene.len() * 36) as u64,
