@@ -295,9 +295,10 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
     assert_eq!(n, 2 * expected.len());
 }
 
-/// Packets change the work, never the answer: for every scene, layout, B, P (both packet
-/// implementations where the device allows) and ray kind, GPU hits equal the single-ray CPU
-/// hits ray for ray, and GPU counters equal the CPU packet reference.
+/// Packets change the work, never the answer: for every scene, layout, f16h math mode, B, P
+/// (both packet implementations where the device allows) and ray kind, GPU hits equal the
+/// single-ray f32 hits ray for ray, and GPU counters equal the CPU packet reference of the
+/// same mode.
 #[test]
 fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
     use halftrace::trace::packet::PACKETS;
@@ -329,7 +330,9 @@ fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
             for b in BRANCHINGS {
                 let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
                 let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-                let single: Vec<_> = sets.iter().map(|(_, rays)| enc.trace(rays).0).collect();
+                // Every packet variant of every math mode must return exactly the f32 hits.
+                let f32_enc = Encoded::new(&p.scene, &p.bin, Layout::F32, b).unwrap();
+                let single: Vec<_> = sets.iter().map(|(_, rays)| f32_enc.trace(rays).0).collect();
                 for (timed, stats) in kernels.iter().filter(|(k, _)| k.variant.layout == layout && k.variant.branching == b) {
                     let pk = timed.variant.packet;
                     for ((kind, rays), want) in sets.iter().zip(&single) {
