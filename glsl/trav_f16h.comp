@@ -10,9 +10,6 @@
 #include "frame.glsl"
 
 #include "node.glsl"
-#ifdef DEBUG_RAY
-layout(std430, set = 0, binding = 5) writeonly buffer Dbg { float dbg[]; };
-#endif
 
 // The "extra stack": node, frame (w, k), origin in the node frame, its error bound,
 // the world parameter it stands for, and a lower bound on what can still matter.
@@ -58,13 +55,6 @@ void main() {
             float tp = st_tp[sp];
             float tlo = st_tlo[sp];
             if (tlo > best_t) continue;
-#ifdef DEBUG_RAY
-            if (i == DEBUG_RAY && cnt.x < 256u) {
-                uint q = 8u * cnt.x;
-                dbg[q] = float(ni); dbg[q + 1u] = tlo; dbg[q + 2u] = tp; dbg[q + 3u] = e;
-                dbg[q + 4u] = float(o.x); dbg[q + 5u] = float(o.y); dbg[q + 6u] = float(o.z); dbg[q + 7u] = best_t;
-            }
-#endif
             cnt.x++;
             precise float mk = m * fk;
             precise float s_max = S_BASE + e + 1.0;

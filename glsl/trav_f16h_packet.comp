@@ -11,9 +11,6 @@
 #include "packet.glsl"
 
 #include "node.glsl"
-#ifdef DEBUG_RAY
-layout(std430, set = 0, binding = 5) writeonly buffer Dbg { float dbg[]; };
-#endif
 
 // The "extra stack", per lane: node (shared), frame (w, k), origin in the node frame, its
 // error bound (-1: inactive for the node), the world parameter it stands for, and a lower

@@ -79,7 +79,6 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
     let mut itf = Interface::default();
     let mut sets = std::collections::HashMap::new();
     let mut binds = std::collections::HashMap::new();
-    let mut entry_ids = Vec::new();
     let mut last_op = 0;
     while i < words.len() {
         let wc = (words[i] >> 16) as usize;
@@ -94,7 +93,6 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
                 let bytes: Vec<u8> = ops[2..].iter().flat_map(|w| w.to_le_bytes()).collect();
                 let name = bytes.split(|&b| b == 0).next().map(|s| String::from_utf8_lossy(s).to_string()).unwrap_or_default();
                 itf.entry_points.push((ops[0], name));
-                entry_ids.push(ops[1]);
             }
             16 if ops.len() >= 5 && ops[1] == 17 => itf.local_size = Some([ops[2], ops[3], ops[4]]),
             71 if ops.len() >= 3 && ops[1] == 34 => {

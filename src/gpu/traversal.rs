@@ -158,21 +158,3 @@ pub fn run(gpu: &Gpu, bvh: &GpuBvh, kernel: &Kernel, rays: &[Ray], warmup: usize
     Ok(RunOutput { hits, counters, times_ms: times })
 }
 
-/// Runs a debugging build of a kernel whose binding 5 is a float buffer of `dbg_floats`
-/// entries, and returns it.
-pub fn run_debug(gpu: &Gpu, bvh: &GpuBvh, pipe: &ComputePipeline, rays: &[Ray], dbg_floats: usize) -> Result<Vec<f32>, GpuError> {
-    const WG_SINGLE: u32 = 64;
-    let n = rays.len();
-    let ray_buf = Buffer::upload(gpu, "rays", bytemuck::cast_slice(rays))?;
-    let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
-    let hits = Buffer::new(gpu, "hits", (n * 16) as u64, usage, MemoryLocation::GpuOnly)?;
-    let dbg = Buffer::new(gpu, "debug", (dbg_floats * 4) as u64, usage, MemoryLocation::GpuOnly)?;
-    pipe.bind(&[&bvh.nodes, &bvh.tris, &bvh.ids, &ray_buf, &hits, &dbg]);
-    let mut push = bvh.push;
-    push.ray_count = n as u32;
-    gpu.submit_and_wait(|cmd| {
-        pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(WG_SINGLE));
-        pipe.barrier(cmd);
-    })?;
-    Ok(bytemuck::pod_collect_to_vec(&dbg.download(dbg_floats * 4)?))
-}

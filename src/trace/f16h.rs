@@ -275,23 +275,13 @@ pub fn trace(bvh: &F16hBvh, ray: &Ray) -> (Hit, Counters) {
 
 pub fn trace_math(bvh: &F16hBvh, ray: &Ray, math: Math) -> (Hit, Counters) {
     match &bvh.nodes {
-        F16hNodes::B2(n) => trace_n(bvh, n, ray, math, None),
-        F16hNodes::B4(n) => trace_n(bvh, n, ray, math, None),
-        F16hNodes::B8(n) => trace_n(bvh, n, ray, math, None),
-        F16hNodes::B16(n) => trace_n(bvh, n, ray, math, None),
+        F16hNodes::B2(n) => trace_n(bvh, n, ray, math),
+        F16hNodes::B4(n) => trace_n(bvh, n, ray, math),
+        F16hNodes::B8(n) => trace_n(bvh, n, ray, math),
+        F16hNodes::B16(n) => trace_n(bvh, n, ray, math),
     }
 }
 
-/// [`trace`], optionally logging every visited node as
-/// `[node, tlo, tp, e, o.x, o.y, o.z, t_closest]` (debugging the shader against this code).
-pub fn trace_logged(bvh: &F16hBvh, ray: &Ray, log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
-    match &bvh.nodes {
-        F16hNodes::B2(n) => trace_n(bvh, n, ray, Math::F16, log),
-        F16hNodes::B4(n) => trace_n(bvh, n, ray, Math::F16, log),
-        F16hNodes::B8(n) => trace_n(bvh, n, ray, Math::F16, log),
-        F16hNodes::B16(n) => trace_n(bvh, n, ray, Math::F16, log),
-    }
-}
 
 /// Per-ray state: fp32 ray constants, fp16 ray constants, closest hit, counters.
 struct Lane {
@@ -419,7 +409,7 @@ fn slot_box<N: NodeF16h>(n: &N, s: usize) -> ([f16; 3], [f16; 3]) {
     ([n.lo(0, s), n.lo(1, s), n.lo(2, s)], [n.hi(0, s), n.hi(1, s), n.hi(2, s)])
 }
 
-fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, math: Math, mut log: Option<&mut Vec<[f32; 8]>>) -> (Hit, Counters) {
+fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, math: Math) -> (Hit, Counters) {
     let mut lane = Lane::new(ray, math);
     let Some(root) = lane.root(bvh) else { return (Hit::MISS, lane.c) };
     let mut stack: Vec<Entry> = Vec::with_capacity(64);
@@ -431,9 +421,6 @@ fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, math: Math, mut l
             continue;
         }
         lane.c.nodes += 1;
-        if let Some(l) = log.as_deref_mut() {
-            l.push([en.node as f32, en.tlo, en.tp, en.e, en.o[0], en.o[1], en.o[2], lane.best.t]);
-        }
         let n = &nodes[en.node as usize];
         let v = visit(&en, &lane);
         let mut nh = 0;
