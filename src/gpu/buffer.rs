@@ -41,15 +41,7 @@ impl<'g> Buffer<'g> {
 
     /// A device-local storage buffer filled with `data` through a staging copy.
     pub fn upload(gpu: &'g Gpu, name: &str, data: &[u8]) -> Result<Buffer<'g>, GpuError> {
-        let dst = Buffer::new(gpu, name, data.len() as u64, vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
-        if data.is_empty() {
-            return Ok(dst);
-        }
-        let mut staging = Buffer::new(gpu, &format!("{name} (staging)"), data.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
-        staging.write(data)?;
-        let n = data.len() as u64;
-        gpu.submit_and_wait(|cmd| unsafe { gpu.device.cmd_copy_buffer(cmd, staging.raw, dst.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n }]) })?;
-        Ok(dst)
+        Buffer::upload_with(gpu, name, data, vk::BufferUsageFlags::STORAGE_BUFFER)
     }
 
     /// The buffer's device address (needs SHADER_DEVICE_ADDRESS usage).
@@ -60,6 +52,9 @@ impl<'g> Buffer<'g> {
     /// A device-local buffer with `usage` (plus transfer destination) filled through a staging copy.
     pub fn upload_with(gpu: &'g Gpu, name: &str, data: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer<'g>, GpuError> {
         let dst = Buffer::new(gpu, name, data.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
+        if data.is_empty() {
+            return Ok(dst);
+        }
         let mut staging = Buffer::new(gpu, &format!("{name} (staging)"), data.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
         staging.write(data)?;
         let n = data.len() as u64;
