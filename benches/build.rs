@@ -1,10 +1,10 @@
 //! BVH build + collapse + encode throughput on the largest shared scene (igea, 268k
-//! triangles), every B and layout. Target on the 2-core CI machine: ≥ 2 M triangles/s for
+//! triangles), every B and registered layout. Target on the 2-core CI machine: ≥ 2 M triangles/s for
 //! the binary SAH build.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use halftrace::bvh::{self, BRANCHINGS};
-use halftrace::encode;
+use halftrace::layout::{Encoded, LayoutId};
 use std::path::PathBuf;
 
 fn bench(c: &mut Criterion) {
@@ -19,15 +19,12 @@ fn bench(c: &mut Criterion) {
     for b in BRANCHINGS {
         g.bench_function(format!("collapse/b{b}"), |bn| bn.iter(|| bvh::collapse(&bin, b)));
         let w = bvh::collapse(&bin, b);
-        g.bench_function(format!("encode_f32/b{b}"), |bn| bn.iter(|| encode::f32::encode(&scene, &w)));
-        g.bench_function(format!("encode_f16h/b{b}"), |bn| bn.iter(|| encode::f16h::encode(&scene, &w).unwrap()));
-        g.bench_function(format!("total_f16h/b{b}"), |bn| {
-            bn.iter(|| {
-                let bin = bvh::build_binary(&scene);
-                let w = bvh::collapse(&bin, b);
-                encode::f16h::encode(&scene, &w).unwrap()
-            })
-        });
+        for l in LayoutId::layouts() {
+            let layout = l.bvh().unwrap();
+            g.bench_function(format!("encode_{l}/b{b}"), |bn| bn.iter(|| layout.encode(&scene, &w).unwrap()));
+        }
+        let f16h = LayoutId::parse("f16h").unwrap();
+        g.bench_function(format!("total_f16h/b{b}"), |bn| bn.iter(|| Encoded::new(&scene, &bvh::build_binary(&scene), f16h, b).unwrap()));
     }
     g.finish();
 }

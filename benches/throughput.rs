@@ -1,14 +1,16 @@
 //! GPU traversal throughput on the default Vulkan device: primary and ao rays at 512x512 on
-//! a shared scene, f32 and f16h, B = 4, packet sizes 1..64. Each variant is validated against
-//! the CPU reference first, then timed with timestamp queries: 2 warm-up dispatches, 10
-//! timed; median, min, max.
+//! a shared scene, every BVH layout in its default math, B = 4, packet sizes 1..64. Each
+//! variant goes through the same validate-then-time path as the sweep: checked against the
+//! CPU reference first, then 2 warm-up and 10 timed dispatches; median, min, max.
 //!
 //! `cargo bench --bench throughput [-- SCENE.obj]`
 
-use halftrace::encode::Layout;
-use halftrace::gpu::{traversal, ContextOptions, Gpu};
-use halftrace::pipeline::{make_rays, Encoded, RayKind, RayParams};
-use halftrace::variant::Variant;
+use halftrace::gpu::kernel::{choose_impl, GpuBvh, Kernel, Source};
+use halftrace::gpu::{ContextOptions, Gpu};
+use halftrace::layout::{Encoded, LayoutId};
+use halftrace::measure::{validate_then_time, KernelTarget, Plan, Reference};
+use halftrace::rays::{make_rays, RayKind, RayParams};
+use halftrace::variant::{Variant, PACKETS};
 use std::path::PathBuf;
 
 fn main() {
@@ -22,19 +24,22 @@ fn main() {
     let params = RayParams { width: 512, height: 512, ..Default::default() };
     for kind in [RayKind::Primary, RayKind::Ao] {
         let rays = make_rays(&scene, &bin, &kind, &params).unwrap();
-        for layout in Layout::ALL {
-          let enc = Encoded::new(&scene, &bin, layout, 4).unwrap();
-          let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-          let (cpu, _) = enc.trace(&rays);
-          for p in halftrace::variant::PACKETS {
-            let v = Variant::new(layout, 4, p);
-            let pipe = traversal::pipeline(&g, &v, traversal::choose_impl(&g, &v, None), false, None).unwrap();
-            let out = traversal::run(&g, &gb, &pipe, &rays, 2, 10).unwrap();
-            let bad = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&cpu[i])).count();
-            assert_eq!(bad, 0, "{v} {kind}: {bad} rays differ from the CPU reference");
-            let t = halftrace::report::Timing::of(&out.times_ms);
-            println!("{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), pipe.name(), rays.len(), t.median, t.min, t.max, t.mrays(rays.len()).0);
-          }
+        let f32_hits = Encoded::new(&scene, &bin, LayoutId::f32(), 4).unwrap().trace_default(&rays).0;
+        for layout in LayoutId::layouts() {
+            let enc = Encoded::new(&scene, &bin, layout, 4).unwrap();
+            let gb = GpuBvh::upload(&g, &enc).unwrap();
+            for p in PACKETS {
+                let v = Variant::new(layout, 4, p);
+                let (cpu_hits, cpu_counters) = enc.trace(&rays, p, v.math);
+                let k = Kernel::build(&g, &v, choose_impl(&g, &v, None), false, &Source::Builtin).unwrap();
+                let target = KernelTarget { gpu: &g, bvh: &gb, timed: &k, counting: None };
+                let m = validate_then_time(&target, &rays, Reference::Exact { hits: &cpu_hits, counters: &cpu_counters }, &f32_hits, Plan { warmup: 2, repeat: 10, count: false }).unwrap();
+                if let Some(f) = m.failure {
+                    panic!("{f}");
+                }
+                let t = m.timing.unwrap();
+                println!("{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), k.name(), rays.len(), t.median, t.min, t.max, t.mrays(rays.len()).0);
+            }
         }
     }
 }

@@ -1,9 +1,18 @@
-// Packet reductions over the P rays of a packet (src/trace/packet.rs has the rule).
+// Packet reductions over the P rays of a packet (src/trace/traverse.rs has the rule) and the
+// one child ordering of every kernel.
+// P == 1: single-ray traversal; the reductions are the identity.
 // PACKET_SUBGROUP: a packet is a cluster of P invocations of one subgroup (P <= subgroup
-// size); otherwise a packet is a whole workgroup of P invocations, reduced through shared
-// memory with barriers. Every invocation of a packet runs every reduction (uniform control
-// flow), including lanes past the ray count, which stay inactive.
-#ifdef PACKET_SUBGROUP
+// size), reduced with clustered subgroup operations.
+// Otherwise a packet is a whole workgroup of P invocations, reduced through shared memory
+// with barriers. Every invocation of a packet runs every reduction (uniform control flow),
+// including lanes past the ray count, which stay inactive.
+#if P == 1
+uint packet_lane() { return 0u; }
+uint packet_ray_index() { return ray_index(); }
+uint packet_or(uint x) { return x; }
+uint packet_add(uint x) { return x; }
+float packet_min(float x) { return x; }
+#elif defined(PACKET_SUBGROUP)
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_clustered : require
@@ -46,8 +55,9 @@ float packet_min(float x) {
 #endif
 bool packet_any(bool b) { return packet_or(b ? 1u : 0u) != 0u; }
 
-// Orders the slots in `mask` by (key, slot) ascending into `order`; returns their count.
-int packet_order(uint mask, float key[B], out uint order[B]) {
+// Orders the slots in `mask` by (key, slot) ascending into `order`; returns their count
+// (src/trace/traverse.rs, order_children).
+int order_children(uint mask, float key[B], out uint order[B]) {
     int n = 0;
     for (uint s = 0u; s < uint(B); s++) {
         if ((mask & (1u << s)) == 0u) continue;

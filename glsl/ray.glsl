@@ -1,7 +1,6 @@
-// Shared interface of every traversal kernel: bindings, push constants, ray set-up.
-// Mirrors src/gpu/traversal.rs (PushConstants, BINDINGS) and src/trace/mod.rs (RayPre).
-#extension GL_EXT_shader_explicit_arithmetic_types_float16 : require
-#extension GL_EXT_shader_16bit_storage : require
+// Shared by every traversal kernel: float controls, workgroup size, the buffers of the
+// interface (declared from the generated interface.glsl, which must come first and enables
+// the fp16 types), the ray set-up and the hit write. Mirrors src/trace/mod.rs (RayPre).
 #extension GL_EXT_spirv_intrinsics : require
 // IEEE fp16: round-to-nearest-even after every operation, signed zeros/inf/NaN preserved.
 spirv_execution_mode(capabilities = [4467], 4462, 16);
@@ -13,30 +12,16 @@ spirv_execution_mode(capabilities = [4466], 4461, 32);
 #endif
 layout(local_size_x = WG, local_size_y = 1, local_size_z = 1) in;
 
-layout(push_constant) uniform Push {
-    uint ray_count;
-    uint node_count;
-    uint pad0;
-    uint pad1;
-    vec4 root_wk;   // f16h root frame: w.xyz, k
-    vec4 box_lo;    // root box, world space
-    vec4 box_hi;
-} pc;
-
-layout(std430, set = 0, binding = 1) readonly buffer TriVerts { float tri_v[]; };   // 9 floats per triangle, leaf order
-layout(std430, set = 0, binding = 2) readonly buffer TriIds { uint tri_id[]; };     // public prim id per triangle
-layout(std430, set = 0, binding = 3) readonly buffer Rays { float ray_f[]; };       // ox oy oz tmin dx dy dz tmax
-struct Hit { float t; int prim; float u; float v; };
-layout(std430, set = 0, binding = 4) writeonly buffer Hits { Hit hits[]; };
+layout(std430, set = 0, binding = BINDING_TRI_VERTS) readonly buffer TriVerts { float tri_v[]; };   // 9 floats per triangle, leaf order
+layout(std430, set = 0, binding = BINDING_TRI_IDS) readonly buffer TriIds { uint tri_id[]; };       // public prim id per triangle
+layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { float ray_f[]; };            // ox oy oz tmin dx dy dz tmax
+layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
 #ifdef STATS
-// per ray: [nodes, box tests, tri tests, re-anchors], [packet nodes, active rays summed, 0, 0]
-layout(std430, set = 0, binding = 5) writeonly buffer Counters { uvec4 counters[]; };
+layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer CounterBuf { Counters counters[]; };
 #endif
 
 #define INF uintBitsToFloat(0x7f800000u)
 #define FLT_MIN_NORMAL uintBitsToFloat(0x00800000u)
-const uint CHILD_EMPTY = 0xffffffffu;
-const uint LEAF_BIT = 0x80000000u;
 const int NO_PRIM = 0x7fffffff;
 
 uint ray_index() {
@@ -55,7 +40,7 @@ struct RayPre {
 
 RayPre ray_pre(uint i) {
     RayPre r;
-    uint b = 8u * i;
+    uint b = RAY_FLOATS * i;
     r.o = vec3(ray_f[b], ray_f[b + 1u], ray_f[b + 2u]);
     r.tmin = ray_f[b + 3u];
     vec3 d = vec3(ray_f[b + 4u], ray_f[b + 5u], ray_f[b + 6u]);

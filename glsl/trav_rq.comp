@@ -1,15 +1,16 @@
 #version 460
-// Layout rq: the driver's acceleration structure, traced with a ray query (closest hit,
+// Baseline rq: the driver's acceleration structure, traced with a ray query (closest hit,
 // opaque triangles, no culling). Same interface as the other kernels: binding 0 is the TLAS.
 #extension GL_EXT_ray_query : require
+#include "interface.glsl"
 #include "ray.glsl"
 
-layout(set = 0, binding = 0) uniform accelerationStructureEXT tlas;
+layout(set = 0, binding = BINDING_NODES) uniform accelerationStructureEXT tlas;
 
 void main() {
     uint i = ray_index();
     if (i >= pc.ray_count) return;
-    uint b = 8u * i;
+    uint b = RAY_FLOATS * i;
     vec3 o = vec3(ray_f[b], ray_f[b + 1u], ray_f[b + 2u]);
     vec3 d = vec3(ray_f[b + 4u], ray_f[b + 5u], ray_f[b + 6u]);
     rayQueryEXT q;

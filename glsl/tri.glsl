@@ -57,3 +57,19 @@ void closest_test(RayPre r, uint ti) {
         }
     }
 }
+
+void closest_init(float tmax) {
+    best_t = tmax; best_prim = NO_PRIM; best_u = 0.0; best_v = 0.0;
+}
+
+bool is_leaf(uint c) { return (c & LEAF_BIT) != 0u; }
+
+// Tests the triangles of leaf child word `c` (the one leaf decode of every kernel).
+void test_leaf(RayPre r, uint c, inout uint tri_tests) {
+    uint first = c & LEAF_FIRST_MASK;
+    uint count = ((c >> LEAF_COUNT_SHIFT) & LEAF_COUNT_MASK) + 1u;
+    for (uint t = first; t < first + count; t++) {
+        tri_tests++;
+        closest_test(r, t);
+    }
+}

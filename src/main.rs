@@ -3,9 +3,10 @@
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use halftrace::bvh::{self, stats::stats};
-use halftrace::encode::Layout;
-use halftrace::pipeline::{self, Encoded, RayKind, RayParams};
-use halftrace::rays::Camera;
+use halftrace::gpu::kernel::{self, GpuBvh, Kernel, Source};
+use halftrace::layout::{Encoded, LayoutId, Math};
+use halftrace::measure::{self, BaselineTarget, KernelTarget, Plan, Reference};
+use halftrace::rays::{make_rays, Camera, RayKind, RayParams};
 use halftrace::variant::{PacketImpl, Variant};
 use halftrace::{gpu, npy, scene};
 use std::io::Write;
@@ -115,7 +116,8 @@ struct TraceArgs {
     /// OBJ or .obj.gz scene.
     #[arg(long)]
     scene: PathBuf,
-    /// Node layout: f32, f16h, or rq (the driver's acceleration structure and ray queries).
+    /// Layout (f32, f16h) or baseline (rq: the driver's acceleration structure and ray
+    /// queries); `halftrace devices` lists them.
     #[arg(long, default_value = "f16h")]
     layout: String,
     /// Branching factor: 2, 4, 8 or 16.
@@ -124,9 +126,10 @@ struct TraceArgs {
     /// Rays per packet: 1, 4, 8, 16, 32 or 64.
     #[arg(long, default_value_t = 1)]
     packet: usize,
-    /// f16h arithmetic: f16 (the seed), f32 (fp16 nodes, fp32 tests), mixed.
-    #[arg(long, default_value = "f16")]
-    math: String,
+    /// Box-test arithmetic, for layouts with several modes (f16h: f16 = the seed, f32 = fp16
+    /// nodes with fp32 tests, mixed); default: the layout's first mode.
+    #[arg(long)]
+    math: Option<String>,
     /// Packet implementation: subgroup or shared (default: subgroup when P fits the device's
     /// subgroup, else shared memory).
     #[arg(long)]
@@ -168,9 +171,11 @@ struct TraceArgs {
     /// Also run the counting kernel and print work per ray.
     #[arg(long)]
     stats: bool,
-    /// Run this SPIR-V module in place of the built-in kernel (same interface).
-    #[arg(long)]
-    spirv: Option<PathBuf>,
+    /// Run this kernel in place of the built-in one of the variant: a GLSL compute file
+    /// (compiled with the built-in kernel's defines and includes) or a SPIR-V module (.spv),
+    /// checked against the variant's interface, then validated and timed like the built-in.
+    #[arg(long, alias = "spirv")]
+    kernel: Option<PathBuf>,
     /// Treat a device feature as missing (testing): shaderFloat16, storageBuffer16BitAccess.
     #[arg(long, hide = true)]
     mask_feature: Vec<String>,
@@ -184,46 +189,30 @@ fn load_scene(path: &PathBuf) -> anyhow::Result<scene::Scene> {
     Ok(s)
 }
 
-fn print_timing(times_ms: &[f64], warmup: usize, rays: usize) -> anyhow::Result<()> {
-    let t = halftrace::report::Timing::of(times_ms);
+fn print_timing(t: &measure::Timing, warmup: usize, rays: usize) -> anyhow::Result<()> {
     outln!("time over {} dispatches after {warmup} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.count, t.median, t.min, t.max, t.mrays(rays).0);
     Ok(())
 }
 
-/// `trace --layout rq`: the driver's acceleration structure and ray queries.
-fn trace_rq(a: &TraceArgs) -> anyhow::Result<()> {
-    let kind: RayKind = a.rays.parse()?;
-    let camera = a.camera.as_deref().map(Camera::parse).transpose()?;
-    anyhow::ensure!(a.backend.as_deref() != Some("cpu"), "--layout rq runs on the GPU only");
-    let scene = load_scene(&a.scene)?;
-    let bin = bvh::build_binary(&scene);
-    let params = RayParams { width: a.width, height: a.height, camera, seed: a.seed, ..Default::default() };
-    let rays = pipeline::make_rays(&scene, &bin, &kind, &params)?;
-    let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
-    let g = gpu::Gpu::new(&opts)?;
-    outln!("scene {} ({} triangles), layout rq, rays {kind}: {} rays; device {} ({})", scene.name, scene.len(), rays.len(), g.info.name, g.info.driver);
-    let rq = gpu::rq::RqScene::build(&g, &scene)?;
-    outln!("acceleration structures: {} bytes (driver size query), built in {:.2} ms", rq.bytes, rq.build_ms);
-    let pipe = gpu::rq::pipeline(&g)?;
-    let out = gpu::rq::run(&g, &rq, &pipe, &rays, a.warmup, a.repeat.max(1))?;
-    let f = Encoded::new(&scene, &bin, Layout::F32, 4)?;
-    let (ref_hits, _) = f.trace(&rays);
-    let agree = halftrace::trace::agreement(&out.hits, &ref_hits);
-    outln!("agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)", 100.0 * agree.rate(), agree.agree, agree.total);
-    print_timing(&out.times_ms, a.warmup, rays.len())?;
-    if let Some(p) = &a.out {
-        npy::write_hits(p, &out.hits)?;
-        outln!("hits written to {}", p.display());
-    }
+fn print_counters(c: &[halftrace::trace::Counters], rays: usize, packet: usize) -> anyhow::Result<()> {
+    let m = halftrace::trace::mean_counters(c);
+    outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
+    let packets = rays.div_ceil(packet).max(1);
+    let pn: u64 = c.iter().map(|x| x.packet_nodes as u64).sum();
+    outln!("per packet of {packet}: {:.2} nodes visited; SIMD utilisation {:.1}% (active rays per visited node)", pn as f64 / packets as f64, 100.0 * halftrace::trace::simd_utilisation(c, packet));
     Ok(())
 }
 
-fn trace(a: TraceArgs) -> anyhow::Result<()> {
-    if a.layout == "rq" {
-        return trace_rq(&a);
-    }
-    let layout: Layout = a.layout.parse()?;
-    bvh::check_branching(a.branching).context("--branching")?;
+/// Scene, BVH and rays of a `trace` command.
+struct Traced {
+    scene: scene::Scene,
+    bin: bvh::BinaryBvh,
+    build_ms: f64,
+    kind: RayKind,
+    rays: Vec<halftrace::rays::Ray>,
+}
+
+fn trace_inputs(a: &TraceArgs) -> anyhow::Result<Traced> {
     let kind: RayKind = a.rays.parse()?;
     let camera = a.camera.as_deref().map(Camera::parse).transpose()?;
     let scene = load_scene(&a.scene)?;
@@ -231,10 +220,55 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let bin = bvh::build_binary(&scene);
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
     let params = RayParams { width: a.width, height: a.height, camera, seed: a.seed, ..Default::default() };
-    let rays = pipeline::make_rays(&scene, &bin, &kind, &params)?;
-    let enc = Encoded::new(&scene, &bin, layout, a.branching)?;
+    let rays = make_rays(&scene, &bin, &kind, &params)?;
+    Ok(Traced { scene, bin, build_ms, kind, rays })
+}
+
+fn open_gpu(a: &TraceArgs) -> anyhow::Result<gpu::Gpu> {
+    let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
+    Ok(gpu::Gpu::new(&opts)?)
+}
+
+/// `trace --layout <baseline>`: someone else's traversal of the same triangles (rq: the
+/// driver's acceleration structure and ray queries), checked against the f32 reference.
+fn trace_baseline(a: &TraceArgs, layout: LayoutId) -> anyhow::Result<()> {
+    let b = layout.baseline().expect("a baseline");
+    anyhow::ensure!(a.backend.as_deref() != Some("cpu"), "--layout {layout} runs on the GPU only");
+    let t = trace_inputs(a)?;
+    let g = open_gpu(a)?;
+    outln!("scene {} ({} triangles), layout {layout}, rays {}: {} rays; device {} ({})", t.scene.name, t.scene.len(), t.kind, t.rays.len(), g.info.name, g.info.driver);
+    let dev = b.prepare(&g)?;
+    let bs = dev.scene(&t.scene)?;
+    outln!("acceleration structures: {} bytes, built in {:.2} ms", bs.bytes(), bs.build_ms());
+    let f32_hits = Encoded::new(&t.scene, &t.bin, LayoutId::f32(), 4)?.trace_default(&t.rays).0;
+    let plan = Plan { warmup: a.warmup, repeat: a.repeat.max(1), count: false };
+    let m = measure::validate_then_time(&BaselineTarget { name: b.kernel(), scene: bs.as_ref() }, &t.rays, Reference::Agreement, &f32_hits, plan)?;
+    let agree = m.vs_f32;
+    outln!("agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)", 100.0 * agree.rate(), agree.agree, agree.total);
+    print_timing(m.timing.as_ref().expect("baselines are always timed"), a.warmup, t.rays.len())?;
+    if let Some(p) = &a.out {
+        npy::write_hits(p, &m.hits)?;
+        outln!("hits written to {}", p.display());
+    }
+    Ok(())
+}
+
+fn trace(a: TraceArgs) -> anyhow::Result<()> {
+    let layout: LayoutId = a.layout.parse()?;
+    if layout.baseline().is_some() {
+        return trace_baseline(&a, layout);
+    }
+    bvh::check_branching(a.branching).context("--branching")?;
     anyhow::ensure!(halftrace::variant::PACKETS.contains(&a.packet), "--packet {}: use one of 1, 4, 8, 16, 32, 64", a.packet);
-    let math: halftrace::variant::Math = a.math.parse().map_err(anyhow::Error::msg).context("--math")?;
+    let maths = layout.caps().maths;
+    let math = match &a.math {
+        None => maths[0],
+        Some(m) => {
+            let math: Math = m.parse().map_err(anyhow::Error::msg).context("--math")?;
+            anyhow::ensure!(maths.contains(&math), "--math {m}: layout {layout} has {}", maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", "));
+            math
+        }
+    };
     let variant = Variant::new(layout, a.branching, a.packet).with_math(math);
     let force_impl = match a.packet_impl.as_deref() {
         None => None,
@@ -246,7 +280,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let backend = match a.backend.as_deref() {
         Some("cpu") => "cpu",
         Some("gpu") => "gpu",
-        None if a.spirv.is_some() => "gpu",
+        None if a.kernel.is_some() => "gpu",
         None => {
             if gpu::list_devices().map(|d| !d.is_empty()).unwrap_or(false) {
                 "gpu"
@@ -256,74 +290,75 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         }
         Some(other) => anyhow::bail!("--backend '{other}': use gpu or cpu"),
     };
-    outln!("scene {} ({} triangles), variant {variant}, rays {kind}: {} rays", scene.name, scene.len(), rays.len());
+    let t = trace_inputs(&a)?;
+    let enc = Encoded::new(&t.scene, &t.bin, layout, a.branching)?;
+    let rays = &t.rays;
+    outln!("scene {} ({} triangles), variant {variant}, rays {}: {} rays", t.scene.name, t.scene.len(), t.kind, rays.len());
+    let t1 = Instant::now();
+    let (ref_hits, ref_counters) = enc.trace(rays, a.packet, math);
+    let cpu_secs = t1.elapsed().as_secs_f64();
     let (hits, counters) = if backend == "cpu" {
-        let t1 = Instant::now();
-        let (hits, counters) = enc.trace_variant(&rays, a.packet, variant.math);
-        let secs = t1.elapsed().as_secs_f64();
-        outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", secs * 1e3, rays.len() as f64 / secs / 1e6, build_ms);
-        (hits, Some(counters))
+        outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", cpu_secs * 1e3, rays.len() as f64 / cpu_secs / 1e6, t.build_ms);
+        (ref_hits, Some(ref_counters))
     } else {
-        let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
-        let g = gpu::Gpu::new(&opts)?;
+        let g = open_gpu(&a)?;
         outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
-        let imp = gpu::traversal::choose_impl(&g, &variant, force_impl);
-        let wg = variant.workgroup(imp);
-        let custom = a.spirv.as_deref().map(|p| gpu::shader::load_checked(p, wg)).transpose()?;
-        let bvh_gpu = gpu::traversal::GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
-        let kernel = gpu::traversal::pipeline(&g, &variant, imp, false, custom.as_deref()).with_context(|| variant.to_string())?;
-        let kname = kernel.name();
-        let out = gpu::traversal::run(&g, &bvh_gpu, &kernel, &rays, a.warmup, a.repeat.max(1)).with_context(|| kname.clone())?;
-        // Correctness before speed: the CPU reference of the same layout and packet size.
-        let (ref_hits, ref_counters) = enc.trace_variant(&rays, a.packet, variant.math);
-        let bad: Vec<usize> = (0..rays.len()).filter(|&i| !out.hits[i].same_bits(&ref_hits[i])).collect();
-        if let Some(&i) = bad.first() {
-            anyhow::bail!("{kname}{}: {} of {} rays differ from the CPU reference; first: ray {i} {:?}: gpu {:?}, cpu {:?}",
-                if a.spirv.is_some() { " (custom SPIR-V)" } else { "" }, bad.len(), rays.len(), rays[i], out.hits[i], ref_hits[i]);
-        }
-        outln!("kernel {kname}: validated against the CPU reference ({} rays identical)", rays.len());
-        print_timing(&out.times_ms, a.warmup, rays.len())?;
-        let counters = if a.stats {
-            let sk = gpu::traversal::pipeline(&g, &variant, imp, true, None)?;
-            let so = gpu::traversal::run(&g, &bvh_gpu, &sk, &rays, 0, 1)?;
-            let c = so.counters.unwrap();
-            if let Some(i) = (0..rays.len()).find(|&i| c[i] != ref_counters[i]) {
-                anyhow::bail!("{}: ray {i}: GPU counters {:?} differ from the CPU reference {:?}", sk.name(), c[i], ref_counters[i]);
+        let imp = kernel::choose_impl(&g, &variant, force_impl);
+        let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
+        let gb = GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
+        let timed = Kernel::build(&g, &variant, imp, false, &source).with_context(|| variant.to_string())?;
+        let counting = match (&source, a.stats) {
+            (_, false) => None,
+            (Source::Builtin, true) => Some(Kernel::build(&g, &variant, imp, true, &source)?),
+            (_, true) => {
+                let k = Kernel::user_counting(&g, &variant, imp, &source)?;
+                if k.is_none() {
+                    outln!("--stats: {} writes no counters; work counters not measured", source_name(&source));
+                }
+                k
             }
-            Some(c)
-        } else {
-            None
         };
-        (out.hits, counters)
+        let f32_hits = if layout == LayoutId::f32() { ref_hits.clone() } else { Encoded::new(&t.scene, &t.bin, LayoutId::f32(), a.branching)?.trace_default(rays).0 };
+        let target = KernelTarget { gpu: &g, bvh: &gb, timed: &timed, counting: counting.as_ref() };
+        let plan = Plan { warmup: a.warmup, repeat: a.repeat.max(1), count: counting.is_some() };
+        // Correctness before speed: the CPU reference of the same layout, packet size and math.
+        let m = measure::validate_then_time(&target, rays, Reference::Exact { hits: &ref_hits, counters: &ref_counters }, &f32_hits, plan)?;
+        if let Some(f) = m.failure {
+            anyhow::bail!("{f}");
+        }
+        outln!("kernel {}: validated against the CPU reference ({} rays identical)", timed.label(), rays.len());
+        if layout != LayoutId::f32() {
+            outln!("against f32: {} rays differ, {} false misses", m.vs_f32.differs(), m.vs_f32.false_misses);
+        }
+        print_timing(m.timing.as_ref().expect("validated targets are timed"), a.warmup, rays.len())?;
+        (m.hits, m.counters)
     };
     let nhit = hits.iter().filter(|h| h.is_hit()).count();
     outln!("{nhit} hits");
     if let Some(c) = counters.filter(|_| a.stats || backend == "cpu") {
-        let m = pipeline::mean_counters(&c);
-        outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
-        let packets = rays.len().div_ceil(a.packet).max(1);
-        let pn: u64 = c.iter().map(|x| x.packet_nodes as u64).sum();
-        outln!(
-            "per packet of {}: {:.2} nodes visited; SIMD utilisation {:.1}% (active rays per visited node)",
-            a.packet,
-            pn as f64 / packets as f64,
-            100.0 * halftrace::trace::packet::simd_utilisation(&c, a.packet)
-        );
+        print_counters(&c, rays.len(), a.packet)?;
     }
     if let Some(p) = &a.out {
         npy::write_hits(p, &hits)?;
         outln!("hits written to {}", p.display());
     }
     if let Some(p) = &a.save_rays {
-        npy::write_rays(p, &rays)?;
+        npy::write_rays(p, rays)?;
         outln!("rays written to {}", p.display());
     }
     if let Some(p) = &a.image {
-        anyhow::ensure!(kind == RayKind::Primary, "--image needs --rays primary");
-        pipeline::write_image(p, &scene, &rays, &hits, a.width, a.height)?;
+        anyhow::ensure!(t.kind == RayKind::Primary, "--image needs --rays primary");
+        halftrace::images::render(p, &t.scene, rays, &hits, a.width, a.height)?;
         outln!("image written to {}", p.display());
     }
     Ok(())
+}
+
+fn source_name(s: &Source) -> String {
+    match s {
+        Source::Builtin => "the built-in kernel".into(),
+        Source::Glsl(p) | Source::Spirv(p) => p.display().to_string(),
+    }
 }
 
 fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
@@ -336,15 +371,15 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
     for b in bvh::BRANCHINGS {
         let w = bvh::collapse(&bin, b);
         let st = stats(&w);
-        for layout in Layout::ALL {
+        for layout in LayoutId::layouts() {
             let enc = Encoded::new(&scene, &bin, layout, b)?;
             outln!(
                 "{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9.2} {:>6.2}",
-                b, layout.name(), st.inner_nodes, st.leaves, enc.node_bytes(), enc.node_bytes() / enc.node_count(), st.depth, st.sah_cost, st.fill
+                b, layout.name(), st.inner_nodes, st.leaves, enc.node_bytes(), enc.node_size(), st.depth, st.sah_cost, st.fill
             );
         }
     }
-    let tb = halftrace::encode::TriBuffer::new(&scene, &bvh::collapse(&bin, 2));
+    let tb = halftrace::layout::TriBuffer::new(&scene, &bvh::collapse(&bin, 2));
     outln!("triangles (shared by all layouts): {} bytes", tb.bytes());
     Ok(())
 }
@@ -359,6 +394,12 @@ fn devices(bench: bool, device: Option<String>) -> anyhow::Result<()> {
             "{}: {} ({}), Vulkan {}, driver {}\n   shaderFloat16 {}, storageBuffer16BitAccess {}, shaderFloat64 {}, subgroup size {}, ray query {}, max storage buffer {} MiB",
             d.index, d.name, d.kind, d.api_version, d.driver, d.shader_float16, d.storage_16bit, d.shader_float64, d.subgroup_size, d.ray_query, d.max_storage_buffer >> 20
         );
+    }
+    outln!("\nlayouts and baselines (--layout):");
+    for l in LayoutId::all() {
+        let c = l.caps();
+        let maths = if c.maths.is_empty() { "n/a".to_string() } else { c.maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ") };
+        outln!("  {:<6} {} ({}; math: {maths})", l.name(), l.summary(), if l.baseline().is_some() { "baseline" } else { "layout" });
     }
     if bench {
         let g = gpu::Gpu::new(&gpu::ContextOptions { device, ..Default::default() })?;

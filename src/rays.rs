@@ -6,6 +6,7 @@ use crate::geom::Aabb;
 use crate::scene::Scene;
 use crate::trace::Hit;
 use glam::Vec3;
+use std::path::PathBuf;
 use thiserror::Error;
 
 /// One ray, laid out as a row of the rays `.npy` file: `ox oy oz tmin dx dy dz tmax`
@@ -352,4 +353,84 @@ mod tests {
             }
         }
     }
+}
+
+// Ray sets by kind, as the command line and the sweep name them.
+
+/// Which rays to trace.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RayKind {
+    Primary,
+    Ao,
+    Diffuse,
+    Grazing,
+    File(PathBuf),
+}
+
+impl std::str::FromStr for RayKind {
+    type Err = RayError;
+    fn from_str(s: &str) -> Result<RayKind, RayError> {
+        Ok(match s {
+            "primary" => RayKind::Primary,
+            "ao" => RayKind::Ao,
+            "diffuse" => RayKind::Diffuse,
+            "grazing" => RayKind::Grazing,
+            f if f.ends_with(".npy") => RayKind::File(PathBuf::from(f)),
+            other => return Err(RayError::Param(format!("--rays '{other}': use primary, ao, diffuse, grazing or a FILE.npy"))),
+        })
+    }
+}
+
+impl std::fmt::Display for RayKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RayKind::Primary => f.write_str("primary"),
+            RayKind::Ao => f.write_str("ao"),
+            RayKind::Diffuse => f.write_str("diffuse"),
+            RayKind::Grazing => f.write_str("grazing"),
+            RayKind::File(p) => write!(f, "{}", p.display()),
+        }
+    }
+}
+
+/// Parameters of generated ray sets.
+#[derive(Clone, Debug)]
+pub struct RayParams {
+    pub width: u32,
+    pub height: u32,
+    pub camera: Option<Camera>,
+    pub seed: u64,
+    /// Number of grazing rays.
+    pub grazing: usize,
+}
+
+impl Default for RayParams {
+    fn default() -> Self {
+        RayParams { width: 256, height: 256, camera: None, seed: 1, grazing: 4096 }
+    }
+}
+
+/// Builds or reads the ray set. ao and diffuse trace the primary rays first (f32, B = 4).
+pub fn make_rays(scene: &Scene, bin: &crate::bvh::BinaryBvh, kind: &RayKind, p: &RayParams) -> anyhow::Result<Vec<Ray>> {
+    let cam = p.camera.unwrap_or_else(|| Camera::framing(&scene.bounds));
+    let rays = match kind {
+        RayKind::Primary => primary(&cam, p.width, p.height)?,
+        RayKind::Ao | RayKind::Diffuse => {
+            let prim = primary(&cam, p.width, p.height)?;
+            let f = crate::layout::Encoded::new(scene, bin, crate::layout::LayoutId::f32(), 4)?;
+            let (hits, _) = f.trace_default(&prim);
+            let len = if *kind == RayKind::Ao { Some(AO_LENGTH) } else { None };
+            secondary(scene, &prim, &hits, p.seed, len)
+        }
+        RayKind::Grazing => {
+            let boxes: Vec<_> = bin.nodes.iter().map(|n| n.bounds).collect();
+            grazing(scene, &boxes, p.grazing, p.seed)
+        }
+        RayKind::File(path) => {
+            let r = crate::npy::read_rays(path)?;
+            validate(&r, &path.display().to_string())?;
+            r
+        }
+    };
+    Ok(rays)
 }

@@ -6,6 +6,7 @@ use anyhow::Context;
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use crate::layout::LayoutId;
 use std::path::{Path, PathBuf};
 
 /// One variant's results, with everything needed to read it alone months later.
@@ -57,30 +58,6 @@ pub struct Row {
     pub device_fp16_ratio: f64,
 }
 
-/// Median, min and max of repeated timings (ms).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Timing {
-    pub median: f64,
-    pub min: f64,
-    pub max: f64,
-    pub count: usize,
-}
-
-impl Timing {
-    /// Summarises at least one timing.
-    pub fn of(times_ms: &[f64]) -> Timing {
-        let mut t = times_ms.to_vec();
-        t.sort_by(f64::total_cmp);
-        Timing { median: t[t.len() / 2], min: t[0], max: t[t.len() - 1], count: t.len() }
-    }
-
-    /// Mrays/s of `rays` at the median, the slowest and the fastest timing.
-    pub fn mrays(&self, rays: usize) -> (f64, f64, f64) {
-        let n = rays.max(1) as f64;
-        (n / self.median / 1e3, n / self.max / 1e3, n / self.min / 1e3)
-    }
-}
-
 /// Appends rows to `results.csv` and rewrites `results.json` after each one, so an
 /// interrupted sweep keeps everything finished.
 pub struct Writer {
@@ -109,6 +86,17 @@ impl Writer {
     pub fn rows(&self) -> &[Row] {
         &self.rows
     }
+}
+
+/// Whether rows of `layout` have work counters (unknown layouts, e.g. from another version,
+/// are assumed to).
+fn has_counters(layout: &str) -> bool {
+    LayoutId::parse(layout).map(|l| l.caps().counters).unwrap_or(true)
+}
+
+/// The BVH layouts that have rows, in registry order.
+fn layouts_in(rows: &[&Row]) -> Vec<&'static str> {
+    LayoutId::layouts().map(|l| l.name()).filter(|n| rows.iter().any(|r| r.layout == *n)).collect()
 }
 
 /// Reads the rows of `DIR/results.csv`.
@@ -258,19 +246,22 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     }
     md += "\n![ratio vs B](ratio_vs_b.png) ![ratio vs P](ratio_vs_p.png)\n\n";
     md += &separated_effects(rows);
-    let rq: Vec<&Row> = rows.iter().filter(|r| r.layout == "rq" && r.status == "ok").collect();
-    if !rq.is_empty() {
-        md += "## Against the driver's ray queries (`rq`) on the same device\n\nMrays/s of each variant ÷ Mrays/s of `rq` for the same scene and rays (above 1: faster than the driver). `rq` builds its acceleration structure in the driver (prefer fast trace); its size and build time are in its row.\n\n| device | scene | rays | kernel | Mrays/s | ÷ rq |\n|---|---|---|---|---:|---:|\n";
+    for b in LayoutId::all().filter(|l| l.baseline().is_some()) {
+        let base: Vec<&Row> = rows.iter().filter(|r| r.layout == b.name() && r.status == "ok").collect();
+        if base.is_empty() {
+            continue;
+        }
+        md += &format!("## Against `{b}` on the same device\n\n`{b}`: {}. Mrays/s of each variant ÷ Mrays/s of `{b}` for the same scene and rays (above 1: faster). Its structures' size and build time are in its row.\n\n| device | scene | rays | kernel | Mrays/s | ÷ {b} |\n|---|---|---|---|---:|---:|\n", b.summary());
         for x in rows.iter().filter(|r| r.status == "ok") {
-            if let Some(q) = rq.iter().find(|q| q.device == x.device && q.scene == x.scene && q.rays == x.rays) {
+            if let Some(q) = base.iter().find(|q| q.device == x.device && q.scene == x.scene && q.rays == x.rays) {
                 md += &format!("| {} | {} | {} | {} | {:.2} | {:.3} |\n", x.device, x.scene, x.rays, x.kernel, x.mrays_median, x.mrays_median / q.mrays_median);
             }
         }
         md += "\n";
     }
-    md += "## Every variant\n\nFor `rq`, B, P and the work counters do not apply (shown as –); its bytes are the driver's acceleration structures, and ≠ f32 counts rays whose prim differs and whose t is not within 1e-5 relative.\n\n| device | scene | rays | kernel | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | BVH bytes | build ms | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+    md += "## Every variant\n\nFor baselines (`rq`), B, P and the work counters do not apply, and for user kernels that do not count, the work counters are not measured (both shown as –); a baseline's bytes are its own acceleration structures. ≠ f32 counts rays that hit where f32 misses or the reverse, or hit another triangle at a t more than 1e-5 (relative) away.\n\n| device | scene | rays | kernel | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | BVH bytes | build ms | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
     for x in rows {
-        let na = x.layout == "rq";
+        let na = !has_counters(&x.layout) || x.nodes_per_ray.is_nan();
         let c = |v: String| if na { "–".to_string() } else { v };
         md += &format!(
             "| {} | {} ({} tris) | {} ({}) | {} | {:.2} ({:.2}–{:.2}) | {:.3} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.3e} | {} |\n",
@@ -281,9 +272,16 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
         );
     }
     md += "\n![Mrays/s per variant](mrays.png) ![memory per layout and B](memory.png)\n";
-    let imgs: Vec<&str> = ["render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"].into_iter().filter(|f| out.join(f).exists()).collect();
+    let mut imgs = vec!["render.png".to_string()];
+    for l in LayoutId::layouts() {
+        imgs.push(format!("heat_{l}.png"));
+    }
+    for l in LayoutId::layouts().filter(|&l| l != LayoutId::f32()) {
+        imgs.push(format!("diff_{l}_vs_f32.png"));
+    }
+    imgs.retain(|f| out.join(f).exists());
     if !imgs.is_empty() {
-        md += "\n## Images\n\nShaded primary render; nodes visited per pixel (f32, f16h; B = 4, P = 1; same colour scale); pixels whose f16h hit differs from f32 (white), black when none does.\n\n";
+        md += "\n## Images\n\nShaded primary render (f32 hits); nodes visited per pixel of each layout (B = 4, P = 1, default math; one colour scale); pixels whose hit differs from f32 (white), black when none does.\n\n";
         for i in imgs {
             md += &format!("![{i}]({i}) ");
         }
@@ -317,8 +315,12 @@ type Series = BTreeMap<(String, usize), [f64; 5]>;
 fn line_chart(out: &Path, name: &str, title: &str, xlabel: &str, ylabel: &str, xs: &[usize], lines: &[(String, Vec<(usize, f64)>)], log2x: bool) -> anyhow::Result<()> {
     font()?;
     let xmap = |x: usize| if log2x { (x as f64).log2() } else { x as f64 };
+    // An empty series (e.g. an f32-only sweep has no f16h ÷ f32 ratio) still gets a finite
+    // axis: an infinite one makes the mesh drawing loop forever.
+    let title = if xs.is_empty() { format!("{title} (no data)") } else { title.to_string() };
+    let title = title.as_str();
     let (xmin, xmax) = xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(xmap(x)), b.max(xmap(x))));
-    let (xmin, xmax) = if xmin < xmax { (xmin, xmax) } else { (xmin - 1.0, xmin + 1.0) };
+    let (xmin, xmax) = if xs.is_empty() { (0.0, 1.0) } else if xmin < xmax { (xmin, xmax) } else { (xmin - 1.0, xmin + 1.0) };
     let ys: Vec<f64> = lines.iter().flat_map(|l| l.1.iter().map(|p| p.1)).filter(|y| y.is_finite()).collect();
     let ymax = ys.iter().cloned().fold(0.0f64, f64::max).max(1.0) * 1.1;
     macro_rules! draw {
@@ -381,7 +383,7 @@ fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Resu
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok").collect();
     let mut lines = Vec::new();
     let mut xs = Vec::new();
-    for layout in ["f32", "f16h"] {
+    for layout in layouts_in(&ok) {
         for kind in ok.iter().map(|r| r.rays.clone()).collect::<std::collections::BTreeSet<_>>() {
             let mean = |f: &dyn Fn(&Row) -> bool| -> Vec<(usize, f64)> {
                 let mut m: BTreeMap<usize, (f64, usize)> = BTreeMap::new();
@@ -409,7 +411,7 @@ fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Resu
     // Memory per layout and B.
     let mut lines = Vec::new();
     let mut xs = Vec::new();
-    for layout in ["f32", "f16h"] {
+    for layout in layouts_in(&ok) {
         let mut m: BTreeMap<usize, (f64, usize)> = BTreeMap::new();
         for r in ok.iter().filter(|r| r.layout == layout && r.packet == 1) {
             let e = m.entry(r.branching).or_insert((0.0, 0));
@@ -423,31 +425,4 @@ fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Resu
     xs.sort();
     xs.dedup();
     line_chart(out, "memory", "BVH node memory per layout and B (mean over scenes)", "branching factor B", "KiB", &xs, &lines, true)
-}
-
-/// Writes a heat map of a per-pixel value (pixel order of primary rays) with a fixed scale.
-pub fn heat_map(path: &Path, w: u32, h: u32, values: &[f64], max: f64) -> anyhow::Result<()> {
-    let mut img = image::RgbImage::new(w, h);
-    for (&(x, y), &v) in crate::rays::pixel_order(w, h).iter().zip(values) {
-        let t = if max > 0.0 { (v / max).clamp(0.0, 1.0) } else { 0.0 };
-        // black → blue → red → yellow
-        let c = if t < 0.33 {
-            [0.0, 0.0, t / 0.33]
-        } else if t < 0.66 {
-            [(t - 0.33) / 0.33, 0.0, 1.0 - (t - 0.33) / 0.33]
-        } else {
-            [1.0, (t - 0.66) / 0.34, 0.0]
-        };
-        img.put_pixel(x, y, image::Rgb(c.map(|v| (v * 255.0) as u8)));
-    }
-    img.save(path).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Writes a mask image: white where `mask` is set, black elsewhere.
-pub fn mask_image(path: &Path, w: u32, h: u32, mask: &[bool]) -> anyhow::Result<()> {
-    let mut img = image::RgbImage::new(w, h);
-    for (&(x, y), &m) in crate::rays::pixel_order(w, h).iter().zip(mask) {
-        img.put_pixel(x, y, image::Rgb(if m { [255; 3] } else { [0; 3] }));
-    }
-    img.save(path).with_context(|| format!("writing {}", path.display()))
 }

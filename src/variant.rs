@@ -1,22 +1,24 @@
-//! The variant matrix as data: layout × branching × packet size. Artifact names spell the
-//! values (`trav_f16h_b8_p1`).
+//! The variant matrix as data: layout × branching × packet size × math. Artifact names spell
+//! the values (`trav_f16h_m16_b8_p1`).
 
 use crate::bvh::BRANCHINGS;
-use crate::encode::Layout;
-pub use crate::trace::f16h::Math;
+use crate::interface;
+use crate::layout::LayoutId;
+pub use crate::layout::Math;
 
-/// One traversal kernel configuration.
+/// Packet sizes the harness supports.
+pub const PACKETS: [usize; 6] = [1, 4, 8, 16, 32, 64];
+
+/// One traversal kernel configuration of a BVH layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Variant {
-    pub layout: Layout,
+    pub layout: LayoutId,
     pub branching: usize,
     /// Rays per packet (1 = single-ray traversal).
     pub packet: usize,
-    /// f16h arithmetic (the f32 layout always has `Math::F32`).
+    /// Arithmetic of the box tests (one of the layout's modes).
     pub math: Math,
 }
-
-pub use crate::trace::packet::PACKETS;
 
 /// How the P rays of a packet cooperate on the GPU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -54,29 +56,28 @@ pub fn stack_entries(b: usize) -> usize {
 }
 
 impl Variant {
-    /// A variant in its layout's default math (f16h: the seed's fp16 math).
-    pub fn new(layout: Layout, branching: usize, packet: usize) -> Variant {
-        let math = if layout == Layout::F32 { Math::F32 } else { Math::F16 };
-        Variant { layout, branching, packet, math }
+    /// A variant in its layout's default math. `layout` must be a BVH layout.
+    pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
+        Variant { layout, branching, packet, math: layout.caps().maths[0] }
     }
 
-    /// The same variant with another f16h math mode (no effect on f32).
+    /// The same variant in another math mode, when the layout has it (else unchanged).
     pub fn with_math(mut self, math: Math) -> Variant {
-        if self.layout == Layout::F16h {
+        if self.layout.caps().maths.contains(&math) {
             self.math = math;
         }
         self
     }
 
-    /// The kernel's name: `trav_{layout}[_{math}]_b{B}_p{P}` (math m16, m32 or mix for f16h),
-    /// then `_subgroup` for the subgroup packet implementation and `_stats` for the counting
-    /// kernel. Packets of P > 1 without a suffix use shared memory (portable to any subgroup
-    /// size).
+    /// The kernel's name: `trav_{layout}[_{math}]_b{B}_p{P}` (the math tag m16, m32 or mix
+    /// for layouts with more than one mode), then `_subgroup` for the subgroup packet
+    /// implementation and `_stats` for the counting kernel. Packets of P > 1 without a suffix
+    /// use shared memory (portable to any subgroup size).
     pub fn kernel_name(&self, imp: PacketImpl, stats: bool) -> String {
         format!(
             "trav_{}{}_b{}_p{}{}{}",
             self.layout.name(),
-            if self.layout == Layout::F16h { format!("_{}", self.math.tag()) } else { String::new() },
+            if self.layout.caps().maths.len() > 1 { format!("_{}", self.math.tag()) } else { String::new() },
             self.branching,
             self.packet,
             if imp == PacketImpl::Subgroup { "_subgroup" } else { "" },
@@ -106,13 +107,12 @@ impl Variant {
         }
     }
 
-    /// The default matrix (the seed's two series): every layout (f16h in every math mode) with
+    /// The default matrix (the seed's two series): every layout in every math mode with
     /// B ∈ {2, 4, 8, 16} at P = 1, and P ∈ {4, 8, 16, 32, 64} at B = 4.
     pub fn matrix() -> Vec<Variant> {
         let mut v = Vec::new();
-        for layout in Layout::ALL {
-            let maths: &[Math] = if layout == Layout::F16h { &Math::ALL } else { &[Math::F32] };
-            for &math in maths {
+        for layout in LayoutId::layouts() {
+            for &math in layout.caps().maths {
                 for b in BRANCHINGS {
                     v.push(Variant::new(layout, b, 1).with_math(math));
                 }
@@ -124,33 +124,17 @@ impl Variant {
         v
     }
 
-    /// The GLSL entry file of this variant.
-    pub fn source_file(&self) -> &'static str {
-        match (self.layout, self.packet) {
-            (Layout::F32, 1) => "trav_f32.comp",
-            (Layout::F16h, 1) => "trav_f16h.comp",
-            (Layout::F32, _) => "trav_f32_packet.comp",
-            (Layout::F16h, _) => "trav_f16h_packet.comp",
-        }
-    }
-
-    /// Preprocessor definitions of this variant.
+    /// Preprocessor definitions of this variant's kernel.
     pub fn defines(&self, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Vec<(String, String)> {
         let mut d = vec![
             ("B".to_string(), self.branching.to_string()),
             ("P".to_string(), self.packet.to_string()),
             ("WG".to_string(), self.workgroup(imp).to_string()),
             ("STACK_SIZE".to_string(), stack_entries(self.branching).to_string()),
+            (self.math.define().to_string(), "1".to_string()),
         ];
         if imp == PacketImpl::Subgroup {
             d.push(("PACKET_SUBGROUP".into(), "1".into()));
-        }
-        if self.layout == Layout::F16h {
-            match self.math {
-                Math::F32 => d.push(("MATH_F32".into(), "1".into())),
-                Math::Mixed => d.push(("MATH_MIXED".into(), "1".into())),
-                Math::F16 => {}
-            }
         }
         if stats {
             d.push(("STATS".into(), "1".into()));
@@ -159,6 +143,23 @@ impl Variant {
             d.push(("HAS_F64".into(), "1".into()));
         }
         d
+    }
+
+    /// The layout's stack entry fields in this variant's math.
+    pub fn stack_entry(&self) -> &'static [(&'static str, &'static str)] {
+        self.layout.bvh().expect("a variant's layout is a BVH layout").stack_entry(self.math)
+    }
+
+    /// Stack bytes per ray: entries × entry bytes (node index and the layout's fields, from
+    /// the same definition the kernel's `struct Entry` is generated from).
+    pub fn stack_bytes(&self) -> u64 {
+        (stack_entries(self.branching) * interface::stack_entry_bytes(self.stack_entry())) as u64
+    }
+
+    /// The generated `interface.glsl` of this variant's kernels.
+    pub fn interface_glsl(&self) -> String {
+        let l = self.layout.bvh().expect("a variant's layout is a BVH layout");
+        interface::glsl_header(Some((self.stack_entry(), &l.glsl_constants())))
     }
 }
 
@@ -179,4 +180,28 @@ pub fn spirv_matrix() -> Vec<(Variant, PacketImpl)> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stack_bytes_follow_the_layout_and_math() {
+        let f32 = LayoutId::f32();
+        let f16h = LayoutId::parse("f16h").unwrap();
+        assert_eq!(Variant::new(f32, 4, 1).stack_bytes(), 97 * 8);
+        // node 4 + frame 16 + origin (fp16 6 or fp32 12) + e, tp, tlo 12
+        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F16).stack_bytes(), 97 * 38);
+        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::Mixed).stack_bytes(), 97 * 38);
+        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F32).stack_bytes(), 97 * 44);
+    }
+
+    #[test]
+    fn kernel_names_spell_the_variant() {
+        let f16h = LayoutId::parse("f16h").unwrap();
+        assert_eq!(Variant::new(LayoutId::f32(), 8, 1).name(false), "trav_f32_b8_p1");
+        assert_eq!(Variant::new(f16h, 4, 16).with_math(Math::F32).kernel_name(PacketImpl::Subgroup, true), "trav_f16h_m32_b4_p16_subgroup_stats");
+        assert_eq!(Variant::new(LayoutId::f32(), 4, 1).with_math(Math::F16).math, Math::F32, "f32 has one math mode");
+    }
 }

@@ -5,36 +5,36 @@
 
 mod common;
 use common::*;
-use halftrace::bvh::{collapse, ChildRef, BRANCHINGS};
-use halftrace::encode::f16h::{self, derive_child, F16hNodes, NodeF16h};
-use halftrace::encode::{decode_child, encode_child, CHILD_EMPTY};
+use halftrace::bvh::{collapse, ChildRef, WideBvh, BRANCHINGS};
+use halftrace::layout::f16h::{derive_child, encode_with_frames, hooks::slot_box, Frame};
+use halftrace::layout::{decode_child, encode_child, CHILD_EMPTY};
 
-fn check<N: NodeF16h>(name: &str, b: usize, w: &halftrace::bvh::WideBvh, enc: &f16h::F16hBvh, nodes: &[N]) -> usize {
+fn check<const B: usize>(name: &str, w: &WideBvh) -> usize {
+    let (nodes, _, frames) = encode_with_frames::<B>(w).unwrap();
     let mut checked = 0;
     assert_eq!(nodes.len(), w.nodes.len());
-    for (i, (wn, n)) in w.nodes.iter().zip(nodes).enumerate() {
-        let f = &enc.frames[i];
-        for s in 0..N::B {
+    for (i, (wn, n)) in w.nodes.iter().zip(&nodes).enumerate() {
+        let f: &Frame = &frames[i];
+        for s in 0..B {
             if s >= wn.children.len() {
-                assert_eq!(n.child(s), CHILD_EMPTY, "{name} B={b} node {i} slot {s} should be empty");
+                assert_eq!(n.child[s], CHILD_EMPTY, "{name} B={B} node {i} slot {s} should be empty");
                 continue;
             }
             let (bx, c) = &wn.children[s];
-            assert_eq!(n.child(s), encode_child(c));
-            assert_eq!(decode_child(n.child(s)), *c);
+            assert_eq!(n.child[s], encode_child(c));
+            assert_eq!(decode_child(n.child[s]), *c);
+            let (lo, hi) = slot_box(n, s);
             for a in 0..3 {
-                let (lo, hi) = (n.lo(a, s), n.hi(a, s));
-                assert!(lo.is_finite() && hi.is_finite(), "{name} B={b} node {i} slot {s}: non-finite");
-                assert!(lo.to_f32().abs() <= 16384.0 && hi.to_f32().abs() <= 16384.0, "{name} B={b} node {i} slot {s}: out of range {lo} {hi}");
+                let (lo, hi) = (lo[a], hi[a]);
+                assert!(lo.is_finite() && hi.is_finite(), "{name} B={B} node {i} slot {s}: non-finite");
+                assert!(lo.to_f32().abs() <= 16384.0 && hi.to_f32().abs() <= 16384.0, "{name} B={B} node {i} slot {s}: out of range {lo} {hi}");
                 // Exact containment in the parent frame (fp32 inputs, power-of-two scale).
                 let tl = (bx.min[a] as f64 - f.w[a] as f64) * f.k as f64;
                 let th = (bx.max[a] as f64 - f.w[a] as f64) * f.k as f64;
-                assert!(lo.to_f64() <= tl && hi.to_f64() >= th, "{name} B={b} node {i} slot {s} axis {a}: [{lo}, {hi}] does not contain [{tl}, {th}]");
+                assert!(lo.to_f64() <= tl && hi.to_f64() >= th, "{name} B={B} node {i} slot {s} axis {a}: [{lo}, {hi}] does not contain [{tl}, {th}]");
             }
             if let ChildRef::Inner(j) = c {
-                let lo = [n.lo(0, s), n.lo(1, s), n.lo(2, s)];
-                let hi = [n.hi(0, s), n.hi(1, s), n.hi(2, s)];
-                assert_eq!(derive_child(f, lo, hi).frame, enc.frames[*j as usize], "{name} B={b}: derived frame of node {j}");
+                assert_eq!(derive_child(f, lo, hi).frame, frames[*j as usize], "{name} B={B}: derived frame of node {j}");
             }
             checked += 1;
         }
@@ -49,13 +49,12 @@ fn every_node_of_every_scene_satisfies_the_f16h_invariants() {
         let p = prepare(&path);
         for b in BRANCHINGS {
             let w = collapse(&p.bin, b);
-            let enc = f16h::encode(&p.scene, &w).unwrap();
             let name = &p.scene.name;
-            total += match &enc.nodes {
-                F16hNodes::B2(n) => check(name, b, &w, &enc, n),
-                F16hNodes::B4(n) => check(name, b, &w, &enc, n),
-                F16hNodes::B8(n) => check(name, b, &w, &enc, n),
-                F16hNodes::B16(n) => check(name, b, &w, &enc, n),
+            total += match b {
+                2 => check::<2>(name, &w),
+                4 => check::<4>(name, &w),
+                8 => check::<8>(name, &w),
+                _ => check::<16>(name, &w),
             };
         }
     }

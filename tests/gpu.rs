@@ -1,18 +1,21 @@
 //! The Vulkan backend on the default device (lavapipe in CI), with the Khronos validation
-//! layer on: every variant equals the CPU reference of its layout ray for ray (hits
-//! bitwise, counters exactly), the shader reads the node layouts as Rust writes them, no
-//! validation message, no leaked allocation, and bad input gets a clear error.
+//! layer on: every variant of every registered layout equals the CPU reference of its layout
+//! ray for ray (hits bitwise, counters exactly), the shader reads every node layout as Rust
+//! writes it, user kernels are checked, validated and timed, no validation message, no leaked
+//! allocation, and bad input gets a clear error.
 
 mod common;
 use common::*;
 use halftrace::bvh::BRANCHINGS;
-use halftrace::encode::Layout;
 use halftrace::gpu::buffer::Buffer;
+use halftrace::gpu::kernel::{GpuBvh, Kernel, Source};
 use halftrace::gpu::pipeline::ComputePipeline;
-use halftrace::gpu::{shader, traversal, ContextOptions, Gpu, GpuError};
-use halftrace::pipeline::Encoded;
+use halftrace::gpu::shader::{self, Includes};
+use halftrace::gpu::{ContextOptions, Gpu, GpuError};
+use halftrace::interface::{binding, PushConstants};
+use halftrace::layout::{LayoutId, Math};
 use halftrace::rays::Ray;
-use halftrace::variant::{Math, PacketImpl, Variant};
+use halftrace::variant::{PacketImpl, Variant, PACKETS};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -31,6 +34,10 @@ fn clean(g: &Gpu) {
     assert_eq!(g.allocated_bytes(), 0, "allocations leaked");
 }
 
+fn builtin<'g>(g: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Kernel<'g> {
+    Kernel::build(g, v, imp, stats, &Source::Builtin).unwrap_or_else(|e| panic!("{}: {e}", v.kernel_name(imp, stats)))
+}
+
 #[test]
 fn every_variant_equals_the_cpu_reference_on_every_scene() {
     let g = gpu();
@@ -38,31 +45,30 @@ fn every_variant_equals_the_cpu_reference_on_every_scene() {
     for path in all_scenes() {
         let p = prepare(&path);
         let sets = ray_sets(&p, 40, 1000);
-        for layout in Layout::ALL {
+        for layout in LayoutId::layouts() {
             for b in BRANCHINGS {
-              let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
-              let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-              let maths: &[Math] = if layout == Layout::F16h { &Math::ALL } else { &[Math::F32] };
-              for &math in maths {
-                let v = Variant::new(layout, b, 1).with_math(math);
-                let timed = traversal::pipeline(&g, &v, PacketImpl::Single, false, None).unwrap();
-                let stats = traversal::pipeline(&g, &v, PacketImpl::Single, true, None).unwrap();
-                for (kind, rays) in &sets {
-                    let (hits, counters) = enc.trace_variant(rays, 1, math);
-                    let f32_hits = if layout == Layout::F32 { hits.clone() } else { Encoded::new(&p.scene, &p.bin, Layout::F32, b).unwrap().trace(rays).0 };
-                    assert_same_hits(&format!("{} {v} {kind}: CPU reference vs f32", p.scene.name), rays, &f32_hits, &hits);
-                    let what = format!("{} {v} {kind}", p.scene.name);
-                    let a = traversal::run(&g, &gb, &timed, rays, 0, 1).unwrap();
-                    assert_same_hits(&format!("{what} (timed kernel) vs CPU"), rays, &hits, &a.hits);
-                    let s = traversal::run(&g, &gb, &stats, rays, 0, 1).unwrap();
-                    assert_same_hits(&format!("{what} (counting kernel) vs CPU"), rays, &hits, &s.hits);
-                    let c = s.counters.unwrap();
-                    if let Some(i) = (0..rays.len()).find(|&i| c[i] != counters[i]) {
-                        panic!("{what}: ray {i} {:?}: GPU counters {:?}, CPU {:?}", rays[i], c[i], counters[i]);
+                let enc = encode(&p, layout, b);
+                let gb = GpuBvh::upload(&g, &enc).unwrap();
+                let f32_enc = encode(&p, LayoutId::f32(), b);
+                for &math in layout.caps().maths {
+                    let v = Variant::new(layout, b, 1).with_math(math);
+                    let timed = builtin(&g, &v, PacketImpl::Single, false);
+                    let stats = builtin(&g, &v, PacketImpl::Single, true);
+                    for (kind, rays) in &sets {
+                        let (hits, counters) = enc.trace(rays, 1, math);
+                        assert_same_hits(&format!("{} {v} {kind}: CPU reference vs f32", p.scene.name), rays, &f32_enc.trace_default(rays).0, &hits);
+                        let what = format!("{} {v} {kind}", p.scene.name);
+                        let a = timed.run(&g, &gb, rays, 0, 1).unwrap();
+                        assert_same_hits(&format!("{what} (timed kernel) vs CPU"), rays, &hits, &a.hits);
+                        let s = stats.run(&g, &gb, rays, 0, 1).unwrap();
+                        assert_same_hits(&format!("{what} (counting kernel) vs CPU"), rays, &hits, &s.hits);
+                        let c = s.counters.unwrap();
+                        if let Some(i) = (0..rays.len()).find(|&i| c[i] != counters[i]) {
+                            panic!("{what}: ray {i} {:?}: GPU counters {:?}, CPU {:?}", rays[i], c[i], counters[i]);
+                        }
+                        checked += rays.len();
                     }
-                    checked += rays.len();
                 }
-              }
             }
         }
     }
@@ -76,79 +82,75 @@ fn odd_ray_counts_and_all_miss_batches() {
     let p = prepare(&scenes_dir().join("teapot.obj"));
     let sets = ray_sets(&p, 40, 10);
     let rays = &sets[0].1;
-    for layout in Layout::ALL {
-        let enc = Encoded::new(&p.scene, &p.bin, layout, 8).unwrap();
-        let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
-        let pipe = traversal::pipeline(&g, &Variant::new(layout, 8, 1), PacketImpl::Single, false, None).unwrap();
+    for layout in LayoutId::layouts() {
+        let enc = encode(&p, layout, 8);
+        let gb = GpuBvh::upload(&g, &enc).unwrap();
+        let k = builtin(&g, &Variant::new(layout, 8, 1), PacketImpl::Single, false);
         for n in [1usize, 63, 65, 1000] {
             let r = &rays[..n];
-            let a = traversal::run(&g, &gb, &pipe, r, 1, 2).unwrap();
+            let a = k.run(&g, &gb, r, 1, 2).unwrap();
             assert_eq!(a.times_ms.len(), 2);
-            assert_same_hits(&format!("{layout} n={n}"), r, &enc.trace(r).0, &a.hits);
+            assert_same_hits(&format!("{layout} n={n}"), r, &enc.trace_default(r).0, &a.hits);
         }
         // Rays pointing away from the scene: all misses.
         let away: Vec<Ray> = (0..100).map(|i| Ray { origin: [100.0, i as f32, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY }).collect();
-        let a = traversal::run(&g, &gb, &pipe, &away, 0, 1).unwrap();
+        let a = k.run(&g, &gb, &away, 0, 1).unwrap();
         assert!(a.hits.iter().all(|h| h.prim == -1 && h.t == f32::INFINITY));
     }
     clean(&g);
 }
 
-/// A kernel that copies every node field back out proves the std430 layout in node.glsl
-/// matches the Rust structs byte for byte.
+/// A kernel that copies every child box and child word back out through each layout's own
+/// GLSL hooks proves the layout's GLSL `Node` reads the bytes exactly as its Rust node type
+/// writes them (any drift in field order, stride or type shows as a wrong word).
 #[test]
 fn shader_reads_every_node_layout_as_rust_writes_it() {
     let g = gpu();
     let p = prepare(&scenes_dir().join("fandisk.obj"));
     let src = r#"#version 460
+#include "interface.glsl"
 #include "ray.glsl"
-#include "node.glsl"
-layout(std430, set = 0, binding = 5) writeonly buffer Out { uint o[]; };
+#include "box.glsl"
+#include "layout.glsl"
+layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Out { uint o[]; };
 void main() {
     uint i = ray_index();
     if (i >= pc.node_count) return;
     uint b = i * 7u * uint(B);
-    for (uint k = 0u; k < 3u * uint(B); k++) {
-        o[b + k] = floatBitsToUint(float(nodes[i].lo[k]));
-        o[b + 3u * uint(B) + k] = floatBitsToUint(float(nodes[i].hi[k]));
+    for (uint s = 0u; s < uint(B); s++) {
+        vec3 lo, hi;
+        child_box(i, s, lo, hi);
+        for (uint a = 0u; a < 3u; a++) {
+            o[b + a * uint(B) + s] = floatBitsToUint(lo[a]);
+            o[b + (3u + a) * uint(B) + s] = floatBitsToUint(hi[a]);
+        }
+        o[b + 6u * uint(B) + s] = child_word(i, s);
     }
-    for (uint s = 0u; s < uint(B); s++) o[b + 6u * uint(B) + s] = nodes[i].child[s];
 }"#;
-    for layout in Layout::ALL {
+    for layout in LayoutId::layouts() {
         for b in BRANCHINGS {
-            let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
-            let mut defs = vec![("B".to_string(), b.to_string())];
-            if layout == Layout::F16h {
-                defs.push(("F16H".into(), "1".into()));
-            }
-            let code = shader::compile_source("node round trip", "roundtrip.comp", src, &defs).unwrap();
-            let pipe = ComputePipeline::new(&g, "round trip", &code, traversal::BINDINGS, 64).unwrap();
+            let enc = encode(&p, layout, b);
+            let v = Variant::new(layout, b, 1);
+            let code = shader::compile_source("node round trip", "roundtrip.comp", src, &v.defines(PacketImpl::Single, false, false), &Includes::variant(&v)).unwrap();
+            let pipe = ComputePipeline::new(&g, "round trip", &code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32).unwrap();
             let n = enc.node_count();
-            let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER | ash::vk::BufferUsageFlags::TRANSFER_SRC;
-            let (bytes, expect): (&[u8], Vec<u32>) = match &enc {
-                Encoded::F32(e) => (e.nodes.bytes(), bytemuck::cast_slice::<u8, u32>(e.nodes.bytes()).to_vec()),
-                Encoded::F16h(e) => {
-                    // Expected: each fp16 coordinate widened to f32 bits, then the child words.
-                    let nb = e.nodes.bytes();
-                    let per = 16 * b;
-                    let mut v = Vec::new();
-                    for node in nb.chunks_exact(per) {
-                        for c in node[..12 * b].chunks_exact(2) {
-                            v.push(half::f16::from_le_bytes([c[0], c[1]]).to_f32().to_bits());
-                        }
-                        for c in node[12 * b..].chunks_exact(4) {
-                            v.push(u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
-                        }
+            let mut expect = vec![0u32; n * 7 * b];
+            for node in 0..n {
+                for s in 0..b {
+                    let (lo, hi) = enc.nodes.child_box(node, s);
+                    for a in 0..3 {
+                        expect[node * 7 * b + a * b + s] = lo[a].to_bits();
+                        expect[node * 7 * b + (3 + a) * b + s] = hi[a].to_bits();
                     }
-                    (nb, v)
+                    expect[node * 7 * b + 6 * b + s] = enc.nodes.child(node, s);
                 }
-            };
-            let nodes = Buffer::upload(&g, "nodes", bytes).unwrap();
+            }
+            let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER | ash::vk::BufferUsageFlags::TRANSFER_SRC;
+            let nodes = Buffer::upload(&g, "nodes", &enc.nodes.to_bytes()).unwrap();
             let out = Buffer::new(&g, "out", (n * 7 * b * 4) as u64, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
             let dummy = Buffer::new(&g, "unused", 16, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
             pipe.bind(&[&nodes, &dummy, &dummy, &dummy, &dummy, &out]);
-            let mut push = traversal::PushConstants { ray_count: 0, node_count: n as u32, _pad: [0; 2], root_wk: [0.0; 4], box_lo: [0.0; 4], box_hi: [0.0; 4] };
-            push.node_count = n as u32;
+            let push = PushConstants { node_count: n as u32, root: enc.push_root, ..Default::default() };
             g.submit_and_wait(|cmd| {
                 pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(64));
                 pipe.barrier(cmd);
@@ -186,8 +188,8 @@ fn device_without_fp16_is_a_clear_error() {
 fn scene_too_big_for_the_device_is_a_clear_error() {
     let g = Gpu::new(&ContextOptions { max_buffer: Some(4096), ..Default::default() }).unwrap();
     let p = prepare(&scenes_dir().join("teapot.obj"));
-    let enc = Encoded::new(&p.scene, &p.bin, Layout::F16h, 4).unwrap();
-    let e = traversal::GpuBvh::upload(&g, &enc).err().expect("upload must fail");
+    let enc = encode(&p, layout("f16h"), 4);
+    let e = GpuBvh::upload(&g, &enc).err().expect("upload must fail");
     let msg = e.to_string();
     assert!(msg.contains("nodes (f16h, B=4)") && msg.contains("limit of 4096 bytes"), "{msg}");
 }
@@ -203,24 +205,68 @@ fn cli(args: &[&str]) -> (bool, String, String) {
     (o.status.success(), String::from_utf8_lossy(&o.stdout).to_string(), String::from_utf8_lossy(&o.stderr).to_string())
 }
 
+fn repo(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)
+}
+
 #[test]
-fn raw_spirv_modules_are_checked_then_validated_and_timed() {
+fn user_kernels_are_checked_then_validated_and_timed() {
     let scene = scenes_dir().join("teapot.obj");
     let sc = scene.to_str().unwrap();
-    let repo_spv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv/trav_f16h_m16_b4_p1.spv");
-    // A correct module (the built-in one, from spirv/) runs through validation and timing.
-    let (ok, out, err) = cli(&["trace", "--scene", sc, "--layout", "f16h", "--branching", "4", "--width", "32", "--height", "32", "--repeat", "2", "--spirv", repo_spv.to_str().unwrap()]);
+    let small = ["--width", "32", "--height", "32", "--repeat", "2"];
+    let run = |args: &[&str]| {
+        let mut a = vec!["trace", "--scene", sc];
+        a.extend_from_slice(&small);
+        a.extend_from_slice(args);
+        cli(&a)
+    };
+    let hits = |name: &str| -> Vec<halftrace::trace::Hit> { halftrace::npy::read_hits(&tmp(name)).unwrap() };
+    let out_of = |name: &str| tmp(name).to_str().unwrap().to_string();
+    // The built-in kernel's hits, as the reference.
+    let (ok, _, err) = run(&["--layout", "f16h", "--branching", "4", "--out", &out_of("builtin.npy")]);
     assert!(ok, "{err}");
-    assert!(out.contains("validated against the CPU reference") && out.contains("Mrays/s"), "{out}");
-    // A module for the other layout gives wrong hits: caught by validation, naming the variant.
-    let other = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv/trav_f32_b4_p1.spv");
-    let (ok, _, err) = cli(&["trace", "--scene", sc, "--layout", "f16h", "--branching", "4", "--width", "32", "--height", "32", "--spirv", other.to_str().unwrap()]);
-    assert!(!ok && err.contains("trav_f16h_m16_b4_p1 (custom SPIR-V)") && err.contains("differ from the CPU reference"), "{err}");
+    // A module emitted by `shaders --emit` (the copy in spirv/) gives the built-in's hits.
+    let spv = repo("spirv/trav_f16h_m16_b4_p1.spv");
+    let (ok, out, err) = run(&["--layout", "f16h", "--branching", "4", "--kernel", spv.to_str().unwrap(), "--out", &out_of("spv.npy")]);
+    assert!(ok, "{err}");
+    assert!(out.contains("validated against the CPU reference") && out.contains("Mrays/s") && out.contains("user kernel"), "{out}");
+    assert_eq!(hits("spv.npy"), hits("builtin.npy"));
+    // `--spirv` stays an alias.
+    let (ok, _, err) = run(&["--layout", "f16h", "--branching", "4", "--spirv", spv.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    // A GLSL kernel: the documented minimal example, for every layout, gives the built-in's hits.
+    let example = repo("docs/examples/unordered.comp");
+    for l in LayoutId::layouts() {
+        let (ok, out, err) = run(&["--layout", l.name(), "--branching", "8", "--kernel", example.to_str().unwrap(), "--out", &out_of("example.npy"), "--stats"]);
+        assert!(ok, "{l}: {err}");
+        assert!(out.contains("validated against the CPU reference") && out.contains("writes no counters"), "{l}: {out}");
+        let (ok, _, err) = run(&["--layout", l.name(), "--branching", "8", "--out", &out_of("example_builtin.npy")]);
+        assert!(ok, "{err}");
+        assert_eq!(hits("example.npy"), hits("example_builtin.npy"), "{l}: the example kernel's hits differ from the built-in's");
+    }
+    // A module of another layout fits the interface but returns other hits: validation fails,
+    // naming the variant and the user's file, exit non-zero, no hits file.
+    let other = repo("spirv/trav_f32_b4_p1.spv");
+    let no_hits = tmp("other.npy");
+    let _ = std::fs::remove_file(&no_hits);
+    let (ok, _, err) = run(&["--layout", "f16h", "--branching", "4", "--kernel", other.to_str().unwrap(), "--out", no_hits.to_str().unwrap()]);
+    assert!(!ok && err.contains("trav_f16h_m16_b4_p1 (user kernel") && err.contains("differ from the CPU reference"), "{err}");
+    assert!(!no_hits.exists(), "a failed validation wrote a hits file");
+    // Interfaces that do not fit the variant are refused before dispatch, naming what differs.
+    let counting = repo("spirv/trav_f16h_m16_b4_p1_stats.spv");
+    let packet = repo("spirv/trav_f16h_m16_b4_p16.spv");
+    for (args, want) in [
+        (vec!["--layout", "f16h", "--branching", "4", "--kernel", counting.to_str().unwrap()], "counting kernel"),
+        (vec!["--layout", "f16h", "--branching", "4", "--kernel", packet.to_str().unwrap()], "workgroup size"),
+    ] {
+        let (ok, _, err) = run(&args);
+        assert!(!ok && err.contains(want) && err.contains("cannot stand in for trav_f16h_m16_b4_p1"), "{want}: {err}");
+    }
 
     let garbage = tmp("garbage.spv");
     std::fs::write(&garbage, b"definitely not spir-v!!!").unwrap();
     let truncated = tmp("truncated.spv");
-    let good = std::fs::read(&repo_spv).unwrap();
+    let good = std::fs::read(&spv).unwrap();
     std::fs::write(&truncated, &good[..good.len() / 2 / 4 * 4 + 4]).unwrap();
     // Cut exactly after an instruction in the middle: still not a complete module.
     let words: Vec<u32> = bytemuck::pod_collect_to_vec(&good);
@@ -233,18 +279,32 @@ fn raw_spirv_modules_are_checked_then_validated_and_timed() {
     std::fs::write(&clean_cut, bytemuck::cast_slice::<u32, u8>(&words[..cut])).unwrap();
     let odd = tmp("odd.spv");
     std::fs::write(&odd, &good[..good.len() - 1]).unwrap();
-    // A valid module with the wrong interface.
-    let wrong = shader::compile_source(
-        "wrong",
-        "wrong.comp",
-        "#version 460\nlayout(local_size_x = 64) in;\nlayout(std430, binding = 9) buffer X { float x[]; };\nvoid main() { x[gl_GlobalInvocationID.x] = 1.0; }",
-        &[],
-    )
-    .unwrap();
-    let wrong_p = tmp("wrong.spv");
-    std::fs::write(&wrong_p, bytemuck::cast_slice(&wrong)).unwrap();
-    for (p, what) in [(&garbage, "bad magic"), (&truncated, "truncated or malformed"), (&clean_cut, "does not end with OpFunctionEnd"), (&odd, "multiple of 4"), (&wrong_p, "binding 9")] {
-        let (ok, _, err) = cli(&["trace", "--scene", sc, "--spirv", p.to_str().unwrap()]);
+    // Valid modules with the wrong interface.
+    let module = |name: &str, src: &str| {
+        let code = shader::compile_source(name, "wrong.comp", src, &[], &Includes::plain()).unwrap();
+        let p = tmp(&format!("{name}.spv"));
+        std::fs::write(&p, bytemuck::cast_slice(&code)).unwrap();
+        p
+    };
+    let binding9 = module("binding9", "#version 460\nlayout(local_size_x = 64) in;\nlayout(std430, binding = 9) buffer X { float x[]; };\nvoid main() { x[gl_GlobalInvocationID.x] = 1.0; }");
+    let big_push = module(
+        "bigpush",
+        "#version 460\nlayout(local_size_x = 64) in;\nlayout(push_constant) uniform P { vec4 a[5]; } pc;\nlayout(std430, binding = 3) buffer R { float r[]; };\nlayout(std430, binding = 4) buffer H { float h[]; };\nvoid main() { h[gl_GlobalInvocationID.x] = r[0] + pc.a[4].x; }",
+    );
+    let spec = module(
+        "spec",
+        "#version 460\nlayout(local_size_x = 64) in;\nlayout(constant_id = 7) const float K = 1.0;\nlayout(push_constant) uniform P { uint n; } pc;\nlayout(std430, binding = 3) buffer R { float r[]; };\nlayout(std430, binding = 4) buffer H { float h[]; };\nvoid main() { h[gl_GlobalInvocationID.x] = r[pc.n] * K; }",
+    );
+    for (p, what) in [
+        (&garbage, "bad magic"),
+        (&truncated, "truncated or malformed"),
+        (&clean_cut, "does not end with OpFunctionEnd"),
+        (&odd, "multiple of 4"),
+        (&binding9, "binding 9"),
+        (&big_push, "push-constant block is 80 bytes"),
+        (&spec, "SpecId [7]"),
+    ] {
+        let (ok, _, err) = cli(&["trace", "--scene", sc, "--kernel", p.to_str().unwrap()]);
         assert!(!ok, "{what}");
         assert!(err.contains(p.to_str().unwrap()) && err.contains(what) && !err.contains("panicked"), "{what}: {err}");
     }
@@ -264,7 +324,7 @@ fn instructions(words: &[u32]) -> Vec<(u32, Vec<u32>)> {
 
 #[test]
 fn spirv_folder_is_fresh_valid_and_really_fp16() {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("spirv");
+    let dir = repo("spirv");
     let mut n = 0;
     let expected = halftrace::variant::spirv_matrix();
     for (v, imp) in &expected {
@@ -277,7 +337,7 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             let val = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&p).output().expect("spirv-val (package spirv-tools) is required");
             assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
             // The fp16 math modes must really compute in float16_t (m32 widens on purpose).
-            if v.layout == Layout::F16h && v.math != Math::F32 {
+            if v.math != Math::F32 {
                 let ins = instructions(&fresh);
                 assert!(ins.iter().any(|(op, o)| *op == 17 && o[0] == 9), "{name}: no Float16 capability");
                 let mut f16: Vec<u32> = ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
@@ -295,28 +355,26 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
     assert_eq!(n, 2 * expected.len());
 }
 
-/// Packets change the work, never the answer: for every scene, layout, f16h math mode, B, P
-/// (both packet implementations where the device allows) and ray kind, GPU hits equal the
+/// Packets change the work, never the answer: for every scene, layout, math mode, B, P (both
+/// packet implementations where the device allows) and ray kind, GPU hits equal the
 /// single-ray f32 hits ray for ray, and GPU counters equal the CPU packet reference of the
 /// same mode.
 #[test]
 fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
-    use halftrace::trace::packet::PACKETS;
     let g = gpu();
     let mut kernels = Vec::new();
-    for layout in Layout::ALL {
+    for layout in LayoutId::layouts() {
         for b in BRANCHINGS {
             for p in PACKETS.into_iter().filter(|&p| p > 1) {
-                let maths: &[Math] = if layout == Layout::F16h { &Math::ALL } else { &[Math::F32] };
-                for &math in maths {
+                for &math in layout.caps().maths {
                     let v = Variant::new(layout, b, p).with_math(math);
-                    let mut imps = vec![halftrace::variant::PacketImpl::Shared];
-                    // every P on the portable kernel; the subgroup kernel where it fits (seed's math)
+                    let mut imps = vec![PacketImpl::Shared];
+                    // every P on the portable kernel; the subgroup kernel where it fits (not mixed math)
                     if p <= g.info.subgroup_size as usize && math != Math::Mixed {
-                        imps.push(halftrace::variant::PacketImpl::Subgroup);
+                        imps.push(PacketImpl::Subgroup);
                     }
                     for imp in imps {
-                        kernels.push((traversal::pipeline(&g, &v, imp, false, None).unwrap(), traversal::pipeline(&g, &v, imp, true, None).unwrap()));
+                        kernels.push((builtin(&g, &v, imp, false), builtin(&g, &v, imp, true)));
                     }
                 }
             }
@@ -326,22 +384,22 @@ fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
     for path in all_scenes() {
         let p = prepare(&path);
         let sets = ray_sets(&p, 12, 120);
-        for layout in Layout::ALL {
+        for layout in LayoutId::layouts() {
             for b in BRANCHINGS {
-                let enc = Encoded::new(&p.scene, &p.bin, layout, b).unwrap();
-                let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+                let enc = encode(&p, layout, b);
+                let gb = GpuBvh::upload(&g, &enc).unwrap();
                 // Every packet variant of every math mode must return exactly the f32 hits.
-                let f32_enc = Encoded::new(&p.scene, &p.bin, Layout::F32, b).unwrap();
-                let single: Vec<_> = sets.iter().map(|(_, rays)| f32_enc.trace(rays).0).collect();
+                let f32_enc = encode(&p, LayoutId::f32(), b);
+                let single: Vec<_> = sets.iter().map(|(_, rays)| f32_enc.trace_default(rays).0).collect();
                 for (timed, stats) in kernels.iter().filter(|(k, _)| k.variant.layout == layout && k.variant.branching == b) {
                     let pk = timed.variant.packet;
                     for ((kind, rays), want) in sets.iter().zip(&single) {
                         let what = format!("{} {} {kind}", p.scene.name, timed.name());
-                        let (cpu_hits, cpu_counters) = enc.trace_variant(rays, pk, timed.variant.math);
+                        let (cpu_hits, cpu_counters) = enc.trace(rays, pk, timed.variant.math);
                         assert_same_hits(&format!("{what}: CPU packet reference vs single-ray"), rays, want, &cpu_hits);
-                        let a = traversal::run(&g, &gb, timed, rays, 0, 1).unwrap();
+                        let a = timed.run(&g, &gb, rays, 0, 1).unwrap();
                         assert_same_hits(&format!("{what} vs single-ray"), rays, want, &a.hits);
-                        let s = traversal::run(&g, &gb, stats, rays, 0, 1).unwrap();
+                        let s = stats.run(&g, &gb, rays, 0, 1).unwrap();
                         assert_same_hits(&format!("{what} (counting) vs single-ray"), rays, want, &s.hits);
                         let c = s.counters.unwrap();
                         if let Some(i) = (0..rays.len()).find(|&i| c[i] != cpu_counters[i]) {
@@ -365,15 +423,15 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
     let rays = &ray_sets(&p, 40, 10)[0].1;
     let r1000 = &rays[..1000];
     let away: Vec<Ray> = (0..130).map(|i| Ray { origin: [1.0, i as f32 * 0.01, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY }).collect();
-    for layout in Layout::ALL {
-        let enc = Encoded::new(&p.scene, &p.bin, layout, 4).unwrap();
-        let gb = traversal::GpuBvh::upload(&g, &enc).unwrap();
+    for layout in LayoutId::layouts() {
+        let enc = encode(&p, layout, 4);
+        let gb = GpuBvh::upload(&g, &enc).unwrap();
         let v = Variant::new(layout, 4, 64);
-        let k = traversal::pipeline(&g, &v, halftrace::variant::PacketImpl::Shared, true, None).unwrap();
-        let a = traversal::run(&g, &gb, &k, r1000, 0, 1).unwrap();
-        assert_same_hits("1000 rays, P=64", r1000, &enc.trace(r1000).0, &a.hits);
-        assert_eq!(a.counters.unwrap(), enc.trace_packets(r1000, 64).1);
-        let m = traversal::run(&g, &gb, &k, &away, 0, 1).unwrap();
+        let k = builtin(&g, &v, PacketImpl::Shared, true);
+        let a = k.run(&g, &gb, r1000, 0, 1).unwrap();
+        assert_same_hits("1000 rays, P=64", r1000, &enc.trace_default(r1000).0, &a.hits);
+        assert_eq!(a.counters.unwrap(), enc.trace(r1000, 64, v.math).1);
+        let m = k.run(&g, &gb, &away, 0, 1).unwrap();
         assert!(m.hits.iter().all(|h| h.prim == -1));
         let c = m.counters.unwrap();
         assert!(c.iter().all(|c| c.nodes == 0 && c.tri_tests == 0 && c.packet_nodes == 0), "all-miss packets visit nothing");
@@ -381,25 +439,26 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
     clean(&g);
 }
 
-/// The driver's ray queries (layout `rq`) against the f32 reference: same prim, or t within
+/// The driver's ray queries (baseline `rq`) against the f32 reference: same prim, or t within
 /// 1e-5 relative where triangles tie or share edges; at least 99.99% of primary, ao and
 /// diffuse rays on every shared scene. The grazing set (rays through shared vertices and
 /// along edges) is reported, not held to the bar: it measures whether the driver's triangle
 /// test is watertight, which the Vulkan spec does not require.
 #[test]
-fn ray_query_layout_agrees_with_f32_on_every_scene() {
+fn ray_query_baseline_agrees_with_f32_on_every_scene() {
     let g = gpu();
-    assert!(g.info.ray_query, "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)", g.info.name);
-    let pipe = halftrace::gpu::rq::pipeline(&g).unwrap();
+    let rq = layout("rq").baseline().expect("rq is a baseline");
+    assert!(rq.unavailable(&g).is_none(), "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)", g.info.name);
+    let dev = rq.prepare(&g).unwrap();
     let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
     for path in all_scenes() {
         let p = prepare(&path);
-        let rs = halftrace::gpu::rq::RqScene::build(&g, &p.scene).unwrap();
-        assert!(rs.bytes > 0 && rs.build_ms > 0.0);
-        let f = Encoded::new(&p.scene, &p.bin, Layout::F32, 4).unwrap();
+        let rs = dev.scene(&p.scene).unwrap();
+        assert!(rs.bytes() > 0 && rs.build_ms() > 0.0);
+        let f = encode(&p, LayoutId::f32(), 4);
         for (kind, rays) in ray_sets(&p, 48, 1500) {
-            let out = halftrace::gpu::rq::run(&g, &rs, &pipe, &rays, 0, 1).unwrap();
-            let a = halftrace::trace::agreement(&out.hits, &f.trace(&rays).0);
+            let out = rs.run(&rays, 0, 1).unwrap();
+            let a = halftrace::trace::agreement(&out.hits, &f.trace_default(&rays).0);
             eprintln!("{} {kind}: rq agrees with f32 on {:.4}% of {} rays ({} false misses)", p.scene.name, 100.0 * a.rate(), a.total, a.false_misses);
             if kind == "grazing" {
                 grazing.0 += a.agree;
@@ -411,6 +470,6 @@ fn ray_query_layout_agrees_with_f32_on_every_scene() {
         }
     }
     eprintln!("rq vs f32: worst primary/ao/diffuse agreement {:.4}%, grazing set {:.3}% ({} of {})", 100.0 * worst, 100.0 * grazing.0 as f64 / grazing.1 as f64, grazing.0, grazing.1);
-    drop(pipe);
+    drop(dev);
     clean(&g);
 }

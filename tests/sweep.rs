@@ -72,6 +72,13 @@ fn small_sweep_writes_consistent_outputs() {
         assert!(r.simd_utilisation > 0.0 && r.simd_utilisation <= 1.0);
         assert_eq!((r.differs_from_f32, r.false_misses, r.max_abs_dt), (0, 0, 0.0), "{} differs from f32", r.kernel);
         assert_eq!(r.bytes_per_node as usize, if r.layout == "f32" { 28 } else { 16 } * r.branching);
+        // Stack bytes per ray: entries × (node index + the layout's entry in this math).
+        let entry = match (r.layout.as_str(), r.math.as_str()) {
+            ("f32", _) => 8,
+            ("f16h", "f32") => 44,
+            _ => 38,
+        };
+        assert_eq!(r.stack_bytes_per_ray as usize, halftrace::variant::stack_entries(r.branching) * entry, "{}", r.kernel);
         assert!(!r.commit.is_empty() && r.device.contains("llvmpipe") || !r.device.is_empty());
     }
     // The headline table is computed from the rows it shows (f16h in the seed's fp16 math).
@@ -116,7 +123,7 @@ fn small_sweep_writes_consistent_outputs() {
 fn interrupted_sweep_keeps_finished_rows() {
     let out = tmp("interrupt");
     let mut child = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["sweep", "--quiet", "--scene", &teapot(), "--width", "96", "--height", "96", "--repeat", "5", "--out", out.to_str().unwrap()])
+        .args(["sweep", "--quiet", "--scene", &teapot(), "--width", "128", "--height", "128", "--repeat", "10", "--out", out.to_str().unwrap()])
         .spawn()
         .unwrap();
     let csv = out.join("results.csv");
@@ -130,12 +137,14 @@ fn interrupted_sweep_keeps_finished_rows() {
         assert!(child.try_wait().unwrap().is_none(), "sweep ended before it could be interrupted");
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
-    let st = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    // SIGTERM, as a batch system sends: a shell running the tests in the background ignores
+    // SIGINT for its children.
+    let st = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     assert!(st.success());
     let status = child.wait().unwrap();
     assert!(!status.success(), "the sweep should have been interrupted");
     let rows = read_rows(&out).expect("rows written before the interrupt must parse");
-    assert!(rows.len() >= 2 && rows.len() < 36, "{} rows", rows.len());
+    assert!(rows.len() >= 2 && rows.len() < 112, "{} rows", rows.len());
     assert!(rows.iter().all(|r| r.status == "ok" && r.mrays_median > 0.0));
 }
 
@@ -168,4 +177,53 @@ fn bad_sweep_configs_are_clear_errors() {
     }
     let example = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("sweep.example.toml");
     assert_eq!(halftrace::sweep::Config::load(&example).unwrap(), halftrace::sweep::Config::default(), "sweep.example.toml documents the defaults");
+}
+
+/// `[[kernel]]` tables run as their own rows, validated against the layout's CPU reference
+/// like the built-in kernels; a kernel of another layout fails validation and the sweep exits
+/// non-zero.
+#[test]
+fn user_kernels_run_as_their_own_rows() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let example = root.join("docs/examples/unordered.comp");
+    let emitted = root.join("spirv/trav_f16h_m16_b4_p1.spv");
+    let cfg = |extra: &str| {
+        let p = std::env::temp_dir().join(format!("halftrace-kernels-{}-{}.toml", std::process::id(), extra.len()));
+        std::fs::write(&p, format!(
+            "scenes = [{:?}]\nrays = [\"primary\", \"ao\"]\nlayouts = [\"f32\"]\nbranchings = [4]\npackets = [1]\nwidth = 24\nheight = 24\nrepeat = 2\nwarmup = 1\n{extra}",
+            teapot()
+        )).unwrap();
+        p
+    };
+    let good = format!(
+        "[[kernel]]\nname = \"unordered\"\nlayout = \"f16h\"\nfile = {:?}\nbranching = 8\n\n[[kernel]]\nname = \"emitted\"\nlayout = \"f16h\"\nfile = {:?}\nrays = [\"primary\"]\n",
+        example.display().to_string(),
+        emitted.display().to_string()
+    );
+    let out = tmp("kernels");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--quiet", "--config", cfg(&good).to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = read_rows(&out).unwrap();
+    let unordered: Vec<&Row> = rows.iter().filter(|r| r.kernel == "unordered").collect();
+    assert_eq!(unordered.len(), 2, "one row per ray kind");
+    for r in &unordered {
+        assert_eq!((r.status.as_str(), r.layout.as_str(), r.branching, r.packet), ("ok", "f16h", 8, 1));
+        assert!(r.mrays_median > 0.0 && r.nodes_per_ray.is_nan(), "a kernel without counters reports none: {r:?}");
+        assert_eq!(r.differs_from_f32, 0);
+    }
+    let emitted_rows: Vec<&Row> = rows.iter().filter(|r| r.kernel == "emitted").collect();
+    assert_eq!(emitted_rows.len(), 1);
+    assert_eq!(emitted_rows[0].status, "ok");
+    assert!(std::fs::read_to_string(out.join("report.md")).unwrap().contains("| unordered |"));
+
+    // The f32 layout's kernel over an f16h BVH: it runs, and returns other hits.
+    let f32_module = root.join("spirv/trav_f32_b4_p1.spv");
+    let bad = format!("[[kernel]]\nname = \"wrong-layout\"\nlayout = \"f16h\"\nfile = {:?}\nrays = [\"primary\"]\n", f32_module.display().to_string());
+    let out = tmp("kernels-bad");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--quiet", "--config", cfg(&bad).to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("wrong-layout") && err.contains("failed validation"), "{err}");
+    let rows = read_rows(&out).unwrap();
+    let r = rows.iter().find(|r| r.kernel == "wrong-layout").unwrap();
+    assert!(r.status.starts_with("FAILED") && r.status.contains("differ from the CPU reference"), "{}", r.status);
 }

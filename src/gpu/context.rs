@@ -22,6 +22,9 @@ pub struct DeviceInfo {
     pub storage_16bit: bool,
     pub shader_float64: bool,
     pub subgroup_size: u32,
+    /// `VkSubgroupFeatureFlags` the device supports (basic, vote, arithmetic, ballot, shuffle,
+    /// shuffle relative, clustered, quad: bits 0..7).
+    pub subgroup_ops: u32,
     pub ray_query: bool,
     pub max_storage_buffer: u64,
     pub timestamp_period_ns: f32,
@@ -139,6 +142,7 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
             storage_16bit: v11.storage_buffer16_bit_access == vk::TRUE,
             shader_float64: f64ok,
             subgroup_size: sub.subgroup_size,
+            subgroup_ops: sub.supported_operations.as_raw(),
             ray_query: rq_ok,
             max_storage_buffer: props.limits.max_storage_buffer_range as u64,
             timestamp_period_ns: props.limits.timestamp_period,

@@ -1,16 +1,17 @@
 //! The Vulkan backend: the only module with `unsafe`. One file per Vulkan concept:
 //! [`context`] (instance, device, queue, allocator, validation), [`buffer`], [`shader`]
-//! (GLSL → SPIR-V, interface checks), [`pipeline`], [`timer`] (timestamp queries), and
-//! [`traversal`] (uploading a BVH and dispatching a traversal variant).
+//! (GLSL → SPIR-V, interface checks), [`pipeline`] (the Vulkan compute pipeline object),
+//! [`timer`] (timestamp queries), [`kernel`] (a BVH on the device and the traversal kernels
+//! over it), [`rq`] (the ray-query baseline) and [`bench`] (raw fp16/fp32 throughput).
 
 pub mod bench;
 pub mod buffer;
 pub mod context;
+pub mod kernel;
 pub mod pipeline;
 pub mod rq;
 pub mod shader;
 pub mod timer;
-pub mod traversal;
 
 pub use context::{list_devices, ContextOptions, DeviceInfo, Gpu};
 use thiserror::Error;

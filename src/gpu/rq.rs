@@ -5,9 +5,10 @@
 
 use super::buffer::Buffer;
 use super::pipeline::ComputePipeline;
-use super::timer::Timer;
-use super::traversal::{PushConstants, RunOutput};
+use super::kernel::{dispatch_timed, RunOutput};
 use super::{shader, Gpu, GpuError, VkResultExt};
+use crate::interface::{binding, PushConstants};
+use crate::layout::{Baseline, BaselineDevice, BaselineScene};
 use crate::rays::Ray;
 use crate::scene::Scene;
 use crate::trace::Hit;
@@ -141,10 +142,9 @@ pub const KERNEL: &str = "trav_rq";
 
 /// The ray-query kernel's pipeline: binding 0 is the TLAS, 3 rays, 4 hits.
 pub fn pipeline(gpu: &Gpu) -> Result<ComputePipeline<'_>, GpuError> {
-    let src = shader::SOURCES.iter().find(|(n, _)| *n == "trav_rq.comp").map(|(_, s)| *s).unwrap();
-    let code = shader::compile_source(KERNEL, "trav_rq.comp", src, &[])?;
-    let mut types = vec![vk::DescriptorType::STORAGE_BUFFER; 6];
-    types[0] = vk::DescriptorType::ACCELERATION_STRUCTURE_KHR;
+    let code = shader::compile_baseline(KERNEL, "trav_rq.comp")?;
+    let mut types = vec![vk::DescriptorType::STORAGE_BUFFER; binding::COUNT as usize];
+    types[binding::NODES as usize] = vk::DescriptorType::ACCELERATION_STRUCTURE_KHR;
     ComputePipeline::new_typed(gpu, KERNEL, &code, &types, std::mem::size_of::<PushConstants>() as u32)
 }
 
@@ -153,22 +153,65 @@ pub fn run(gpu: &Gpu, scene: &RqScene, pipe: &ComputePipeline, rays: &[Ray], war
     let n = rays.len();
     let ray_buf = Buffer::upload(gpu, "rays", bytemuck::cast_slice(rays))?;
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
-    let hits = Buffer::new(gpu, "hits", (n * 16) as u64, usage, MemoryLocation::GpuOnly)?;
+    let hit_bytes = n * std::mem::size_of::<Hit>();
+    let hits = Buffer::new(gpu, "hits", hit_bytes as u64, usage, MemoryLocation::GpuOnly)?;
     let unused = Buffer::new(gpu, "unused", 16, usage, MemoryLocation::GpuOnly)?;
-    pipe.bind_acceleration_structure(0, scene.tlas);
-    pipe.bind_at(&[(1, &unused), (2, &unused), (3, &ray_buf), (4, &hits), (5, &unused)]);
-    let push = PushConstants { ray_count: n as u32, node_count: 0, _pad: [0; 2], root_wk: [0.0; 4], box_lo: [0.0; 4], box_hi: [0.0; 4] };
-    let timer = Timer::new(gpu)?;
-    let mut times = Vec::new();
-    for i in 0..(warmup + repeat).max(1) {
-        gpu.submit_and_wait(|cmd| {
-            timer.record(cmd, || pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(64)));
-            pipe.barrier(cmd);
-        })?;
-        if i >= warmup {
-            times.push(timer.elapsed_ms()?);
-        }
-    }
-    let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(n * 16)?);
+    pipe.bind_acceleration_structure(binding::NODES, scene.tlas);
+    pipe.bind_at(&[(binding::TRI_VERTS, &unused), (binding::TRI_IDS, &unused), (binding::RAYS, &ray_buf), (binding::HITS, &hits), (binding::COUNTERS, &unused)]);
+    let push = PushConstants { ray_count: n as u32, ..Default::default() };
+    let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(64), warmup, repeat)?;
+    let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
     Ok(RunOutput { hits, counters: None, times_ms: times })
+}
+
+/// The registry entry `rq`.
+pub struct Rq;
+
+impl Baseline for Rq {
+    fn name(&self) -> &'static str {
+        "rq"
+    }
+    fn summary(&self) -> &'static str {
+        "the driver's acceleration structure (prefer fast trace) traced with rayQueryEXT"
+    }
+    fn kernel(&self) -> &'static str {
+        KERNEL
+    }
+    fn unavailable(&self, gpu: &Gpu) -> Option<String> {
+        (!gpu.info.ray_query).then(|| "the device has no VK_KHR_ray_query / VK_KHR_acceleration_structure".to_string())
+    }
+    fn prepare<'g>(&self, gpu: &'g Gpu) -> Result<Box<dyn BaselineDevice + 'g>, GpuError> {
+        if let Some(why) = self.unavailable(gpu) {
+            return Err(GpuError::MissingFeature { device: gpu.info.name.clone(), feature: why });
+        }
+        Ok(Box::new(RqDevice { gpu, pipe: pipeline(gpu)? }))
+    }
+}
+
+struct RqDevice<'g> {
+    gpu: &'g Gpu,
+    pipe: ComputePipeline<'g>,
+}
+
+struct RqRun<'s> {
+    dev: &'s RqDevice<'s>,
+    scene: RqScene<'s>,
+}
+
+impl<'g> BaselineDevice for RqDevice<'g> {
+    fn scene<'s>(&'s self, scene: &Scene) -> Result<Box<dyn BaselineScene + 's>, GpuError> {
+        Ok(Box::new(RqRun { dev: self, scene: RqScene::build(self.gpu, scene)? }))
+    }
+}
+
+impl BaselineScene for RqRun<'_> {
+    fn bytes(&self) -> u64 {
+        self.scene.bytes
+    }
+    fn build_ms(&self) -> f64 {
+        self.scene.build_ms
+    }
+    fn run(&self, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError> {
+        run(self.dev.gpu, &self.scene, &self.dev.pipe, rays, warmup, repeat)
+    }
 }

@@ -1,40 +1,108 @@
-//! GLSL → SPIR-V with shaderc (sources embedded in the binary, `#include`s resolved among
-//! them), and the interface check applied to user-supplied SPIR-V modules.
+//! GLSL → SPIR-V with shaderc, and the interface check applied to a user's module.
+//!
+//! Includes resolve, in order, to: `interface.glsl` (generated for the variant from the Rust
+//! definitions, see [`crate::interface`]), `layout.glsl` (the variant's layout hooks),
+//! `layout/<name>.glsl` (any registered layout's hooks), the shared files of `glsl/`
+//! (embedded, so the binary is self-contained), and — for a user's kernel — files beside it.
 
-use super::GpuError;
+use super::{Gpu, GpuError};
+use crate::interface::{self, binding, PushConstants};
+use crate::layout::LayoutId;
 use crate::variant::{PacketImpl, Variant};
+use std::path::{Path, PathBuf};
 
-/// The GLSL sources in `glsl/`, embedded so the binary is self-contained.
+/// The shared GLSL sources in `glsl/` (layout hooks come from the registry).
 pub const SOURCES: &[(&str, &str)] = &[
     ("ray.glsl", include_str!("../../glsl/ray.glsl")),
     ("tri.glsl", include_str!("../../glsl/tri.glsl")),
     ("box.glsl", include_str!("../../glsl/box.glsl")),
-    ("frame.glsl", include_str!("../../glsl/frame.glsl")),
-    ("node.glsl", include_str!("../../glsl/node.glsl")),
-    ("trav_f32.comp", include_str!("../../glsl/trav_f32.comp")),
-    ("trav_f16h.comp", include_str!("../../glsl/trav_f16h.comp")),
     ("packet.glsl", include_str!("../../glsl/packet.glsl")),
-    ("trav_f32_packet.comp", include_str!("../../glsl/trav_f32_packet.comp")),
-    ("trav_f16h_packet.comp", include_str!("../../glsl/trav_f16h_packet.comp")),
+    ("trav.comp", include_str!("../../glsl/trav.comp")),
     ("trav_rq.comp", include_str!("../../glsl/trav_rq.comp")),
     ("bench.comp", include_str!("../../glsl/bench.comp")),
 ];
 
-fn source(name: &str) -> Option<&'static str> {
+/// A shared source by file name.
+pub fn source(name: &str) -> Option<&'static str> {
     SOURCES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
 }
 
-/// Compiles one variant. `f64_fallback`: use fp64 for the watertight test's exact-zero edge
-/// case (needs `shaderFloat64`; the CPU reference always does).
-pub fn compile(v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
-    let file = v.source_file();
-    let name = v.kernel_name(imp, stats);
-    let src = source(file).ok_or_else(|| GpuError::Compile { variant: name.clone(), log: format!("missing source {file}") })?;
-    compile_source(&name, file, src, &v.defines(imp, stats, f64_fallback))
+/// What `#include` resolves to for one compilation.
+pub struct Includes {
+    /// The generated `interface.glsl`.
+    pub interface: String,
+    /// The variant's layout hooks (`layout.glsl`), if any.
+    pub layout: Option<&'static str>,
+    /// A user kernel's folder, searched last.
+    pub user_dir: Option<PathBuf>,
 }
 
-/// Compiles GLSL compute source (which may `#include` the files in `glsl/`) with defines.
-pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
+impl Includes {
+    /// The includes of a variant's kernel.
+    pub fn variant(v: &Variant) -> Includes {
+        Includes { interface: v.interface_glsl(), layout: Some(v.layout.bvh().expect("a BVH layout").glsl()), user_dir: None }
+    }
+
+    /// The includes of a kernel without a layout (the baselines, the micro-benchmark).
+    pub fn plain() -> Includes {
+        Includes { interface: interface::glsl_header(None), layout: None, user_dir: None }
+    }
+
+    fn resolve(&self, req: &str) -> Result<String, String> {
+        if req == "interface.glsl" {
+            return Ok(self.interface.clone());
+        }
+        if req == "layout.glsl" {
+            return self.layout.map(str::to_string).ok_or_else(|| "layout.glsl: this kernel has no layout".to_string());
+        }
+        if let Some(name) = req.strip_prefix("layout/").and_then(|r| r.strip_suffix(".glsl")) {
+            if let Some(l) = LayoutId::parse(name).ok().and_then(|l| l.bvh()) {
+                return Ok(l.glsl().to_string());
+            }
+        }
+        if let Some(s) = source(req) {
+            return Ok(s.to_string());
+        }
+        if let Some(d) = &self.user_dir {
+            let p = d.join(req);
+            if let Ok(s) = std::fs::read_to_string(&p) {
+                return Ok(s);
+            }
+        }
+        Err(format!("no such include: {req}"))
+    }
+}
+
+/// Compiles one built-in variant. `f64_fallback`: use fp64 for the watertight test's
+/// exact-zero edge case (needs `shaderFloat64`; the CPU reference always does).
+pub fn compile(v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+    let src = source("trav.comp").expect("glsl/trav.comp is embedded");
+    compile_source(&v.kernel_name(imp, stats), "trav.comp", src, &v.defines(imp, stats, f64_fallback), &Includes::variant(v))
+}
+
+/// Compiles a user's GLSL kernel file with the defines and includes of the built-in kernel of
+/// `v` (plus the file's own folder).
+pub fn compile_user(path: &Path, v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+    let src = std::fs::read_to_string(path).map_err(|e| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot read: {e}") })?;
+    let mut inc = Includes::variant(v);
+    inc.user_dir = path.parent().map(Path::to_path_buf);
+    let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
+    compile_source(&format!("{} ({})", v.kernel_name(imp, stats), path.display()), &file, &src, &v.defines(imp, stats, f64_fallback), &inc)
+}
+
+/// Compiles a shared kernel that has no layout (`trav_rq.comp`, `bench.comp`).
+pub fn compile_baseline(name: &str, file: &str) -> Result<Vec<u32>, GpuError> {
+    compile_plain(name, file, &[])
+}
+
+/// Compiles a shared kernel without a layout, with defines.
+pub fn compile_plain(name: &str, file: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
+    let src = source(file).ok_or_else(|| GpuError::Compile { variant: name.into(), log: format!("missing source {file}") })?;
+    compile_source(name, file, src, defines, &Includes::plain())
+}
+
+/// Compiles GLSL compute source with defines; `#include`s resolve through `inc`.
+pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, String)], inc: &Includes) -> Result<Vec<u32>, GpuError> {
     let compile_err = |log: String| GpuError::Compile { variant: name.to_string(), log };
     let compiler = shaderc::Compiler::new().map_err(|e| compile_err(format!("shaderc unavailable: {e}")))?;
     let mut opts = shaderc::CompileOptions::new().map_err(|e| compile_err(format!("shaderc options: {e}")))?;
@@ -44,17 +112,10 @@ pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, Str
     for (k, val) in defines {
         opts.add_macro_definition(k, Some(val));
     }
-    opts.set_include_callback(|req, _ty, _from, _depth| {
-        source(req)
-            .map(|s| shaderc::ResolvedInclude { resolved_name: req.to_string(), content: s.to_string() })
-            .ok_or_else(|| format!("no such include: {req}"))
-    });
+    opts.set_include_callback(|req, _ty, _from, _depth| inc.resolve(req).map(|content| shaderc::ResolvedInclude { resolved_name: req.to_string(), content }));
     let art = compiler.compile_into_spirv(src, shaderc::ShaderKind::Compute, file, "main", Some(&opts)).map_err(|e| compile_err(e.to_string()))?;
     Ok(art.as_binary().to_vec())
 }
-
-/// What a traversal module must look like to be dispatched in place of a built-in one.
-pub const EXPECTED_BINDINGS: [u32; 6] = [0, 1, 2, 3, 4, 5];
 
 /// A summary of a SPIR-V module's interface.
 #[derive(Debug, Default, Clone, PartialEq)]
@@ -63,12 +124,16 @@ pub struct Interface {
     pub local_size: Option<[u32; 3]>,
     /// (descriptor set, binding) of every decorated variable.
     pub bindings: Vec<(u32, u32)>,
-    pub push_constants: bool,
+    /// Bytes of the push-constant block, if the module declares one.
+    pub push_constant_bytes: Option<u32>,
+    /// SpecId of every specialization constant.
+    pub spec_ids: Vec<u32>,
     pub capabilities: Vec<u32>,
 }
 
 /// Parses the words of a SPIR-V module far enough to read its interface.
 pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
+    use std::collections::HashMap;
     if words.len() < 5 {
         return Err("too short to be SPIR-V".into());
     }
@@ -77,8 +142,15 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
     }
     let mut i = 5;
     let mut itf = Interface::default();
-    let mut sets = std::collections::HashMap::new();
-    let mut binds = std::collections::HashMap::new();
+    let (mut sets, mut binds) = (HashMap::new(), HashMap::new());
+    // Type sizes for the push-constant block: id → bytes; struct member offsets; constants.
+    let mut size: HashMap<u32, u64> = HashMap::new();
+    let mut members: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut offsets: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut strides: HashMap<u32, u32> = HashMap::new();
+    let mut consts: HashMap<u32, u32> = HashMap::new();
+    let mut pointee: HashMap<u32, u32> = HashMap::new();
+    let mut push_ptr_types = Vec::new();
     let mut last_op = 0;
     while i < words.len() {
         let wc = (words[i] >> 16) as usize;
@@ -101,7 +173,46 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
             71 if ops.len() >= 3 && ops[1] == 33 => {
                 binds.insert(ops[0], ops[2]);
             }
-            59 if ops.len() >= 3 && ops[2] == 9 => itf.push_constants = true,
+            71 if ops.len() >= 3 && ops[1] == 1 => itf.spec_ids.push(ops[2]),
+            71 if ops.len() >= 3 && ops[1] == 6 => {
+                strides.insert(ops[0], ops[2]);
+            }
+            72 if ops.len() >= 4 && ops[2] == 35 => {
+                offsets.insert((ops[0], ops[1]), ops[3]);
+            }
+            21 | 22 if ops.len() >= 2 => {
+                size.insert(ops[0], ops[1] as u64 / 8);
+            }
+            23 if ops.len() >= 3 => {
+                let s = size.get(&ops[1]).copied().unwrap_or(0) * ops[2] as u64;
+                size.insert(ops[0], s);
+            }
+            24 if ops.len() >= 3 => {
+                let s = size.get(&ops[1]).copied().unwrap_or(0) * ops[2] as u64;
+                size.insert(ops[0], s);
+            }
+            43 if ops.len() >= 3 => {
+                consts.insert(ops[1], ops[2]);
+            }
+            28 if ops.len() >= 3 => {
+                let n = consts.get(&ops[2]).copied().unwrap_or(0) as u64;
+                let stride = strides.get(&ops[0]).map(|&s| s as u64).unwrap_or_else(|| size.get(&ops[1]).copied().unwrap_or(0));
+                size.insert(ops[0], n * stride);
+            }
+            30 => {
+                members.insert(ops[0], ops[1..].to_vec());
+            }
+            32 if ops.len() >= 3 => {
+                pointee.insert(ops[0], ops[2]);
+                if ops[1] == 9 {
+                    push_ptr_types.push(ops[0]);
+                }
+            }
+            59 if ops.len() >= 3 && ops[2] == 9 => {
+                let st = pointee.get(&ops[0]).copied().unwrap_or(0);
+                let bytes = members.get(&st).map(|m| m.iter().enumerate().map(|(k, t)| offsets.get(&(st, k as u32)).copied().unwrap_or(0) as u64 + size.get(t).copied().unwrap_or(0)).max().unwrap_or(0));
+                itf.push_constant_bytes = Some(bytes.unwrap_or(0) as u32);
+            }
             _ => {}
         }
         last_op = op;
@@ -116,35 +227,84 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
     Ok(itf)
 }
 
-/// Loads a user SPIR-V file and checks it can stand in for a traversal kernel whose
-/// workgroup has `local_size` invocations.
-pub fn load_checked(path: &std::path::Path, local_size: u32) -> Result<Vec<u32>, GpuError> {
+/// Reads a SPIR-V file as words.
+pub fn read_spirv(path: &Path) -> Result<Vec<u32>, GpuError> {
     let err = |msg: String| GpuError::Spirv { path: path.display().to_string(), msg };
     let bytes = std::fs::read(path).map_err(|e| err(format!("cannot read: {e}")))?;
     if bytes.len() % 4 != 0 {
         return Err(err(format!("size {} is not a multiple of 4 bytes", bytes.len())));
     }
-    let words: Vec<u32> = bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-    let itf = parse_interface(&words).map_err(err)?;
-    if !itf.entry_points.iter().any(|(model, name)| *model == 5 && name == "main") {
+    Ok(bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+}
+
+/// SPIR-V capabilities a traversal kernel may declare, and whether `gpu` (as halftrace opens
+/// it) provides each.
+fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
+    let i = &gpu.info;
+    let sub = |bit: u32| i.subgroup_ops & (1 << bit) != 0;
+    Some(match cap {
+        1 => ("Shader", true),
+        9 => ("Float16", i.shader_float16),
+        10 => ("Float64", i.shader_float64),
+        4433 => ("StorageBuffer16BitAccess", i.storage_16bit),
+        4466 => ("SignedZeroInfNanPreserve", i.preserve_16 || i.preserve_32),
+        4467 => ("RoundingModeRTE", i.fp16_rte),
+        61 => ("GroupNonUniform", sub(0)),
+        62 => ("GroupNonUniformVote", sub(1)),
+        63 => ("GroupNonUniformArithmetic", sub(2)),
+        64 => ("GroupNonUniformBallot", sub(3)),
+        65 => ("GroupNonUniformShuffle", sub(4)),
+        66 => ("GroupNonUniformShuffleRelative", sub(5)),
+        67 => ("GroupNonUniformClustered", sub(6)),
+        68 => ("GroupNonUniformQuad", sub(7)),
+        _ => return None,
+    })
+}
+
+/// Checks that a user's module can stand in for the kernel of variant `v` (implementation
+/// `imp`, counting or not) on `gpu`; returns the module, or an error that names the file and
+/// what differs.
+pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stats: bool, gpu: &Gpu) -> Result<Vec<u32>, GpuError> {
+    let name = v.kernel_name(imp, stats);
+    let err = |msg: String| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot stand in for {name}: {msg}") };
+    let itf = parse_interface(words).map_err(|m| GpuError::Spirv { path: path.display().to_string(), msg: m })?;
+    if !itf.entry_points.iter().any(|(model, n)| *model == 5 && n == "main") {
         return Err(err(format!("no GLCompute entry point named 'main' (found {:?})", itf.entry_points)));
     }
+    let wg = v.workgroup(imp);
     match itf.local_size {
-        Some([x, 1, 1]) if x == local_size => {}
-        other => return Err(err(format!("workgroup size must be ({local_size}, 1, 1), found {other:?}"))),
+        Some([x, 1, 1]) if x == wg => {}
+        other => return Err(err(format!("its workgroup size is {other:?}; the variant dispatches ({wg}, 1, 1)"))),
     }
     for &(set, b) in &itf.bindings {
-        if set != 0 || !EXPECTED_BINDINGS.contains(&b) {
-            return Err(err(format!("unexpected binding (set {set}, binding {b}); the traversal interface is set 0, bindings 0..=5")));
+        if set != 0 || b >= binding::COUNT {
+            return Err(err(format!("it uses set {set}, binding {b}; the traversal interface is set 0, bindings 0..={}", binding::COUNT - 1)));
         }
     }
-    for need in [3, 4] {
+    for (need, what) in [(binding::RAYS, "rays"), (binding::HITS, "hits")] {
         if !itf.bindings.contains(&(0, need)) {
-            return Err(err(format!("binding {need} ({}) is not used; the module cannot be a traversal kernel", if need == 3 { "rays" } else { "hits" })));
+            return Err(err(format!("it does not use binding {need} ({what}), so it cannot be a traversal kernel")));
         }
     }
-    if !itf.push_constants {
-        return Err(err("no push-constant block (ray count and root frame are passed that way)".into()));
+    let writes_counters = itf.bindings.contains(&(0, binding::COUNTERS));
+    if writes_counters && !stats {
+        return Err(err(format!("it binds {} (counters): it is a counting kernel, and the timed kernel writes no counters", binding::COUNTERS)));
     }
-    Ok(words)
+    let push = std::mem::size_of::<PushConstants>() as u32;
+    match itf.push_constant_bytes {
+        None => return Err(err(format!("it declares no push-constant block (the host passes {push} bytes: ray count, node count, root data, root box)"))),
+        Some(n) if n > push => return Err(err(format!("its push-constant block is {n} bytes; the host passes {push}"))),
+        Some(_) => {}
+    }
+    if !itf.spec_ids.is_empty() {
+        return Err(err(format!("it has specialization constants (SpecId {:?}); the host sets none", itf.spec_ids)));
+    }
+    for &c in &itf.capabilities {
+        match capability(gpu, c) {
+            Some((_, true)) => {}
+            Some((n, false)) => return Err(err(format!("it requires capability {n}, which {} does not provide", gpu.info.name))),
+            None => return Err(err(format!("it requires SPIR-V capability {c}, which halftrace does not enable"))),
+        }
+    }
+    Ok(words.to_vec())
 }

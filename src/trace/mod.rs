@@ -1,7 +1,7 @@
-//! CPU reference traversal, one module per layout, plus brute force. These are the oracles
-//! every GPU variant is compared with.
+//! The CPU reference: one traversal skeleton generic over the layout and the packet width
+//! ([`traverse`]), plus brute force. These are the oracles every GPU variant is compared with.
 //!
-//! Rules shared by every tracer (and by the shaders):
+//! Rules shared by every layout (and by the kernels):
 //! - Triangle tests are fp32 world space, watertight (Woop, Benthin, Wald 2013, with the
 //!   paper's fp64 fallback when an edge function is exactly zero), accepting
 //!   `tmin <= t <= t_closest`.
@@ -11,24 +11,24 @@
 //!   returns exactly the brute-force closest hit.
 
 pub mod brute;
-pub mod f16h;
-pub mod f32;
-pub mod packet;
+pub mod traverse;
 pub mod tri;
 
+use crate::glsl_struct;
 use crate::rays::Ray;
 use glam::Vec3;
-use rayon::prelude::*;
 
-/// One row of `hits.npy`: `t` (+inf on a miss), `prim` (−1 on a miss), barycentrics `u`, `v`
-/// of vertices 1 and 2 (hit point = (1−u−v)·v0 + u·v1 + v·v2). 16 bytes.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Hit {
-    pub t: f32,
-    pub prim: i32,
-    pub u: f32,
-    pub v: f32,
+glsl_struct! {
+    /// One row of `hits.npy` and one record of a kernel's hits buffer: `t` (+inf on a miss),
+    /// `prim` (−1 on a miss), barycentrics `u`, `v` of vertices 1 and 2 (hit point =
+    /// (1−u−v)·v0 + u·v1 + v·v2). 16 bytes.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub struct Hit {
+        pub t: f32,
+        pub prim: i32,
+        pub u: f32,
+        pub v: f32,
+    }
 }
 const _: () = assert!(std::mem::size_of::<Hit>() == 16);
 
@@ -43,23 +43,26 @@ impl Hit {
     }
 }
 
-/// Work counters of one ray.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Counters {
-    /// Inner nodes popped and visited.
-    pub nodes: u32,
-    /// Ray–box tests (child boxes of visited nodes, plus the root's own box).
-    pub box_tests: u32,
-    /// Ray–triangle tests.
-    pub tri_tests: u32,
-    /// f16h only: child origins recomputed from the fp32 world ray because the fp16 origin
-    /// move's error bound grew too large.
-    pub reanchors: u32,
-    /// Packet counters, stored in the first ray of each packet (0 in the others): nodes the
-    /// packet visited, and the sum over those visits of the rays active for them.
-    /// Single-ray traversal: both equal `nodes`.
-    pub packet_nodes: u32,
-    pub active_lanes: u32,
+glsl_struct! {
+    /// Work counters of one ray, as the CPU reference counts them and a counting kernel writes
+    /// them (one record per ray, 24 bytes).
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct Counters {
+        /// Inner nodes popped and visited.
+        pub nodes: u32,
+        /// Ray–box tests (child boxes of visited nodes, plus the root's own box).
+        pub box_tests: u32,
+        /// Ray–triangle tests.
+        pub tri_tests: u32,
+        /// f16h only: child origins recomputed from the fp32 world ray because the fp16 origin
+        /// move's error bound grew too large.
+        pub reanchors: u32,
+        /// Packet counters, stored in the first ray of each packet (0 in the others): nodes the
+        /// packet visited, and the sum over those visits of the rays active for them.
+        /// Single-ray traversal: both equal `nodes`.
+        pub packet_nodes: u32,
+        pub active_lanes: u32,
+    }
 }
 
 impl std::ops::AddAssign for Counters {
@@ -189,7 +192,9 @@ pub fn slab32(r: &RayPre, lo: [f32; 3], hi: [f32; 3], t0: f32, t1: f32) -> (f32,
 }
 
 /// How many rays of one result agree with a reference: same hit/miss, and the same `prim` or,
-/// where triangles tie or share edges, `t` within 1e-5 relative.
+/// where triangles tie or share edges, `t` within 1e-5 relative. This is the one definition of
+/// "differs from f32" in reports ([`Agreement::differs`]); the exact layouts are held to more —
+/// bitwise equality with their CPU reference — by validation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Agreement {
     pub agree: usize,
@@ -199,6 +204,11 @@ pub struct Agreement {
 }
 
 impl Agreement {
+    /// Rays that disagree.
+    pub fn differs(&self) -> usize {
+        self.total - self.agree
+    }
+
     pub fn rate(&self) -> f64 {
         if self.total == 0 {
             1.0
@@ -229,27 +239,28 @@ pub fn agreement(got: &[Hit], reference: &[Hit]) -> Agreement {
     a
 }
 
-/// Traces a batch of rays in parallel with `f`, keeping input order.
-pub fn trace_all<F>(rays: &[Ray], f: F) -> (Vec<Hit>, Vec<Counters>)
-where
-    F: Fn(&Ray) -> (Hit, Counters) + Sync + Send,
-{
-    rays.par_iter().map(f).unzip()
+/// Share of active rays per visited packet node: Σ active / (Σ packet visits · P).
+pub fn simd_utilisation(c: &[Counters], p: usize) -> f64 {
+    let visits: u64 = c.iter().map(|x| x.packet_nodes as u64).sum();
+    let active: u64 = c.iter().map(|x| x.active_lanes as u64).sum();
+    if visits == 0 {
+        1.0
+    } else {
+        active as f64 / (visits as f64 * p as f64)
+    }
 }
 
-/// Sorts up to 16 (key, slot) pairs ascending by key, then slot (insertion sort; the order the
-/// shaders use).
-#[inline]
-pub(crate) fn sort_hits<T: Copy>(v: &mut [(T, usize)], key: impl Fn(&T) -> f32) {
-    for i in 1..v.len() {
-        let x = v[i];
-        let mut j = i;
-        while j > 0 && (key(&v[j - 1].0) > key(&x.0) || (key(&v[j - 1].0) == key(&x.0) && v[j - 1].1 > x.1)) {
-            v[j] = v[j - 1];
-            j -= 1;
-        }
-        v[j] = x;
+/// Mean counters over a ray set: nodes, box tests, triangle tests, re-anchors per ray.
+pub fn mean_counters(c: &[Counters]) -> [f64; 4] {
+    let n = c.len().max(1) as f64;
+    let mut s = [0f64; 4];
+    for x in c {
+        s[0] += x.nodes as f64;
+        s[1] += x.box_tests as f64;
+        s[2] += x.tri_tests as f64;
+        s[3] += x.reanchors as f64;
     }
+    s.map(|v| v / n)
 }
 
 #[cfg(test)]

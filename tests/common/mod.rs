@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use halftrace::bvh::{self, BinaryBvh};
-use halftrace::pipeline::{self, RayKind, RayParams};
-use halftrace::rays::Ray;
+use halftrace::layout::{Encoded, LayoutId};
+use halftrace::rays::{make_rays, Ray, RayKind, RayParams};
 use halftrace::scene::{self, Scene};
 use halftrace::trace::Hit;
 use std::path::PathBuf;
@@ -51,7 +51,7 @@ pub fn ray_sets(p: &Prepared, res: u32, grazing: usize) -> Vec<(String, Vec<Ray>
     let params = RayParams { width: res, height: res, camera: None, seed: 7, grazing };
     [RayKind::Primary, RayKind::Ao, RayKind::Diffuse, RayKind::Grazing]
         .into_iter()
-        .map(|k| (k.to_string(), pipeline::make_rays(&p.scene, &p.bin, &k, &params).unwrap()))
+        .map(|k| (k.to_string(), make_rays(&p.scene, &p.bin, &k, &params).unwrap()))
         .collect()
 }
 
@@ -67,4 +67,14 @@ pub fn assert_same_hits(what: &str, rays: &[Ray], expected: &[Hit], got: &[Hit])
         }
         panic!("{msg}");
     }
+}
+
+/// The registered layout called `name`.
+pub fn layout(name: &str) -> LayoutId {
+    LayoutId::parse(name).unwrap()
+}
+
+/// Encodes the prepared scene in `layout` at branching `b`.
+pub fn encode(p: &Prepared, layout: LayoutId, b: usize) -> Encoded {
+    Encoded::new(&p.scene, &p.bin, layout, b).unwrap()
 }

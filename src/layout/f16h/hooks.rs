@@ -1,12 +1,13 @@
-//! Reference traversal of the `f16h` layout: box tests and origin moves in IEEE half
-//! arithmetic (`half::f16`, one rounding per operation), conservative, so it returns exactly
-//! the fp32 closest hit. The shader does the same operations in the same order.
+//! The f16h traversal hooks: box tests and origin moves in IEEE half arithmetic (`half::f16`,
+//! one rounding per operation) or in the other math modes, conservative, so the traversal
+//! returns exactly the fp32 closest hit. `glsl/layout/f16h.glsl` does the same operations in
+//! the same order.
 //!
 //! # State per stack entry (the seed's "extra stack")
-//! node; its frame (W, K) in fp32; the ray origin O in the node's frame (fp16); `e`, a bound
-//! on the origin's error; `tp`, the world parameter of the point P that O stands for; `tlo`,
-//! a lower bound on the world parameter of any point of the ray that can still matter in this
-//! node.
+//! Besides the node index (which the skeleton keeps): the node's frame (W, K) in fp32; the ray
+//! origin O in the node's frame (fp16, or fp32 in the fp32 math mode); `e`, a bound on the
+//! origin's error; `tp`, the world parameter of the point P that O stands for; `tlo`, a lower
+//! bound on the world parameter of any point of the ray that can still matter in this node.
 //!
 //! # The bound relied on (invariant)
 //! With d* = D / max|D| (exact) and L the node frame's map:
@@ -35,12 +36,11 @@
 //! ray at the child's fp32 entry distance (`Counters::reanchors`). Keeping this rare is what
 //! makes fp16 origin moves usable; the counter reports how rare.
 
-use super::{slab32, sort_hits, upper32, Closest, Counters, Hit, RayPre};
-use crate::bvh::ChildRef;
-use crate::encode::f16h::{derive_child, F16hBvh, F16hNodes, Frame, NodeF16h};
-use crate::encode::{decode_child, CHILD_EMPTY};
+use super::frame::{derive_child, Frame};
+use super::F16hNode;
 use crate::fp16::{down_f32, up_f32};
-use crate::rays::Ray;
+use crate::layout::Math;
+use crate::trace::{slab32, upper32, Counters, RayPre};
 use half::f16;
 
 /// Largest |origin coordinate| kept in a frame (node boxes span ±16384).
@@ -62,54 +62,10 @@ const TWO_M22: f32 = 1.0 / 4_194_304.0;
 const TWO_M23: f32 = 1.0 / 8_388_608.0;
 const TWO_M24: f32 = 1.0 / 16_777_216.0;
 
-/// Arithmetic of the f16h box tests and origin moves (the nodes are fp16 in every mode).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Math {
-    /// The seed: box tests and origin moves in fp16.
-    F16,
-    /// fp16 nodes widened to fp32 on load; box tests and origin moves in fp32.
-    F32,
-    /// fp16 differences and products; fp32 min/max, widening and comparisons; fp16 origin moves.
-    Mixed,
-}
-
-impl Math {
-    pub const ALL: [Math; 3] = [Math::F16, Math::F32, Math::Mixed];
-    /// Name in flags and configs: f16, f32, mixed.
-    pub fn name(self) -> &'static str {
-        match self {
-            Math::F16 => "f16",
-            Math::F32 => "f32",
-            Math::Mixed => "mixed",
-        }
-    }
-    /// Tag in kernel names: m16, m32, mix.
-    pub fn tag(self) -> &'static str {
-        match self {
-            Math::F16 => "m16",
-            Math::F32 => "m32",
-            Math::Mixed => "mix",
-        }
-    }
-}
-
-impl std::str::FromStr for Math {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Math, String> {
-        match s {
-            "f16" | "m16" => Ok(Math::F16),
-            "f32" | "m32" => Ok(Math::F32),
-            "mixed" | "mix" => Ok(Math::Mixed),
-            o => Err(format!("unknown math mode '{o}' (use f16, f32 or mixed)")),
-        }
-    }
-}
-
-/// One stack entry (see the module docs). The origin is held in fp32; in the fp16 modes its
-/// values are fp16 numbers (exactly representable).
+/// One stack entry besides the node index (see the module docs). The origin is held in fp32;
+/// in the fp16 modes its values are fp16 numbers (exactly representable).
 #[derive(Clone, Copy, Debug)]
 pub struct Entry {
-    pub node: u32,
     pub frame: Frame,
     pub o: [f32; 3],
     pub e: f32,
@@ -119,7 +75,8 @@ pub struct Entry {
 
 /// Per-ray fp16 constants: d16 = fp16(D / max|D|), with components below 2⁻¹⁵ in magnitude
 /// flushed to +0 (an error ≤ 2⁻¹⁵, inside the 2⁻¹² direction budget), and idir = fp16(1 / d16),
-/// finite (|idir| ≤ 32768) for every non-zero component, computed by fp16 division.
+/// finite (|idir| ≤ 32768) for every non-zero component, computed by fp16 division; and the
+/// math mode.
 #[derive(Clone, Copy, Debug)]
 pub struct Ray16 {
     pub m: f32,
@@ -127,13 +84,14 @@ pub struct Ray16 {
     pub idir: [f16; 3],
     /// 1 / d16 in fp32 (the fp32 math mode's reciprocal).
     pub idir32: [f32; 3],
+    pub math: Math,
 }
 
 /// Direction components (after normalising the largest to ±1) below this are treated as 0.
 pub const D_FLUSH: f32 = 1.0 / 32768.0;
 
 impl Ray16 {
-    pub fn new(r: &RayPre) -> Ray16 {
+    pub fn new(r: &RayPre, math: Math) -> Ray16 {
         let m = r.d.abs().max_element();
         let mut d = [f16::ZERO; 3];
         let mut idir = [f16::ZERO; 3];
@@ -145,7 +103,7 @@ impl Ray16 {
             idir[a] = if d[a] == f16::ZERO { f16::INFINITY } else { f16::ONE / d[a] };
             idir32[a] = if d[a] == f16::ZERO { f32::INFINITY } else { 1.0 / d[a].to_f32() };
         }
-        Ray16 { m, d, idir, idir32 }
+        Ray16 { m, d, idir, idir32, math }
     }
 }
 
@@ -203,10 +161,11 @@ pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> 
     (tn, tn_lb, tf_ub)
 }
 
-/// The box test of one child in the given math mode, as fp32 values (exact conversions of the
+/// The box test of one child in the ray's math mode, as fp32 values (exact conversions of the
 /// fp16 results in the fp16 mode, so comparisons are unchanged): (tn, tn_lb, tf_ub).
 #[inline]
-pub fn slab(math: Math, o: &[f32; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f32, f32, f32) {
+pub fn slab(o: &[f32; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f32, f32, f32) {
+    let math = r16.math;
     match math {
         Math::F16 => {
             let (a, b, c) = slab16(&o.map(f16::from_f32), r16, w, lo, hi);
@@ -268,58 +227,15 @@ fn up32(x: f32) -> f32 {
     }
 }
 
-/// The seed's mode (fp16 math).
-pub fn trace(bvh: &F16hBvh, ray: &Ray) -> (Hit, Counters) {
-    trace_math(bvh, ray, Math::F16)
-}
-
-pub fn trace_math(bvh: &F16hBvh, ray: &Ray, math: Math) -> (Hit, Counters) {
-    match &bvh.nodes {
-        F16hNodes::B2(n) => trace_n(bvh, n, ray, math),
-        F16hNodes::B4(n) => trace_n(bvh, n, ray, math),
-        F16hNodes::B8(n) => trace_n(bvh, n, ray, math),
-        F16hNodes::B16(n) => trace_n(bvh, n, ray, math),
-    }
-}
-
-
-/// Per-ray state: fp32 ray constants, fp16 ray constants, closest hit, counters.
-struct Lane {
-    r: RayPre,
-    r16: Ray16,
-    best: Closest,
-    c: Counters,
-    math: Math,
-}
-
-impl Lane {
-    fn new(ray: &Ray, math: Math) -> Lane {
-        let r = RayPre::new(ray);
-        Lane { r16: Ray16::new(&r), r, best: Closest::new(ray.tmax), c: Counters { box_tests: 1, ..Default::default() }, math }
-    }
-
-    /// The root entry, or `None` when the ray misses the scene box.
-    fn root(&self, bvh: &F16hBvh) -> Option<Entry> {
-        let root = &bvh.root;
-        let (near, far) = slab32(&self.r, root.box_lo, root.box_hi, self.r.tmin, self.r.tmax);
-        if !(near <= far) {
-            return None;
-        }
-        let rf = Frame { w: root.w, k: root.k };
-        let (o, e) = anchor(&self.r, &rf, near, self.math);
-        Some(Entry { node: 0, frame: rf, o, e, tp: near, tlo: near })
-    }
-
-    fn test_leaf(&mut self, bvh: &F16hBvh, first: u32, count: u32) {
-        for i in first..first + count {
-            self.c.tri_tests += 1;
-            self.best.test(&self.r, &bvh.tris.verts[i as usize], bvh.tris.ids[i as usize] as i32);
-        }
-    }
+/// The root entry of a ray entering the root box at `near`.
+pub fn root_entry(root: &Frame, r: &RayPre, r16: &Ray16, near: f32) -> Entry {
+    let (o, e) = anchor(r, root, near, r16.math);
+    Entry { frame: *root, o, e, tp: near, tlo: near }
 }
 
 /// Quantities fixed for one visit of one node by one ray.
-struct Visit {
+#[derive(Clone, Copy, Debug)]
+pub struct Visit {
     mk: f32,
     s_lim: f16,
     lower: f16,
@@ -327,30 +243,39 @@ struct Visit {
     w: f16,
 }
 
-fn visit(en: &Entry, lane: &Lane) -> Visit {
-    let mk = lane.r16.m * en.frame.k;
+pub fn visit(en: &Entry, r16: &Ray16, best_t: f32) -> Visit {
+    let mk = r16.m * en.frame.k;
     let s_max = S_BASE + en.e + 1.0;
-    let s_lim = up_f32(up32((lane.best.t - en.tp) * mk).min(s_max));
+    let s_lim = up_f32(up32((best_t - en.tp) * mk).min(s_max));
     let sigma = up32((en.tp - en.tlo) * mk);
     let lower = down_f32((-sigma).max(-s_max));
     Visit { mk, s_lim, lower, precise: en.e <= EBIG, w: up_f32(en.e + en.e * TWO_M11 + W_MARGIN) }
 }
 
-/// The box test of one child: `Some((tn, tn_lb))` when the ray may touch it.
+/// The stored fp16 box of slot `s`.
+#[inline(always)]
+pub fn slot_box<const B: usize>(n: &F16hNode<B>, s: usize) -> ([f16; 3], [f16; 3]) {
+    ([n.lo[0][s], n.lo[1][s], n.lo[2][s]], [n.hi[0][s], n.hi[1][s], n.hi[2][s]])
+}
+
+/// The box test of one child: `Some((tn, (tn, tn_lb)))` when the ray may touch it.
 #[inline]
-fn test_child(en: &Entry, lane: &Lane, v: &Visit, lo: [f16; 3], hi: [f16; 3]) -> Option<(f32, f32)> {
+pub fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Visit, r16: &Ray16) -> Option<(f32, (f32, f32))> {
     let lower = v.lower.to_f32();
     if !v.precise {
-        return Some((lower, lower));
+        return Some((lower, (lower, lower)));
     }
-    let (tn, tn_lb, tf_ub) = slab(lane.math, &en.o, &lane.r16, v.w, lo, hi);
-    (tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= v.s_lim.to_f32()).then_some((tn, tn_lb))
+    let (lo, hi) = slot_box(n, s);
+    let (tn, tn_lb, tf_ub) = slab(&en.o, r16, v.w, lo, hi);
+    (tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= v.s_lim.to_f32()).then_some((tn, (tn, tn_lb)))
 }
 
 /// The stack entry of a hit inner child: its frame, and the origin moved into it in fp16
 /// (or re-anchored from the fp32 world ray when the bound grows too large).
-fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi: [f16; 3], tn: f32, tn_lb: f32) -> Entry {
-    let (r, r16, mk, math) = (&lane.r, &lane.r16, v.mk, lane.math);
+#[allow(clippy::too_many_arguments)]
+pub fn child_entry<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Visit, (tn, tn_lb): (f32, f32), r: &RayPre, r16: &Ray16, c: &mut Counters) -> Entry {
+    let (lo, hi) = slot_box(n, s);
+    let (mk, math) = (v.mk, r16.math);
     let cf = derive_child(&en.frame, lo, hi);
     let lower = v.lower.to_f32();
     // Lower bound of the world parameter of anything that matters in the child.
@@ -388,10 +313,10 @@ fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi:
             + (en.tp.abs() + step.abs()) * TWO_M22 * mk2)
             * (1.0 + TWO_M18);
         if finite && omag <= OCAP && e2 <= EMAX {
-            return Entry { node: j, frame: cf.frame, o: o2, e: e2, tp, tlo };
+            return Entry { frame: cf.frame, o: o2, e: e2, tp, tlo };
         }
     }
-    lane.c.reanchors += 1;
+    c.reanchors += 1;
     let inv_k = 1.0 / en.frame.k;
     let mut blo = [0f32; 3];
     let mut bhi = [0f32; 3];
@@ -402,150 +327,14 @@ fn child_entry(en: &Entry, lane: &mut Lane, v: &Visit, j: u32, lo: [f16; 3], hi:
     let (tin, tout) = slab32(r, blo, bhi, f32::NEG_INFINITY, f32::INFINITY);
     let tp = tin.min(tout).max(tlo);
     let (o, e) = anchor(r, &cf.frame, tp, math);
-    Entry { node: j, frame: cf.frame, o, e, tp, tlo }
-}
-
-fn slot_box<N: NodeF16h>(n: &N, s: usize) -> ([f16; 3], [f16; 3]) {
-    ([n.lo(0, s), n.lo(1, s), n.lo(2, s)], [n.hi(0, s), n.hi(1, s), n.hi(2, s)])
-}
-
-fn trace_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], ray: &Ray, math: Math) -> (Hit, Counters) {
-    let mut lane = Lane::new(ray, math);
-    let Some(root) = lane.root(bvh) else { return (Hit::MISS, lane.c) };
-    let mut stack: Vec<Entry> = Vec::with_capacity(64);
-    stack.push(root);
-    let mut hits = [((0f32, 0f32), 0usize); 16];
-    let mut pending: Vec<Entry> = Vec::with_capacity(16);
-    while let Some(en) = stack.pop() {
-        if en.tlo > lane.best.t {
-            continue;
-        }
-        lane.c.nodes += 1;
-        let n = &nodes[en.node as usize];
-        let v = visit(&en, &lane);
-        let mut nh = 0;
-        for s in 0..N::B {
-            if n.child(s) == CHILD_EMPTY {
-                break;
-            }
-            lane.c.box_tests += 1;
-            let (lo, hi) = slot_box(n, s);
-            if let Some(t) = test_child(&en, &lane, &v, lo, hi) {
-                hits[nh] = (t, s);
-                nh += 1;
-            }
-        }
-        sort_hits(&mut hits[..nh], |t| t.0);
-        pending.clear();
-        for &((tn, tn_lb), s) in &hits[..nh] {
-            match decode_child(n.child(s)) {
-                ChildRef::Leaf { first, count } => lane.test_leaf(bvh, first, count),
-                ChildRef::Inner(j) => {
-                    let (lo, hi) = slot_box(n, s);
-                    pending.push(child_entry(&en, &mut lane, &v, j, lo, hi, tn, tn_lb));
-                }
-            }
-        }
-        stack.extend(pending.drain(..).rev());
-    }
-    lane.c.packet_nodes = lane.c.nodes;
-    lane.c.active_lanes = lane.c.nodes;
-    (lane.best.hit(), lane.c)
-}
-
-/// Packet traversal of up to 64 rays (see [`super::packet`] for the rule); returns each
-/// ray's hit and counters, the packet's counters in the first ray's.
-pub fn trace_packet(bvh: &F16hBvh, rays: &[Ray], math: Math) -> Vec<(Hit, Counters)> {
-    match &bvh.nodes {
-        F16hNodes::B2(n) => packet_n(bvh, n, rays, math),
-        F16hNodes::B4(n) => packet_n(bvh, n, rays, math),
-        F16hNodes::B8(n) => packet_n(bvh, n, rays, math),
-        F16hNodes::B16(n) => packet_n(bvh, n, rays, math),
-    }
-}
-
-fn packet_n<N: NodeF16h>(bvh: &F16hBvh, nodes: &[N], rays: &[Ray], math: Math) -> Vec<(Hit, Counters)> {
-    let p = rays.len();
-    let mut lanes: Vec<Lane> = rays.iter().map(|r| Lane::new(r, math)).collect();
-    let roots: Vec<Option<Entry>> = lanes.iter().map(|l| l.root(bvh)).collect();
-    let (mut pnodes, mut active_sum) = (0u32, 0u32);
-    // One shared node sequence; per lane, its own entry (None: inactive for that node).
-    let mut stack: Vec<(u32, Vec<Option<Entry>>)> = Vec::new();
-    if roots.iter().any(|r| r.is_some()) {
-        stack.push((0, roots));
-    }
-    while let Some((ni, entries)) = stack.pop() {
-        let active: Vec<bool> = (0..p).map(|l| entries[l].as_ref().is_some_and(|e| e.tlo <= lanes[l].best.t)).collect();
-        if !active.iter().any(|&a| a) {
-            continue;
-        }
-        pnodes += 1;
-        active_sum += active.iter().filter(|&&a| a).count() as u32;
-        let n = &nodes[ni as usize];
-        let visits: Vec<Option<Visit>> = (0..p).map(|l| active[l].then(|| visit(entries[l].as_ref().unwrap(), &lanes[l]))).collect();
-        // per slot: per-lane results, packet key
-        let mut slots: Vec<(f32, usize, Vec<Option<(f32, f32)>>)> = Vec::new();
-        for s in 0..N::B {
-            if n.child(s) == CHILD_EMPTY {
-                break;
-            }
-            let (lo, hi) = slot_box(n, s);
-            let mut res = Vec::with_capacity(p);
-            let mut key = f32::INFINITY;
-            for l in 0..p {
-                let r = if active[l] {
-                    lanes[l].c.box_tests += 1;
-                    test_child(entries[l].as_ref().unwrap(), &lanes[l], visits[l].as_ref().unwrap(), lo, hi)
-                } else {
-                    None
-                };
-                if let Some((tn, _)) = r {
-                    key = key.min(tn);
-                }
-                res.push(r);
-            }
-            if res.iter().any(|r| r.is_some()) {
-                slots.push((key, s, res));
-            }
-        }
-        super::packet::order(&mut slots);
-        let mut pending: Vec<(u32, Vec<Option<Entry>>)> = Vec::new();
-        for (_, s, res) in slots {
-            match decode_child(n.child(s)) {
-                ChildRef::Leaf { first, count } => {
-                    for l in 0..p {
-                        if res[l].is_some() {
-                            lanes[l].test_leaf(bvh, first, count);
-                        }
-                    }
-                }
-                ChildRef::Inner(j) => {
-                    let (lo, hi) = slot_box(n, s);
-                    let es = (0..p)
-                        .map(|l| res[l].map(|(tn, tn_lb)| child_entry(entries[l].as_ref().unwrap(), &mut lanes[l], visits[l].as_ref().unwrap(), j, lo, hi, tn, tn_lb)))
-                        .collect();
-                    pending.push((j, es));
-                }
-            }
-        }
-        // active lanes of this node count it as visited
-        for l in 0..p {
-            if active[l] {
-                lanes[l].c.nodes += 1;
-            }
-        }
-        stack.extend(pending.into_iter().rev());
-    }
-    let mut out: Vec<(Hit, Counters)> = lanes.into_iter().map(|l| (l.best.hit(), l.c)).collect();
-    out[0].1.packet_nodes = pnodes;
-    out[0].1.active_lanes = active_sum;
-    out
+    Entry { frame: cf.frame, o, e, tp, tlo }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::fp16;
+    use crate::rays::Ray;
     use proptest::prelude::*;
 
     /// A unit-max-norm direction from three random components.
@@ -594,7 +383,7 @@ mod tests {
             let lo = [0, 1, 2].map(|a| fp16::down_f64((x[a] - ext[a]).max(-16384.0)));
             let hi = [0, 1, 2].map(|a| fp16::up_f64((x[a] + ext[a]).min(16384.0)));
             let pre = RayPre::new(&Ray::new(glam::Vec3::ZERO, glam::Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32), 0.0, f32::INFINITY));
-            let r16 = Ray16::new(&pre);
+            let r16 = Ray16::new(&pre, Math::F16);
             prop_assert_eq!(r16.m, 1.0);
             let w = up_f32(e + e * TWO_M11 + W_MARGIN);
             let (_tn, tn_lb, tf_ub) = slab16(&o, &r16, w, lo, hi);
@@ -623,12 +412,12 @@ mod tests {
                 });
                 b.grow(glam::Vec3::from(p));
             }
-            let (lo, hi, exact) = crate::encode::f16h::to_local(&parent, &b);
+            let (lo, hi, exact) = super::super::frame::to_local(&parent, &b);
             prop_assume!(exact.iter().all(|v| v.abs() <= 16384.0));
             for a in 0..3 {
                 prop_assert!(lo[a].to_f64() <= exact[a] && hi[a].to_f64() >= exact[3 + a]);
             }
-            let cf = crate::encode::f16h::derive_child(&parent, lo, hi);
+            let cf = super::super::frame::derive_child(&parent, lo, hi);
             // A grandchild anywhere inside the true child box maps within range.
             let g: [f32; 3] = [0, 1, 2].map(|a| b.min[a] + (b.max[a] - b.min[a]) * inner[a] as f32);
             for a in 0..3 {

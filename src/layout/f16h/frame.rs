@@ -1,4 +1,4 @@
-//! Layout `f16h`: the hierarchical half-precision encoding of Koskela et al.
+//! f16h frames and the encoder.
 //!
 //! Each inner node n has a frame `x_local = (x_world − W_n) · K_n` with one uniform,
 //! power-of-two scale K_n ("rays don't bend"). Only the root frame is stored (fp32); every
@@ -17,16 +17,12 @@
 //!
 //! Consequently every coordinate a node stores lies in [−16384, 16384], a quarter of fp16's
 //! finite range, leaving room for the slab test's differences and products.
-//!
-//! Node byte layout for branching B (16·B bytes): `lo` f16[3][B] at 0, `hi` f16[3][B] at
-//! 6·B, `child` u32[B] at 12·B. B=2: 32 bytes, B=4: 64, B=8: 128, B=16: 256.
-//! The root frame ([`RootFrame`], 48 bytes) is uploaded separately.
 
-use super::{encode_child, node_types, EncodeError, TriBuffer};
+use super::F16hNode;
 use crate::bvh::{ChildRef, WideBvh};
 use crate::fp16;
 use crate::geom::Aabb;
-use crate::scene::Scene;
+use crate::layout::{encode_child, EncodeError, CHILD_EMPTY};
 use half::f16;
 
 /// Largest magnitude of any stored coordinate.
@@ -35,38 +31,13 @@ pub const COORD_LIMIT: f32 = 16384.0;
 pub const K_MIN_LOG2: i32 = -60;
 pub const K_MAX_LOG2: i32 = 60;
 
-/// Accessors shared by the f16h node structs.
-pub trait NodeF16h: bytemuck::Pod {
-    const B: usize;
-    fn lo(&self, axis: usize, slot: usize) -> f16;
-    fn hi(&self, axis: usize, slot: usize) -> f16;
-    fn child(&self, slot: usize) -> u32;
-    fn empty() -> Self;
-    fn set(&mut self, slot: usize, lo: [f16; 3], hi: [f16; 3], child: u32);
-}
-
-node_types!(F16hNodes, NodeF16h, f16, [(F16hNode2, 2, B2), (F16hNode4, 4, B4), (F16hNode8, 8, B8), (F16hNode16, 16, B16)]);
-
-/// A node frame: `x_local = (x_world − w) · k`, `k` a power of two.
+/// A node frame: `x_local = (x_world − w) · k`, `k` a power of two. The root's is the
+/// layout's `Root` (the push constants' `root` = w.xyz, k).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
     pub w: [f32; 3],
     pub k: f32,
 }
-
-/// The root frame and the root's world box (fp32), as uploaded: `w` at 0, `k` at 12,
-/// `box_lo` at 16, pad, `box_hi` at 32, pad. 48 bytes.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct RootFrame {
-    pub w: [f32; 3],
-    pub k: f32,
-    pub box_lo: [f32; 3],
-    pub _pad0: f32,
-    pub box_hi: [f32; 3],
-    pub _pad1: f32,
-}
-const _: () = assert!(std::mem::size_of::<RootFrame>() == 48);
 
 /// A child's frame as derived from its stored box: centre `c` (parent frame, fp16), scale
 /// ratio `r` (power of two), and the resulting world frame.
@@ -126,19 +97,18 @@ pub fn derive_child(parent: &Frame, lo: [f16; 3], hi: [f16; 3]) -> ChildFrame {
 }
 
 /// The root frame: centred on the root box, largest half extent below 16384 local units.
-pub fn root_frame(b: &Aabb) -> RootFrame {
+pub fn root_frame(b: &Aabb) -> Frame {
     let w = b.center();
     let mut m = 0f64;
     for a in 0..3 {
         m = m.max(b.max[a] as f64 - w[a] as f64).max(w[a] as f64 - b.min[a] as f64);
     }
     let m = (m * (1.0 + 1e-6)) as f32;
-    let k = pow2(ratio_log2(m, 0));
-    RootFrame { w: w.into(), k, box_lo: b.min.into(), _pad0: 0.0, box_hi: b.max.into(), _pad1: 0.0 }
+    Frame { w: w.into(), k: pow2(ratio_log2(m, 0)) }
 }
 
 /// Maps a world box into a frame and rounds it outward to fp16 (exact: fp32 inputs, f64
-/// arithmetic with power-of-two k).
+/// arithmetic with power-of-two k). Also returns the exact local coordinates (lo xyz, hi xyz).
 pub fn to_local(f: &Frame, b: &Aabb) -> ([f16; 3], [f16; 3], [f64; 6]) {
     let mut lo = [f16::ZERO; 3];
     let mut hi = [f16::ZERO; 3];
@@ -154,52 +124,34 @@ pub fn to_local(f: &Frame, b: &Aabb) -> ([f16; 3], [f16; 3], [f64; 6]) {
     (lo, hi, exact)
 }
 
-/// An encoded `f16h` BVH: nodes (root at 0), the root frame, the triangles, and (for tests
-/// and statistics) the frame of every node.
-#[derive(Clone, Debug)]
-pub struct F16hBvh {
-    pub branching: usize,
-    pub nodes: F16hNodes,
-    pub root: RootFrame,
-    pub frames: Vec<Frame>,
-    pub tris: TriBuffer,
-    /// Largest traversal stack: (B−1)·depth + 1.
-    pub max_stack: usize,
-}
-
-fn encode_nodes<N: NodeF16h>(w: &WideBvh, root: &RootFrame) -> Result<(Vec<N>, Vec<Frame>), EncodeError> {
+/// Encodes a wide BVH; returns the nodes (root at 0), the root frame and, for tests and
+/// statistics, the frame of every node.
+pub fn encode_with_frames<const B: usize>(w: &WideBvh) -> Result<(Vec<F16hNode<B>>, Frame, Vec<Frame>), EncodeError> {
+    let root = root_frame(&w.nodes[0].bounds);
     let mut frames: Vec<Option<Frame>> = vec![None; w.nodes.len()];
-    frames[0] = Some(Frame { w: root.w, k: root.k });
+    frames[0] = Some(root);
     let mut out = Vec::with_capacity(w.nodes.len());
     for (i, n) in w.nodes.iter().enumerate() {
         // Children always follow their parent, so the frame is known by now.
         let f = frames[i].expect("wide BVH nodes are in depth-first order");
-        let mut node = N::empty();
+        let mut node = F16hNode { lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
         for (slot, (b, c)) in n.children.iter().enumerate() {
             let (lo, hi, _) = to_local(&f, b);
             for v in lo.iter().chain(&hi) {
                 if !(v.to_f32().abs() <= COORD_LIMIT) {
-                    return Err(EncodeError::OutOfRange { node: i, child: slot, value: v.to_f64() });
+                    return Err(EncodeError::OutOfRange { layout: "f16h", node: i, child: slot, value: v.to_f64() });
                 }
             }
-            node.set(slot, lo, hi, encode_child(c));
+            for a in 0..3 {
+                node.lo[a][slot] = lo[a];
+                node.hi[a][slot] = hi[a];
+            }
+            node.child[slot] = encode_child(c);
             if let ChildRef::Inner(j) = c {
                 frames[*j as usize] = Some(derive_child(&f, lo, hi).frame);
             }
         }
         out.push(node);
     }
-    Ok((out, frames.into_iter().map(|f| f.unwrap()).collect()))
-}
-
-pub fn encode(scene: &Scene, w: &WideBvh) -> Result<F16hBvh, EncodeError> {
-    let root = root_frame(&w.nodes[0].bounds);
-    let (nodes, frames) = match w.branching {
-        2 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B2(n), f))?,
-        4 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B4(n), f))?,
-        8 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B8(n), f))?,
-        16 => encode_nodes(w, &root).map(|(n, f)| (F16hNodes::B16(n), f))?,
-        b => panic!("unsupported branching {b}"),
-    };
-    Ok(F16hBvh { branching: w.branching, nodes, root, frames, tris: TriBuffer::new(scene, w), max_stack: w.max_stack() })
+    Ok((out, root, frames.into_iter().map(|f| f.expect("every node is reached")).collect()))
 }

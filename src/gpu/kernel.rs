@@ -1,0 +1,186 @@
+//! A BVH resident on the device and the traversal kernels that run over it: building a
+//! variant's pipeline (built-in, or a user's GLSL or SPIR-V module checked against the
+//! variant's interface first) and dispatching it.
+
+use super::buffer::Buffer;
+use super::pipeline::ComputePipeline;
+use super::timer::Timer;
+use super::{shader, Gpu, GpuError};
+use crate::interface::{binding, PushConstants, PRIM_OVERFLOW};
+use crate::layout::Encoded;
+use crate::rays::Ray;
+use crate::trace::{Counters, Hit};
+use crate::variant::{stack_entries, PacketImpl, Variant};
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use std::path::{Path, PathBuf};
+
+/// A BVH resident on the device: the layout's node bytes, the triangles and the push
+/// constants (ray count filled per dispatch).
+pub struct GpuBvh<'g> {
+    nodes: Buffer<'g>,
+    tris: Buffer<'g>,
+    ids: Buffer<'g>,
+    pub push: PushConstants,
+    /// Bytes uploaded (nodes and triangles).
+    pub bytes: u64,
+}
+
+impl<'g> GpuBvh<'g> {
+    pub fn upload(gpu: &'g Gpu, enc: &Encoded) -> Result<GpuBvh<'g>, GpuError> {
+        let (layout, b) = (enc.layout, enc.branching);
+        if enc.max_stack > stack_entries(b) {
+            return Err(GpuError::Other(format!("BVH needs {} stack entries, more than the {} the B={b} kernels have", enc.max_stack, stack_entries(b))));
+        }
+        let nodes = enc.nodes.to_bytes();
+        let (lo, hi) = (enc.root_box.min, enc.root_box.max);
+        let push = PushConstants { node_count: enc.node_count() as u32, root: enc.push_root, box_lo: [lo.x, lo.y, lo.z, 0.0], box_hi: [hi.x, hi.y, hi.z, 0.0], ..Default::default() };
+        let name = |s: &str| format!("{s} ({layout}, B={b})");
+        let tv: &[u8] = bytemuck::cast_slice(&enc.tris.verts);
+        let ti: &[u8] = bytemuck::cast_slice(&enc.tris.ids);
+        Ok(GpuBvh {
+            nodes: Buffer::upload(gpu, &name("nodes"), &nodes)?,
+            tris: Buffer::upload(gpu, &name("triangles"), tv)?,
+            ids: Buffer::upload(gpu, &name("triangle ids"), ti)?,
+            push,
+            bytes: (nodes.len() + tv.len() + ti.len()) as u64,
+        })
+    }
+}
+
+/// Where a kernel's module comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Source {
+    /// Compiled from `glsl/trav.comp` with the variant's layout hooks.
+    Builtin,
+    /// A user's GLSL compute file, compiled with the built-in kernel's defines and includes.
+    Glsl(PathBuf),
+    /// A user's SPIR-V module.
+    Spirv(PathBuf),
+}
+
+impl Source {
+    /// A user file: `.spv` is SPIR-V, anything else GLSL.
+    pub fn user(path: &Path) -> Source {
+        if path.extension().is_some_and(|e| e == "spv") {
+            Source::Spirv(path.into())
+        } else {
+            Source::Glsl(path.into())
+        }
+    }
+
+    pub fn is_user(&self) -> bool {
+        *self != Source::Builtin
+    }
+}
+
+/// A traversal kernel ready to dispatch.
+pub struct Kernel<'g> {
+    pub pipe: ComputePipeline<'g>,
+    pub variant: Variant,
+    pub imp: PacketImpl,
+    pub stats: bool,
+    pub source: Source,
+}
+
+impl<'g> Kernel<'g> {
+    /// The built-in kernel's name (a user's module runs in its place under the same name).
+    pub fn name(&self) -> String {
+        self.variant.kernel_name(self.imp, self.stats)
+    }
+
+    /// The kernel's name, marked when the module is the user's.
+    pub fn label(&self) -> String {
+        match &self.source {
+            Source::Builtin => self.name(),
+            Source::Glsl(p) | Source::Spirv(p) => format!("{} (user kernel {})", self.name(), p.display()),
+        }
+    }
+
+    /// Builds the pipeline of a variant from `source`. A user's module is checked against the
+    /// variant's interface (entry point, workgroup, bindings, push constants, specialization
+    /// constants, capabilities) before any pipeline is created.
+    pub fn build(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source) -> Result<Kernel<'g>, GpuError> {
+        if imp == PacketImpl::Subgroup && v.packet > gpu.info.subgroup_size as usize {
+            return Err(GpuError::Other(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
+        }
+        let f64 = gpu.info.shader_float64;
+        let code = match source {
+            Source::Builtin => shader::compile(v, imp, stats, f64)?,
+            Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, v, imp, stats, f64)?, v, imp, stats, gpu)?,
+            Source::Spirv(p) => shader::check_user(p, &shader::read_spirv(p)?, v, imp, stats, gpu)?,
+        };
+        Self::with_code(gpu, v, imp, stats, source, &code)
+    }
+
+    fn with_code(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source, code: &[u32]) -> Result<Kernel<'g>, GpuError> {
+        let pipe = ComputePipeline::new(gpu, &v.kernel_name(imp, stats), code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32)?;
+        Ok(Kernel { pipe, variant: *v, imp, stats, source: source.clone() })
+    }
+
+    /// The counting kernel of a user's module: its GLSL compiled with `STATS`, when that build
+    /// writes counters; `None` for a SPIR-V module or a kernel that does not count.
+    pub fn user_counting(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, source: &Source) -> Result<Option<Kernel<'g>>, GpuError> {
+        let Source::Glsl(p) = source else { return Ok(None) };
+        let code = shader::compile_user(p, v, imp, true, gpu.info.shader_float64)?;
+        let itf = shader::parse_interface(&code).map_err(|msg| GpuError::Spirv { path: p.display().to_string(), msg })?;
+        if !itf.bindings.contains(&(0, binding::COUNTERS)) {
+            return Ok(None);
+        }
+        let code = shader::check_user(p, &code, v, imp, true, gpu)?;
+        Self::with_code(gpu, v, imp, true, source, &code).map(Some)
+    }
+
+    /// Dispatches the kernel over `rays`: `warmup` untimed dispatches, then `repeat` timed
+    /// ones (at least one dispatch in all). A counting kernel also reads back the counters.
+    pub fn run(&self, gpu: &Gpu, bvh: &GpuBvh, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError> {
+        let pipe = &self.pipe;
+        let wg = self.variant.workgroup(self.imp);
+        let n = rays.len();
+        let ray_buf = Buffer::upload(gpu, "rays", bytemuck::cast_slice(rays))?;
+        let out_usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
+        let hit_bytes = n * std::mem::size_of::<Hit>();
+        let counter_bytes = n * std::mem::size_of::<Counters>();
+        let hits = Buffer::new(gpu, "hits", hit_bytes as u64, out_usage, MemoryLocation::GpuOnly)?;
+        let counters = Buffer::new(gpu, "counters", if self.stats { counter_bytes as u64 } else { 16 }, out_usage, MemoryLocation::GpuOnly)?;
+        pipe.bind(&[&bvh.nodes, &bvh.tris, &bvh.ids, &ray_buf, &hits, &counters]);
+        let mut push = bvh.push;
+        push.ray_count = n as u32;
+        let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(wg), warmup, repeat)?;
+        let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
+        if let Some(bad) = hits.iter().position(|h| h.prim == PRIM_OVERFLOW) {
+            return Err(GpuError::Other(format!("{}: ray {bad} overflowed the traversal stack", self.label())));
+        }
+        let counters = if self.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
+        Ok(RunOutput { hits, counters, times_ms: times })
+    }
+}
+
+/// Records `warmup + repeat` (at least one) dispatches of `groups` workgroups, each in its own
+/// submission with timestamps around it; returns the times of the last `repeat`.
+pub(crate) fn dispatch_timed(gpu: &Gpu, pipe: &ComputePipeline, push: &[u8], groups: u32, warmup: usize, repeat: usize) -> Result<Vec<f64>, GpuError> {
+    let timer = Timer::new(gpu)?;
+    let mut times = Vec::with_capacity(repeat);
+    for i in 0..(warmup + repeat).max(1) {
+        gpu.submit_and_wait(|cmd| {
+            timer.record(cmd, || pipe.dispatch(cmd, push, groups));
+            pipe.barrier(cmd);
+        })?;
+        if i >= warmup {
+            times.push(timer.elapsed_ms()?);
+        }
+    }
+    Ok(times)
+}
+
+/// Hits (and counters, for a counting kernel) and the GPU time of each timed dispatch.
+pub struct RunOutput {
+    pub hits: Vec<Hit>,
+    pub counters: Option<Vec<Counters>>,
+    pub times_ms: Vec<f64>,
+}
+
+/// The packet implementation this device uses for a variant (`force` overrides it).
+pub fn choose_impl(gpu: &Gpu, v: &Variant, force: Option<PacketImpl>) -> PacketImpl {
+    force.unwrap_or_else(|| PacketImpl::choose(v.packet, gpu.info.subgroup_size))
+}

@@ -1,0 +1,170 @@
+//! The kernel interface: every constant and struct that Rust and the GLSL kernels must agree
+//! on, written once here (or, for the hit and counter records, beside their Rust types with
+//! [`glsl_struct!`]) and generated into the `interface.glsl` header that every traversal
+//! kernel includes ([`glsl_header`]). Nothing in `glsl/` restates these values by hand.
+//!
+//! Per variant the header also carries the layout's stack entry, declared in Rust by the
+//! layout (`Layout::stack_entry`), so the report's stack bytes and the kernel's stack are the
+//! same figure.
+
+use crate::layout::{CHILD_EMPTY, LEAF_BIT, LEAF_COUNT_BITS, LEAF_FIRST_BITS};
+use crate::trace::{Counters, Hit};
+
+/// A Rust type with a GLSL (std430) counterpart: its GLSL name and its size in bytes.
+pub trait GlslType {
+    const GLSL: &'static str;
+}
+
+impl GlslType for u32 {
+    const GLSL: &'static str = "uint";
+}
+impl GlslType for i32 {
+    const GLSL: &'static str = "int";
+}
+impl GlslType for f32 {
+    const GLSL: &'static str = "float";
+}
+impl GlslType for [f32; 4] {
+    const GLSL: &'static str = "vec4";
+}
+
+/// A `#[repr(C)]` struct whose fields map one to one onto a GLSL struct or block.
+pub trait GlslStruct: bytemuck::Pod {
+    /// (field name, GLSL type) in declaration order.
+    const FIELDS: &'static [(&'static str, &'static str)];
+}
+
+/// Declares a `#[repr(C)]`, `bytemuck::Pod` struct and its GLSL field list from one
+/// definition, so the two can never drift. Field types must implement [`GlslType`].
+#[macro_export]
+macro_rules! glsl_struct {
+    ($(#[$m:meta])* pub struct $name:ident { $($(#[$fm:meta])* pub $f:ident : $t:ty),* $(,)? }) => {
+        $(#[$m])*
+        #[repr(C)]
+        #[derive(bytemuck::Pod, bytemuck::Zeroable)]
+        pub struct $name { $($(#[$fm])* pub $f: $t),* }
+        impl $crate::interface::GlslStruct for $name {
+            const FIELDS: &'static [(&'static str, &'static str)] = &[$((stringify!($f), <$t as $crate::interface::GlslType>::GLSL)),*];
+        }
+    };
+}
+
+glsl_struct! {
+    /// Push constants of every traversal kernel (64 bytes): the ray count, the node count,
+    /// the layout's root data (`Layout::push_root`: the f16h root frame w.xyz, k; unused by
+    /// f32) and the root's world box, which every kernel tests first.
+    #[derive(Clone, Copy, Debug, Default, PartialEq)]
+    pub struct PushConstants {
+        pub ray_count: u32,
+        pub node_count: u32,
+        pub pad0: u32,
+        pub pad1: u32,
+        pub root: [f32; 4],
+        pub box_lo: [f32; 4],
+        pub box_hi: [f32; 4],
+    }
+}
+const _: () = assert!(std::mem::size_of::<PushConstants>() == 64);
+
+/// Descriptor bindings of a traversal kernel (set 0), all storage buffers.
+pub mod binding {
+    /// The layout's node array (declared by its hooks file).
+    pub const NODES: u32 = 0;
+    /// Triangle vertices in leaf order, 9 floats each.
+    pub const TRI_VERTS: u32 = 1;
+    /// Public `prim` id of each triangle in leaf order.
+    pub const TRI_IDS: u32 = 2;
+    /// Rays, [`RAY_FLOATS`](super::RAY_FLOATS) floats each.
+    pub const RAYS: u32 = 3;
+    /// One `Hit` per ray.
+    pub const HITS: u32 = 4;
+    /// One `Counters` record per ray (counting kernels only).
+    pub const COUNTERS: u32 = 5;
+    /// Number of bindings.
+    pub const COUNT: u32 = 6;
+}
+
+/// Floats per ray in the rays buffer: `ox oy oz tmin dx dy dz tmax` (`rays::Ray`).
+pub const RAY_FLOATS: u32 = 8;
+/// The `prim` a kernel writes for a ray whose traversal stack overflowed.
+pub const PRIM_OVERFLOW: i32 = -2;
+
+/// A GLSL `const float` declaration of `x`, exactly (the f32 value's shortest f64 spelling).
+pub fn glsl_float(name: &str, x: f32) -> String {
+    format!("const float {name} = {:?};\n", x as f64)
+}
+
+/// A GLSL `const int` declaration.
+pub fn glsl_int(name: &str, x: i32) -> String {
+    format!("const int {name} = {x};\n")
+}
+
+/// Bytes of one value of a GLSL type used in stack entries.
+pub fn glsl_size(ty: &str) -> usize {
+    match ty {
+        "float" | "uint" | "int" | "f16vec2" => 4,
+        "float16_t" => 2,
+        "f16vec3" => 6,
+        "f16vec4" | "vec2" | "uvec2" => 8,
+        "vec3" | "uvec3" => 12,
+        "vec4" | "uvec4" => 16,
+        other => panic!("glsl_size: no size for GLSL type {other}"),
+    }
+}
+
+/// Bytes of a stack entry: the node index (4) plus the layout's per-ray fields.
+pub fn stack_entry_bytes(fields: &[(&str, &str)]) -> usize {
+    4 + fields.iter().map(|(_, t)| glsl_size(t)).sum::<usize>()
+}
+
+fn glsl_fields(fields: &[(&str, &str)]) -> String {
+    fields.iter().map(|(n, t)| format!(" {t} {n};")).collect()
+}
+
+/// The `interface.glsl` header of a kernel. `layout`: the layout's stack entry fields and its
+/// constants (`None` for kernels without a layout, such as the ray-query baseline).
+pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
+    let mut s = String::from("// interface.glsl: generated by halftrace from src/interface.rs and the layout's\n// Rust definitions for this variant. Do not edit; do not copy these values by hand.\n");
+    // Stack entries may hold fp16 values; every kernel stores fp16 in buffers.
+    s += "#extension GL_EXT_shader_explicit_arithmetic_types_float16 : require\n#extension GL_EXT_shader_16bit_storage : require\n";
+    s += &format!("const uint CHILD_EMPTY = {CHILD_EMPTY:#010x}u;\nconst uint LEAF_BIT = {LEAF_BIT:#010x}u;\n");
+    s += &format!("const uint LEAF_FIRST_MASK = {:#010x}u;\nconst uint LEAF_COUNT_SHIFT = {LEAF_FIRST_BITS}u;\nconst uint LEAF_COUNT_MASK = {:#x}u;\n", (1u32 << LEAF_FIRST_BITS) - 1, (1u32 << LEAF_COUNT_BITS) - 1);
+    s += &format!("const uint RAY_FLOATS = {RAY_FLOATS}u;\nconst int PRIM_OVERFLOW = {PRIM_OVERFLOW};\n");
+    for (name, value) in [("NODES", binding::NODES), ("TRI_VERTS", binding::TRI_VERTS), ("TRI_IDS", binding::TRI_IDS), ("RAYS", binding::RAYS), ("HITS", binding::HITS), ("COUNTERS", binding::COUNTERS)] {
+        s += &format!("#define BINDING_{name} {value}\n");
+    }
+    s += &format!("layout(push_constant) uniform Push {{{} }} pc;\n", glsl_fields(PushConstants::FIELDS));
+    s += &format!("struct Hit {{{} }};\n", glsl_fields(Hit::FIELDS));
+    s += &format!("struct Counters {{{} }};\n", glsl_fields(Counters::FIELDS));
+    if let Some((entry, constants)) = layout {
+        s += &format!("// The layout's stack entry besides the node index ({} bytes with it) and its constants.\n", stack_entry_bytes(entry));
+        s += &format!("struct Entry {{{} }};\n#define STACK_ENTRY_BYTES {}\n", glsl_fields(entry), stack_entry_bytes(entry));
+        s += constants;
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_spells_the_rust_values() {
+        let h = glsl_header(Some((&[("t", "float")], &glsl_float("D", 1.0 / 32768.0))));
+        assert!(h.contains("const float D = 3.0517578125e-5;"), "{h}");
+        assert!(h.contains("const uint LEAF_BIT = 0x80000000u;"), "{h}");
+        assert!(h.contains("const uint LEAF_FIRST_MASK = 0x07ffffffu;"), "{h}");
+        assert!(h.contains("const uint LEAF_COUNT_SHIFT = 27u;"), "{h}");
+        assert!(h.contains("layout(push_constant) uniform Push { uint ray_count; uint node_count; uint pad0; uint pad1; vec4 root; vec4 box_lo; vec4 box_hi; } pc;"), "{h}");
+        assert!(h.contains("struct Hit { float t; int prim; float u; float v; };"), "{h}");
+        assert!(h.contains("struct Entry { float t; };") && h.contains("#define STACK_ENTRY_BYTES 8"), "{h}");
+    }
+
+    #[test]
+    fn generated_struct_sizes_match_rust() {
+        let size = |f: &[(&str, &str)]| f.iter().map(|(_, t)| if *t == "vec4" { 16 } else { 4 }).sum::<usize>();
+        assert_eq!(size(PushConstants::FIELDS), std::mem::size_of::<PushConstants>());
+        assert_eq!(size(Hit::FIELDS), std::mem::size_of::<Hit>());
+        assert_eq!(size(Counters::FIELDS), std::mem::size_of::<Counters>());
+    }
+}
