@@ -1,11 +1,9 @@
-// Shared by every traversal kernel: float controls, workgroup size, the buffers of the
-// interface (declared from the generated interface.glsl, which must come first and enables
-// the fp16 types), the ray set-up and the hit write. Mirrors src/trace/mod.rs (RayPre).
-#extension GL_EXT_spirv_intrinsics : require
-// IEEE fp16: round-to-nearest-even after every operation, signed zeros/inf/NaN preserved.
-spirv_execution_mode(capabilities = [4467], 4462, 16);
-spirv_execution_mode(capabilities = [4466], 4461, 16);
-spirv_execution_mode(capabilities = [4466], 4461, 32);
+// Shared by every traversal kernel: workgroup size, the buffers of the interface (declared
+// from the generated interface.glsl, which must come first and enables the fp16 types), the
+// ray set-up and the hit write. Mirrors src/trace/mod.rs (RayPre). The float-control
+// execution modes (round-to-nearest-even, signed zero/inf/NaN preserved, per float width the
+// kernel computes in) are added to the SPIR-V by the host (gpu::support::float_modes), unless
+// the kernel is built without them (FC_OFF).
 
 #ifndef WG
 #define WG 64
@@ -20,7 +18,16 @@ layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits
 layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer CounterBuf { Counters counters[]; };
 #endif
 
+#ifdef FC_OFF
+// Without signed-zero/inf/NaN preservation a driver may assume no operand is infinite, so
+// the kernel never computes with inf: "infinity" is FLT_MAX, a ray's infinite tmax is clamped
+// to it when loaded (a hit at exactly FLT_MAX, the only case that differs, cannot come from
+// finite triangles and rays in practice), and a miss writes inf's bit pattern.
+#define INF uintBitsToFloat(0x7f7fffffu)
+#else
 #define INF uintBitsToFloat(0x7f800000u)
+#endif
+#define MISS_T uintBitsToFloat(0x7f800000u)
 #define FLT_MIN_NORMAL uintBitsToFloat(0x00800000u)
 const int NO_PRIM = 0x7fffffff;
 
@@ -45,6 +52,9 @@ RayPre ray_pre(uint i) {
     r.tmin = ray_f[b + 3u];
     vec3 d = vec3(ray_f[b + 4u], ray_f[b + 5u], ray_f[b + 6u]);
     r.tmax = ray_f[b + 7u];
+#ifdef FC_OFF
+    if ((floatBitsToUint(r.tmax) & 0x7fffffffu) > 0x7f7fffffu) r.tmax = INF;
+#endif
     for (int a = 0; a < 3; a++) {
         if (abs(d[a]) < FLT_MIN_NORMAL) d[a] = 0.0;
     }
@@ -65,6 +75,6 @@ RayPre ray_pre(uint i) {
 }
 
 void write_hit(uint i, float t, int prim, float u, float v) {
-    if (prim == NO_PRIM) hits[i] = Hit(INF, -1, 0.0, 0.0);
+    if (prim == NO_PRIM) hits[i] = Hit(MISS_T, -1, 0.0, 0.0);
     else hits[i] = Hit(t, prim, u, v);
 }

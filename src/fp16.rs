@@ -72,6 +72,37 @@ pub fn down_f32(x: f32) -> f16 {
     -up_f32(-x)
 }
 
+/// Round-to-nearest-even of `x` to fp16, returned exactly as f32, computed the way the
+/// kernels without fp16 arithmetic do it (`glsl/layout/f16h.glsl`, `rte16`): integer
+/// operations on the bits and one exact power-of-two product. Equal to
+/// `f16::from_f32(x).to_f32()` for every x (tested).
+pub fn rte16_emulated(x: f32) -> f32 {
+    let u = x.to_bits();
+    let sgn = u & 0x8000_0000;
+    let a = u & 0x7fff_ffff;
+    if a >= 0x7f80_0000 {
+        return x;
+    }
+    if a >= 0x477f_f000 {
+        return f32::from_bits(sgn | 0x7f80_0000);
+    }
+    let e = (a >> 23) as i32 - 127;
+    if e < -25 {
+        return f32::from_bits(sgn);
+    }
+    let m = (a & 0x7f_ffff) | 0x80_0000;
+    let lsb = (e - 10).max(-24);
+    let sh = (lsb - (e - 23)) as u32;
+    let mut q = m >> sh;
+    let rem = m & ((1 << sh) - 1);
+    let half = 1 << (sh - 1);
+    if rem > half || (rem == half && q & 1 == 1) {
+        q += 1;
+    }
+    let r = q as f32 * f32::from_bits(((lsb + 127) as u32) << 23);
+    f32::from_bits(r.to_bits() | sgn)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,5 +144,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn emulated_rte16_equals_the_conversion() {
+        let check = |x: f32| {
+            let want = f16::from_f32(x).to_f32();
+            let got = rte16_emulated(x);
+            assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{x:e} ({:#x}): {got:e} vs {want:e}", x.to_bits());
+        };
+        // Every f32 whose exponent reaches fp16 (and a margin), in steps that hit every low
+        // bit pattern class, plus every fp16 value, midpoint and their neighbours.
+        for bits in (0x3000_0000u32..0x4800_0000).step_by(97) {
+            check(f32::from_bits(bits));
+            check(-f32::from_bits(bits));
+        }
+        for h in 0..=0x7c00u16 {
+            let v = f16::from_bits(h).to_f32();
+            let n = next_up(f16::from_bits(h)).to_f32();
+            let mid = ((v as f64 + n as f64) / 2.0) as f32;
+            for x in [v, mid, f32::from_bits(mid.to_bits().wrapping_sub(1)), f32::from_bits(mid.to_bits() + 1)] {
+                check(x);
+                check(-x);
+            }
+        }
+        for x in [0.0, -0.0, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, f32::MIN_POSITIVE, 1e-40, 65504.0, 65519.99, 65520.0, 2.0f32.powi(-25), 2.0f32.powi(-26)] {
+            check(x);
+            check(-x);
+        }
+        assert!(rte16_emulated(f32::NAN).is_nan());
     }
 }

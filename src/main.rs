@@ -7,7 +7,7 @@ use halftrace::gpu::kernel::{self, GpuBvh, Kernel, Source};
 use halftrace::layout::{Encoded, LayoutId, Math};
 use halftrace::measure::{self, BaselineTarget, KernelTarget, Plan, Reference};
 use halftrace::rays::{make_rays, Camera, RayKind, RayParams};
-use halftrace::variant::{PacketImpl, Variant};
+use halftrace::variant::{FcChoice, FloatControls, PacketImpl, Variant};
 use halftrace::{gpu, npy, scene};
 use std::io::Write;
 use std::path::PathBuf;
@@ -43,6 +43,9 @@ enum Cmd {
         /// Device to benchmark (index or name substring; default: the default device).
         #[arg(long)]
         device: Option<String>,
+        /// Show what would run with these features treated as missing (testing).
+        #[arg(long, hide = true)]
+        mask_feature: Vec<String>,
     },
     /// Sweep scenes × ray kinds × layouts × B × P: validate, time, count, report.
     Sweep(SweepArgs),
@@ -176,7 +179,13 @@ struct TraceArgs {
     /// checked against the variant's interface, then validated and timed like the built-in.
     #[arg(long, alias = "spirv")]
     kernel: Option<PathBuf>,
-    /// Treat a device feature as missing (testing): shaderFloat16, storageBuffer16BitAccess.
+    /// Float-control execution modes of the kernel: on (round-to-nearest-even, inf/NaN
+    /// preserved), off (a build whose hits stay exact without them), auto (on where the
+    /// device has them, else off where the layout has such a build).
+    #[arg(long, default_value = "auto")]
+    float_controls: String,
+    /// Treat a device feature as missing (testing the fallbacks), e.g. shaderFloat16,
+    /// storageBuffer16BitAccess, floatControls, subgroupSizeControl, rayQuery.
     #[arg(long, hide = true)]
     mask_feature: Vec<String>,
 }
@@ -269,7 +278,11 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
             math
         }
     };
-    let variant = Variant::new(layout, a.branching, a.packet).with_math(math);
+    let fc_choice: FcChoice = a.float_controls.parse().map_err(anyhow::Error::msg).context("--float-controls")?;
+    let mut variant = Variant::new(layout, a.branching, a.packet).with_math(math);
+    if fc_choice == FcChoice::Off {
+        variant = variant.with_fc(FloatControls::Off);
+    }
     let force_impl = match a.packet_impl.as_deref() {
         None => None,
         Some("subgroup") => Some(PacketImpl::Subgroup),
@@ -303,6 +316,8 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     } else {
         let g = open_gpu(&a)?;
         outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
+        let variant = gpu::support::resolve(&g.info, variant, fc_choice).map_err(anyhow::Error::msg)?;
+        outln!("kernel {} (float controls {})", variant.name(false), variant.fc.name());
         let imp = kernel::choose_impl(&g, &variant, force_impl);
         let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
         let gb = GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
@@ -384,16 +399,27 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn devices(bench: bool, device: Option<String>) -> anyhow::Result<()> {
-    let list = gpu::list_devices()?;
+fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Result<()> {
+    let mut list = gpu::list_devices()?;
     if list.is_empty() {
         outln!("no Vulkan devices");
     }
-    for d in &list {
+    for d in &mut list {
+        for m in mask {
+            d.mask(m).map_err(anyhow::Error::msg)?;
+        }
         outln!(
             "{}: {} ({}), Vulkan {}, driver {}\n   shaderFloat16 {}, storageBuffer16BitAccess {}, shaderFloat64 {}, subgroup size {}, ray query {}, max storage buffer {} MiB",
             d.index, d.name, d.kind, d.api_version, d.driver, d.shader_float16, d.storage_16bit, d.shader_float64, d.subgroup_size, d.ray_query, d.max_storage_buffer >> 20
         );
+        outln!(
+            "   float controls: RTE fp16 {}, RTE fp32 {}, inf/NaN preserve fp16 {}, fp32 {}; subgroup size control {}",
+            d.fp16_rte, d.fp32_rte, d.preserve_16, d.preserve_32,
+            if d.subgroup_size_control { format!("{}..{}", d.min_subgroup_size, d.max_subgroup_size) } else { "no".into() }
+        );
+        for line in device_plan(d) {
+            outln!("   {line}");
+        }
     }
     outln!("\nlayouts and baselines (--layout):");
     for l in LayoutId::all() {
@@ -412,6 +438,36 @@ fn devices(bench: bool, device: Option<String>) -> anyhow::Result<()> {
         outln!("fp16:fp32 ratio (geometric mean): {:.3}", b.fp16_ratio);
     }
     Ok(())
+}
+
+/// What halftrace will run on a device: per layout and math mode the float controls (or why it
+/// is skipped), per packet size the implementation, and the baselines.
+fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
+    let mut out = Vec::new();
+    for l in LayoutId::layouts() {
+        for &m in l.caps().maths {
+            let v = Variant::new(l, 4, 1).with_math(m);
+            let what = match gpu::support::resolve(d, v, FcChoice::Auto) {
+                Ok(r) => format!("runs, float controls {}", r.fc.name()),
+                Err(why) => format!("skipped: {why}"),
+            };
+            out.push(format!("{:<5} math {:<6} {what}", l.name(), m.name()));
+        }
+    }
+    let packets: Vec<String> = halftrace::variant::PACKETS
+        .iter()
+        .filter(|&&p| p > 1)
+        .map(|&p| match gpu::support::packet_plan(d, p) {
+            (PacketImpl::Subgroup, Some(n)) => format!("P={p} subgroup (pinned to {n})"),
+            (PacketImpl::Subgroup, None) => format!("P={p} subgroup ({})", d.subgroup_size),
+            (imp, _) => format!("P={p} {}", if imp == PacketImpl::Shared { "shared memory" } else { "single" }),
+        })
+        .collect();
+    out.push(format!("packets: {}", packets.join(", ")));
+    for l in LayoutId::all().filter(|l| l.baseline().is_some()) {
+        out.push(format!("{:<5} {}", l.name(), if l.name() == "rq" && !d.ray_query { "skipped: no VK_KHR_ray_query" } else { "runs" }));
+    }
+    out
 }
 
 fn sweep(a: SweepArgs) -> anyhow::Result<()> {
@@ -487,7 +543,7 @@ fn main() {
     let r = match cli.cmd {
         Cmd::Trace(a) => trace(a),
         Cmd::BvhStats { scene } => bvh_stats(&scene),
-        Cmd::Devices { bench, device } => devices(bench, device),
+        Cmd::Devices { bench, device, mask_feature } => devices(bench, device, &mask_feature),
         Cmd::Shaders { emit } => shaders(&emit),
         Cmd::Sweep(a) => sweep(a),
         Cmd::Report { dirs, out } => report(&dirs, out.as_ref()),

@@ -18,6 +18,52 @@ pub struct Variant {
     pub packet: usize,
     /// Arithmetic of the box tests (one of the layout's modes).
     pub math: Math,
+    /// Whether the kernel declares the float-control execution modes it relies on.
+    pub fc: FloatControls,
+}
+
+/// The float-control execution modes of a kernel (SPIR-V 1.4 / `VK_KHR_shader_float_controls`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
+pub enum FloatControls {
+    /// The kernel declares round-to-nearest-even and signed-zero/inf/NaN preservation for the
+    /// float widths it computes in, and the CPU reference matches it bit for bit.
+    #[default]
+    On,
+    /// The kernel declares none and is written so that any faithful rounding and any inf/NaN
+    /// handling keeps its hits exact (only layouts that provide such a build).
+    Off,
+}
+
+impl FloatControls {
+    pub fn name(self) -> &'static str {
+        match self {
+            FloatControls::On => "on",
+            FloatControls::Off => "off",
+        }
+    }
+}
+
+/// `--float-controls`: on, off, or auto (on where the device has the modes, else off where the
+/// layout has such a build).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FcChoice {
+    #[default]
+    Auto,
+    On,
+    Off,
+}
+
+impl std::str::FromStr for FcChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<FcChoice, String> {
+        match s {
+            "auto" => Ok(FcChoice::Auto),
+            "on" => Ok(FcChoice::On),
+            "off" => Ok(FcChoice::Off),
+            o => Err(format!("unknown float-controls mode '{o}' (use on, off or auto)")),
+        }
+    }
 }
 
 /// How the P rays of a packet cooperate on the GPU.
@@ -58,7 +104,13 @@ pub fn stack_entries(b: usize) -> usize {
 impl Variant {
     /// A variant in its layout's default math. `layout` must be a BVH layout.
     pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
-        Variant { layout, branching, packet, math: layout.caps().maths[0] }
+        Variant { layout, branching, packet, math: layout.caps().maths[0], fc: FloatControls::On }
+    }
+
+    /// The same variant with float controls `fc`.
+    pub fn with_fc(mut self, fc: FloatControls) -> Variant {
+        self.fc = fc;
+        self
     }
 
     /// The same variant in another math mode, when the layout has it (else unchanged).
@@ -71,15 +123,17 @@ impl Variant {
 
     /// The kernel's name: `trav_{layout}[_{math}]_b{B}_p{P}` (the math tag m16, m32 or mix
     /// for layouts with more than one mode), then `_subgroup` for the subgroup packet
-    /// implementation and `_stats` for the counting kernel. Packets of P > 1 without a suffix
-    /// use shared memory (portable to any subgroup size).
+    /// implementation and `_stats` for the counting kernel, after `_fcoff` for a kernel built
+    /// without float controls. Packets of P > 1 without a suffix use shared memory (portable
+    /// to any subgroup size).
     pub fn kernel_name(&self, imp: PacketImpl, stats: bool) -> String {
         format!(
-            "trav_{}{}_b{}_p{}{}{}",
+            "trav_{}{}_b{}_p{}{}{}{}",
             self.layout.name(),
             if self.layout.caps().maths.len() > 1 { format!("_{}", self.math.tag()) } else { String::new() },
             self.branching,
             self.packet,
+            if self.fc == FloatControls::Off { "_fcoff" } else { "" },
             if imp == PacketImpl::Subgroup { "_subgroup" } else { "" },
             if stats { "_stats" } else { "" }
         )
@@ -141,6 +195,9 @@ impl Variant {
         }
         if f64_fallback {
             d.push(("HAS_F64".into(), "1".into()));
+        }
+        if self.fc == FloatControls::Off {
+            d.push(("FC_OFF".into(), "1".into()));
         }
         d
     }

@@ -17,8 +17,27 @@ layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { Node no
 
 uint child_word(uint ni, uint s) { return nodes[ni].child[s]; }
 
-f16vec3 slot_lo(uint ni, uint s) { return f16vec3(nodes[ni].lo[s], nodes[ni].lo[B + s], nodes[ni].lo[2 * B + s]); }
-f16vec3 slot_hi(uint ni, uint s) { return f16vec3(nodes[ni].hi[s], nodes[ni].hi[B + s], nodes[ni].hi[2 * B + s]); }
+// fp16 values: `float16_t` with fp16 arithmetic (MATH_F16, MATH_MIXED); in MATH_F32 they are
+// held exactly in fp32 and the few fp16 roundings are emulated (rte16), so that mode uses 16-bit
+// storage only and runs on devices without shaderFloat16. Every value and bound is the same.
+#ifdef MATH_F32
+#define HALF float
+#define HVEC3 vec3
+#define LOADH(x) float(x)
+#define HINF INF
+#define TO_HALF(x) rte16(x)
+const float H0 = 0.0;
+#else
+#define HALF float16_t
+#define HVEC3 f16vec3
+#define LOADH(x) (x)
+#define HINF float16_t(uintBitsToFloat(0x7f800000u))
+#define TO_HALF(x) float16_t(x)
+const float16_t H0 = float16_t(0.0);
+#endif
+
+HVEC3 slot_lo(uint ni, uint s) { return HVEC3(LOADH(nodes[ni].lo[s]), LOADH(nodes[ni].lo[B + s]), LOADH(nodes[ni].lo[2 * B + s])); }
+HVEC3 slot_hi(uint ni, uint s) { return HVEC3(LOADH(nodes[ni].hi[s]), LOADH(nodes[ni].hi[B + s]), LOADH(nodes[ni].hi[2 * B + s])); }
 
 void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     lo = vec3(slot_lo(ni, s));
@@ -33,9 +52,6 @@ const float TWO_M21 = 1.0 / 2097152.0;
 const float TWO_M22 = 1.0 / 4194304.0;
 const float TWO_M23 = 1.0 / 8388608.0;
 const float TWO_M24 = 1.0 / 16777216.0;
-#define HINF float16_t(uintBitsToFloat(0x7f800000u))
-const float16_t H0 = float16_t(0.0);
-
 // Origin type: fp32 in the fp32 math mode, fp16 otherwise (the Entry's `o` has the same type).
 #ifdef MATH_F32
 #define OVEC vec3
@@ -45,31 +61,64 @@ const float16_t H0 = float16_t(0.0);
 #define OCONV(x) float16_t(x)
 #endif
 
-// An fp16 value >= x with one round-to-nearest conversion (fp16::up_f32).
-float16_t up16(float x) {
-    precise float y = x + abs(x) * (1.0 / 1024.0) + (1.0 / 16777216.0);
-    return y > 65504.0 ? HINF : float16_t(y);
-}
-float16_t down16(float x) { return -up16(-x); }
-float up32(float x) { return isinf(x) ? x : upper32(x); }
-
 int frexp_exp(float x) {
     int e = int((floatBitsToUint(x) >> 23) & 0xffu);
     return e == 0 ? -126 : e - 126;
 }
 float pow2(int e) { return uintBitsToFloat(uint(e + 127) << 23); }
 
+// Round-to-nearest-even of x to fp16, returned exactly in fp32: integer operations on the
+// bits and one exact power-of-two product, so it needs no fp16 arithmetic (fp16.rs,
+// rte16_emulated, takes the same steps and is tested against the conversion for every fp16
+// value, midpoint and neighbour).
+float rte16(float x) {
+    uint u = floatBitsToUint(x);
+    uint sgn = u & 0x80000000u;
+    uint a = u & 0x7fffffffu;
+    if (a >= 0x7f800000u) return x;                                   // inf, NaN
+    if (a >= 0x477ff000u) return uintBitsToFloat(sgn | 0x7f800000u);  // >= 65520 rounds to inf
+    int e = int(a >> 23) - 127;
+    if (e < -25) return uintBitsToFloat(sgn);                         // below half of 2^-24
+    uint m = (a & 0x7fffffu) | 0x800000u;                             // x = m * 2^(e - 23)
+    int lsb = max(e - 10, -24);                                       // fp16's last place
+    uint sh = uint(lsb - (e - 23));                                   // 13..24
+    uint q = m >> sh;
+    uint rem = m & ((1u << sh) - 1u);
+    uint halfway = 1u << (sh - 1u);
+    if (rem > halfway || (rem == halfway && (q & 1u) == 1u)) q++;
+    precise float r = float(q) * pow2(lsb);
+    return uintBitsToFloat(floatBitsToUint(r) | sgn);
+}
+
+// An fp16 value >= x with one round-to-nearest conversion (fp16::up_f32).
+HALF up16(float x) {
+    precise float y = x + abs(x) * (1.0 / 1024.0) + (1.0 / 16777216.0);
+    return y > 65504.0 ? HINF : TO_HALF(y);
+}
+HALF down16(float x) { return -up16(-x); }
+float up32(float x) { return isinf(x) ? x : upper32(x); }
+
 // Child frame from its stored box: centre c (fp16), ratio r, world origin w, scale k
 // (frame.rs, derive_child).
-void derive_child(vec3 pw, float pk, f16vec3 lo, f16vec3 hi, out f16vec3 c, out float r, out vec3 w, out float k) {
+void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float r, out vec3 w, out float k) {
     precise float h = 0.0;
     precise float inv_k = 1.0 / pk;
     float wmax = 0.0;
     for (int a = 0; a < 3; a++) {
         float l = float(lo[a]);
         float u = float(hi[a]);
+#ifdef MATH_F32
+        // fp16's (lo + hi) * 0.5, each operation rounded to fp16: the fp32 sum of two fp16
+        // values is either exact or off by less than fp16's distance to the nearest midpoint
+        // (the smaller operand then lies below 2^-12 of the larger), so rounding it to fp16
+        // gives the fp16 sum.
+        precise float s16 = lo[a] + hi[a];
+        precise float hs = rte16(s16) * 0.5;
+        float ch = rte16(hs);
+#else
         // fp16 arithmetic: compilers may fold an f32->f16->f32 round trip away.
         precise float16_t ch = (lo[a] + hi[a]) * float16_t(0.5);
+#endif
         c[a] = ch;
         float cf = float(ch);
         precise float du = u - cf;
@@ -112,17 +161,21 @@ float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
 // Per-ray constants (hooks.rs, Ray16): m = max|D|, d16 = fp16(D / m), its fp16 and fp32
 // reciprocals.
 float lr_m;
-f16vec3 lr_d16;
+HVEC3 lr_d16;
+#ifndef MATH_F32
 f16vec3 lr_idir;
+#endif
 vec3 lr_idir32;
 
 void layout_ray(RayPre r) {
     lr_m = max(max(abs(r.d.x), abs(r.d.y)), abs(r.d.z));
     for (int a = 0; a < 3; a++) {
         precise float x = r.d[a] / lr_m;
-        lr_d16[a] = abs(x) < D_FLUSH ? H0 : float16_t(x);
+        lr_d16[a] = abs(x) < D_FLUSH ? H0 : TO_HALF(x);
+#ifndef MATH_F32
         precise float16_t inv = float16_t(1.0) / lr_d16[a];
         lr_idir[a] = lr_d16[a] == H0 ? HINF : inv;
+#endif
         precise float inv32 = 1.0 / float(lr_d16[a]);
         lr_idir32[a] = lr_d16[a] == H0 ? INF : inv32;
     }
@@ -137,6 +190,7 @@ Entry no_entry() { return Entry(vec4(0.0), OVEC(0.0), -1.0, 0.0, 0.0); }
 bool has_entry(Entry en) { return en.e >= 0.0; }
 float entry_t(Entry en) { return en.tlo; }
 
+#ifndef MATH_F32
 // fp16 slab test in the node frame: (tn, tn_lb, tf_ub) (hooks.rs, slab16).
 f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
     float16_t tn = -HINF;
@@ -164,9 +218,10 @@ f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
     precise float16_t tf_ub = tf * (tf > H0 ? LO_UP : LO_DOWN);
     return f16vec3(tn, tn_lb, tf_ub);
 }
+#endif
 
 // The box test in the variant's math mode, as fp32 (tn, tn_lb, tf_ub) (hooks.rs, slab).
-vec3 slab_math(OVEC o, float16_t w, f16vec3 lo, f16vec3 hi) {
+vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
 #if !defined(MATH_F32) && !defined(MATH_MIXED)
     return vec3(slab16(o, w, lo, hi));
 #else
@@ -209,10 +264,10 @@ vec3 slab_math(OVEC o, float16_t w, f16vec3 lo, f16vec3 hi) {
 // Quantities fixed for one visit of one node by one ray (hooks.rs, visit).
 struct Visit {
     float mk;
-    float16_t s_lim;
-    float16_t lower;
+    HALF s_lim;
+    HALF lower;
     bool prec;
-    float16_t w;
+    HALF w;
 };
 
 Visit visit_node(Entry en, float best) {
@@ -250,11 +305,11 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
 // moved into it in fp16, or re-anchored from the fp32 world ray when the bound grows too large
 // (counted in `reanchors`).
 Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
-    f16vec3 lo = slot_lo(ni, s);
-    f16vec3 hi = slot_hi(ni, s);
+    HVEC3 lo = slot_lo(ni, s);
+    HVEC3 hi = slot_hi(ni, s);
     vec3 fw = en.wk.xyz;
     float fk = en.wk.w;
-    f16vec3 cc; float cr; vec3 cw; float ck;
+    HVEC3 cc; float cr; vec3 cw; float ck;
     derive_child(fw, fk, lo, hi, cc, cr, cw, ck);
     float lower = float(v.lower);
     float s_lo = max(h.tn_lb, lower);

@@ -32,9 +32,52 @@ pub struct DeviceInfo {
     /// Float controls the kernels declare: fp16 round-to-nearest-even and fp16/fp32
     /// signed-zero/inf/NaN preservation (without them, drivers may skip fp16 roundings).
     pub fp16_rte: bool,
+    pub fp32_rte: bool,
     pub preserve_16: bool,
     pub preserve_32: bool,
+    /// `subgroupSizeControl` with compute in its required-size stages: the subgroup size a
+    /// kernel was built for can be pinned, between these bounds.
+    pub subgroup_size_control: bool,
+    pub min_subgroup_size: u32,
+    pub max_subgroup_size: u32,
 }
+
+impl DeviceInfo {
+    /// Treats feature `name` (one of [`MASKABLE`]) as missing.
+    pub fn mask(&mut self, name: &str) -> Result<(), String> {
+        match name {
+            "shaderFloat16" => self.shader_float16 = false,
+            "storageBuffer16BitAccess" => self.storage_16bit = false,
+            "shaderFloat64" => self.shader_float64 = false,
+            "rayQuery" => self.ray_query = false,
+            "subgroupSizeControl" => {
+                self.subgroup_size_control = false;
+                (self.min_subgroup_size, self.max_subgroup_size) = (self.subgroup_size, self.subgroup_size);
+            }
+            "shaderRoundingModeRTEFloat16" => self.fp16_rte = false,
+            "shaderRoundingModeRTEFloat32" => self.fp32_rte = false,
+            "shaderSignedZeroInfNanPreserveFloat16" => self.preserve_16 = false,
+            "shaderSignedZeroInfNanPreserveFloat32" => self.preserve_32 = false,
+            "floatControls" => (self.fp16_rte, self.fp32_rte, self.preserve_16, self.preserve_32) = (false, false, false, false),
+            other => return Err(format!("unknown feature to mask: '{other}' (use one of {})", MASKABLE.join(", "))),
+        }
+        Ok(())
+    }
+}
+
+/// Every feature `--mask-feature` can hide, so each fallback runs on any device.
+pub const MASKABLE: &[&str] = &[
+    "shaderFloat16",
+    "storageBuffer16BitAccess",
+    "shaderFloat64",
+    "rayQuery",
+    "subgroupSizeControl",
+    "shaderRoundingModeRTEFloat16",
+    "shaderRoundingModeRTEFloat32",
+    "shaderSignedZeroInfNanPreserveFloat16",
+    "shaderSignedZeroInfNanPreserveFloat32",
+    "floatControls",
+];
 
 /// How to open a device.
 #[derive(Clone, Debug, Default)]
@@ -42,8 +85,8 @@ pub struct ContextOptions {
     /// Index or case-insensitive name substring; default: first discrete GPU, else
     /// integrated, else virtual, else CPU (lavapipe), else anything.
     pub device: Option<String>,
-    /// Feature names to treat as missing (tests of the error path): `shaderFloat16`,
-    /// `storageBuffer16BitAccess`, `shaderFloat64`, `rayQuery`.
+    /// Feature names to treat as missing (tests of the fallbacks): any of [`MASKABLE`]
+    /// (`floatControls`: every rounding and preserve mode).
     pub mask_features: Vec<String>,
     /// Enable VK_LAYER_KHRONOS_validation if installed (also `HALFTRACE_VALIDATION=1`).
     pub validation: bool,
@@ -123,8 +166,19 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
         let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
         let mut drv = vk::PhysicalDeviceDriverProperties::default();
         let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
+        let mut ssc = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
+        let ssc_ext = has0(ash::ext::subgroup_size_control::NAME);
         let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut sub).push_next(&mut drv).push_next(&mut fc);
+        if ssc_ext {
+            p2 = p2.push_next(&mut ssc);
+        }
         instance.get_physical_device_properties2(pd, &mut p2);
+        let ssc_ok = ssc_ext && {
+            let mut sf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut sf);
+            instance.get_physical_device_features2(pd, &mut f2);
+            sf.subgroup_size_control == vk::TRUE && ssc.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE)
+        };
         let qf = instance.get_physical_device_queue_family_properties(pd);
         let timestamps = qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
         let v = props.api_version;
@@ -148,8 +202,12 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps,
             fp16_rte: fc.shader_rounding_mode_rte_float16 == vk::TRUE,
+            fp32_rte: fc.shader_rounding_mode_rte_float32 == vk::TRUE,
             preserve_16: fc.shader_signed_zero_inf_nan_preserve_float16 == vk::TRUE,
             preserve_32: fc.shader_signed_zero_inf_nan_preserve_float32 == vk::TRUE,
+            subgroup_size_control: ssc_ok,
+            min_subgroup_size: if ssc_ok { ssc.min_subgroup_size } else { sub.subgroup_size },
+            max_subgroup_size: if ssc_ok { ssc.max_subgroup_size } else { sub.subgroup_size },
         }
     }
 }
@@ -245,29 +303,12 @@ impl Gpu {
             info.max_storage_buffer = info.max_storage_buffer.min(m);
         }
         for m in &opts.mask_features {
-            match m.as_str() {
-                "shaderFloat16" => info.shader_float16 = false,
-                "storageBuffer16BitAccess" => info.storage_16bit = false,
-                "shaderFloat64" => info.shader_float64 = false,
-                "rayQuery" => info.ray_query = false,
-                other => return Err((GpuError::Other(format!("unknown feature to mask: '{other}'")), debug)),
+            if let Err(e) = info.mask(m) {
+                return Err((GpuError::Other(e), debug));
             }
         }
-        if !info.shader_float16 {
-            return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "shaderFloat16 (fp16 arithmetic in shaders)".into() }, debug));
-        }
-        if !info.storage_16bit {
-            return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "storageBuffer16BitAccess (fp16 in storage buffers)".into() }, debug));
-        }
-        for (ok, what) in [
-            (info.fp16_rte, "shaderRoundingModeRTEFloat16 (IEEE rounding of every fp16 operation)"),
-            (info.preserve_16, "shaderSignedZeroInfNanPreserveFloat16"),
-            (info.preserve_32, "shaderSignedZeroInfNanPreserveFloat32"),
-        ] {
-            if !ok {
-                return Err((GpuError::MissingFeature { device: info.name.clone(), feature: what.into() }, debug));
-            }
-        }
+        // No feature is required up front: each variant needs what its layout and math use
+        // (gpu::support), and what a device lacks becomes one skipped line per variant.
         if !info.timestamps {
             return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "timestamp queries on a compute queue".into() }, debug));
         }
@@ -277,15 +318,26 @@ impl Gpu {
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
         let rq = info.ray_query && !opts.mask_features.iter().any(|m| m == "rayQuery");
         info.ray_query = rq;
-        let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(true);
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(true).buffer_device_address(rq);
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_float16).buffer_device_address(rq);
+        let mut sscf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true);
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let base = vk::PhysicalDeviceFeatures::default().shader_float64(info.shader_float64);
         let ext_names = [ash::khr::acceleration_structure::NAME.as_ptr(), ash::khr::ray_query::NAME.as_ptr(), ash::khr::deferred_host_operations::NAME.as_ptr()];
-        let mut dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).enabled_features(&base).push_next(&mut v11).push_next(&mut v12);
+        let mut exts: Vec<*const std::ffi::c_char> = Vec::new();
         if rq {
-            dinfo = dinfo.enabled_extension_names(&ext_names).push_next(&mut asf).push_next(&mut rqf);
+            exts.extend(ext_names);
+        }
+        if info.subgroup_size_control {
+            exts.push(ash::ext::subgroup_size_control::NAME.as_ptr());
+        }
+        let mut dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).enabled_features(&base).push_next(&mut v11).push_next(&mut v12).enabled_extension_names(&exts);
+        if rq {
+            dinfo = dinfo.push_next(&mut asf).push_next(&mut rqf);
+        }
+        if info.subgroup_size_control {
+            dinfo = dinfo.push_next(&mut sscf);
         }
         let device = tryd!(unsafe { instance.create_device(physical, &dinfo, None) }.vk("vkCreateDevice"));
         let queue = unsafe { device.get_device_queue(qfi, 0) };

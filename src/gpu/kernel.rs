@@ -81,6 +81,8 @@ pub struct Kernel<'g> {
     pub imp: PacketImpl,
     pub stats: bool,
     pub source: Source,
+    /// The subgroup size the pipeline is pinned to (`None`: the driver's).
+    pub subgroup: Option<u32>,
 }
 
 impl<'g> Kernel<'g> {
@@ -101,8 +103,9 @@ impl<'g> Kernel<'g> {
     /// variant's interface (entry point, workgroup, bindings, push constants, specialization
     /// constants, capabilities) before any pipeline is created.
     pub fn build(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source) -> Result<Kernel<'g>, GpuError> {
-        if imp == PacketImpl::Subgroup && v.packet > gpu.info.subgroup_size as usize {
-            return Err(GpuError::Other(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
+        super::support::check(&gpu.info, v).map_err(GpuError::Unsupported)?;
+        if imp == PacketImpl::Subgroup && v.packet > gpu.info.max_subgroup_size as usize {
+            return Err(GpuError::Unsupported(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.max_subgroup_size)));
         }
         let f64 = gpu.info.shader_float64;
         let code = match source {
@@ -114,8 +117,17 @@ impl<'g> Kernel<'g> {
     }
 
     fn with_code(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source, code: &[u32]) -> Result<Kernel<'g>, GpuError> {
-        let pipe = ComputePipeline::new(gpu, &v.kernel_name(imp, stats), code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32)?;
-        Ok(Kernel { pipe, variant: *v, imp, stats, source: source.clone() })
+        // A subgroup packet kernel is pinned to the size it was planned for, where the device
+        // allows it; otherwise it runs at the reported size, which must hold the packet.
+        let pin = match imp {
+            PacketImpl::Subgroup => super::support::packet_plan(&gpu.info, v.packet).1,
+            _ => None,
+        };
+        if imp == PacketImpl::Subgroup && pin.is_none() && v.packet > gpu.info.subgroup_size as usize {
+            return Err(GpuError::Unsupported(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
+        }
+        let pipe = ComputePipeline::with_subgroup(gpu, &v.kernel_name(imp, stats), code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32, pin)?;
+        Ok(Kernel { pipe, variant: *v, imp, stats, source: source.clone(), subgroup: pin })
     }
 
     /// The counting kernel of a user's module: its GLSL compiled with `STATS`, when that build
@@ -182,5 +194,5 @@ pub struct RunOutput {
 
 /// The packet implementation this device uses for a variant (`force` overrides it).
 pub fn choose_impl(gpu: &Gpu, v: &Variant, force: Option<PacketImpl>) -> PacketImpl {
-    force.unwrap_or_else(|| PacketImpl::choose(v.packet, gpu.info.subgroup_size))
+    force.unwrap_or_else(|| super::support::packet_plan(&gpu.info, v.packet).0)
 }

@@ -11,6 +11,7 @@ pub mod kernel;
 pub mod pipeline;
 pub mod rq;
 pub mod shader;
+pub mod support;
 pub mod timer;
 
 pub use context::{list_devices, ContextOptions, DeviceInfo, Gpu};
@@ -36,6 +37,9 @@ pub enum GpuError {
     Compile { variant: String, log: String },
     #[error("{path}: {msg}")]
     Spirv { path: String, msg: String },
+    /// The device lacks what this variant needs (a skipped line, not a failure).
+    #[error("{0}")]
+    Unsupported(String),
     #[error("{0}")]
     Other(String),
 }

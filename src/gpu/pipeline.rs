@@ -19,11 +19,17 @@ pub struct ComputePipeline<'g> {
 impl<'g> ComputePipeline<'g> {
     /// A pipeline whose `bindings` are all storage buffers.
     pub fn new(gpu: &'g Gpu, name: &str, spirv: &[u32], bindings: u32, push_size: u32) -> Result<ComputePipeline<'g>, GpuError> {
-        Self::new_typed(gpu, name, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size)
+        Self::new_typed(gpu, name, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size, None)
+    }
+
+    /// A storage-buffer pipeline whose subgroup size is pinned to `subgroup` (needs
+    /// `subgroupSizeControl`; `None`: the driver's choice).
+    pub fn with_subgroup(gpu: &'g Gpu, name: &str, spirv: &[u32], bindings: u32, push_size: u32, subgroup: Option<u32>) -> Result<ComputePipeline<'g>, GpuError> {
+        Self::new_typed(gpu, name, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size, subgroup)
     }
 
     /// A pipeline with one descriptor of the given type per binding.
-    pub fn new_typed(gpu: &'g Gpu, name: &str, spirv: &[u32], types: &[vk::DescriptorType], push_size: u32) -> Result<ComputePipeline<'g>, GpuError> {
+    pub fn new_typed(gpu: &'g Gpu, name: &str, spirv: &[u32], types: &[vk::DescriptorType], push_size: u32, subgroup: Option<u32>) -> Result<ComputePipeline<'g>, GpuError> {
         let d = &gpu.device;
         let mut p = ComputePipeline {
             gpu,
@@ -48,7 +54,11 @@ impl<'g> ComputePipeline<'g> {
             let dsls = [p.dsl];
             let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).offset(0).size(push_size)];
             p.layout = d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&dsls).push_constant_ranges(&ranges), None).vk("vkCreatePipelineLayout")?;
-            let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(p.module).name(c"main");
+            let mut size_info = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default().required_subgroup_size(subgroup.unwrap_or(0));
+            let mut stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(p.module).name(c"main");
+            if subgroup.is_some() {
+                stage = stage.push_next(&mut size_info);
+            }
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout)];
             p.pipeline = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None).map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
             let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();

@@ -145,7 +145,7 @@ pub fn pipeline(gpu: &Gpu) -> Result<ComputePipeline<'_>, GpuError> {
     let code = shader::compile_baseline(KERNEL, "trav_rq.comp")?;
     let mut types = vec![vk::DescriptorType::STORAGE_BUFFER; binding::COUNT as usize];
     types[binding::NODES as usize] = vk::DescriptorType::ACCELERATION_STRUCTURE_KHR;
-    ComputePipeline::new_typed(gpu, KERNEL, &code, &types, std::mem::size_of::<PushConstants>() as u32)
+    ComputePipeline::new_typed(gpu, KERNEL, &code, &types, std::mem::size_of::<PushConstants>() as u32, None)
 }
 
 /// Traces `rays` with ray queries: `warmup` untimed, `repeat` timed dispatches.

@@ -77,7 +77,55 @@ impl Includes {
 /// exact-zero edge case (needs `shaderFloat64`; the CPU reference always does).
 pub fn compile(v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
     let src = source("trav.comp").expect("glsl/trav.comp is embedded");
-    compile_source(&v.kernel_name(imp, stats), "trav.comp", src, &v.defines(imp, stats, f64_fallback), &Includes::variant(v))
+    let words = compile_source(&v.kernel_name(imp, stats), "trav.comp", src, &v.defines(imp, stats, f64_fallback), &Includes::variant(v))?;
+    Ok(add_float_modes(&words, &super::support::float_modes(v)))
+}
+
+/// Adds float-control execution modes `(mode, width)` (and their capabilities) to the entry
+/// point of a compiled module. glslang keeps one `spirv_execution_mode` per mode, whatever the
+/// width, so the host adds them; modes already present are kept once.
+pub fn add_float_modes(words: &[u32], modes: &[super::support::FloatMode]) -> Vec<u32> {
+    if modes.is_empty() || words.len() < 5 {
+        return words.to_vec();
+    }
+    // (start, op, operands) of each instruction.
+    let mut insts = Vec::new();
+    let mut i = 5;
+    while i < words.len() {
+        let wc = ((words[i] >> 16) as usize).max(1);
+        insts.push((i, words[i] & 0xffff, &words[(i + 1).min(words.len())..(i + wc).min(words.len())]));
+        i += wc;
+    }
+    let entry = insts.iter().find(|(_, op, o)| *op == 15 && o.len() >= 2).map(|(_, _, o)| o[1]);
+    let Some(entry) = entry else { return words.to_vec() };
+    let has_cap = |c: u32| insts.iter().any(|(_, op, o)| *op == 17 && o.first() == Some(&c));
+    let has_mode = |m: u32, w: u32| insts.iter().any(|(_, op, o)| *op == 16 && o.len() >= 3 && o[1] == m && o[2] == w);
+    let mut caps: Vec<u32> = Vec::new();
+    for &(m, _) in modes {
+        let cap = if m == super::support::ROUNDING_MODE_RTE { 4467 } else { 4466 };
+        if !has_cap(cap) && !caps.contains(&cap) {
+            caps.push(cap);
+        }
+    }
+    let new_modes: Vec<_> = modes.iter().filter(|&&(m, w)| !has_mode(m, w)).collect();
+    let last_cap = insts.iter().rposition(|(_, op, _)| *op == 17);
+    let last_mode = insts.iter().rposition(|(_, op, _)| *op == 16 || *op == 331).or_else(|| insts.iter().rposition(|(_, op, _)| *op == 15));
+    let mut out = words[..5].to_vec();
+    for (k, (start, _, o)) in insts.iter().enumerate() {
+        out.push(words[*start]);
+        out.extend_from_slice(o);
+        if Some(k) == last_cap {
+            for &c in &caps {
+                out.extend([(2 << 16) | 17, c]);
+            }
+        }
+        if Some(k) == last_mode {
+            for &&(m, w) in &new_modes {
+                out.extend([(4 << 16) | 16, entry, m, w]);
+            }
+        }
+    }
+    out
 }
 
 /// Compiles a user's GLSL kernel file with the defines and includes of the built-in kernel of
@@ -87,7 +135,8 @@ pub fn compile_user(path: &Path, v: &Variant, imp: PacketImpl, stats: bool, f64_
     let mut inc = Includes::variant(v);
     inc.user_dir = path.parent().map(Path::to_path_buf);
     let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-    compile_source(&format!("{} ({})", v.kernel_name(imp, stats), path.display()), &file, &src, &v.defines(imp, stats, f64_fallback), &inc)
+    let words = compile_source(&format!("{} ({})", v.kernel_name(imp, stats), path.display()), &file, &src, &v.defines(imp, stats, f64_fallback), &inc)?;
+    Ok(add_float_modes(&words, &super::support::float_modes(v)))
 }
 
 /// Compiles a shared kernel that has no layout (`trav_rq.comp`, `bench.comp`).
@@ -248,7 +297,7 @@ fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
         10 => ("Float64", i.shader_float64),
         4433 => ("StorageBuffer16BitAccess", i.storage_16bit),
         4466 => ("SignedZeroInfNanPreserve", i.preserve_16 || i.preserve_32),
-        4467 => ("RoundingModeRTE", i.fp16_rte),
+        4467 => ("RoundingModeRTE", i.fp16_rte || i.fp32_rte),
         61 => ("GroupNonUniform", sub(0)),
         62 => ("GroupNonUniformVote", sub(1)),
         63 => ("GroupNonUniformArithmetic", sub(2)),

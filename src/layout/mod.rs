@@ -81,6 +81,17 @@ pub enum EncodeError {
     OutOfRange { layout: &'static str, node: usize, child: usize, value: f64 },
 }
 
+/// Device features a layout's kernels use in one math mode (the shared parts — fp32 leaf tests,
+/// fp32 root box — need none of these).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Needs {
+    /// 16-bit values in storage buffers (`storageBuffer16BitAccess`).
+    pub storage16: bool,
+    /// fp16 arithmetic (`shaderFloat16`); with float controls on, also fp16 round-to-nearest-even
+    /// and fp16 signed-zero/inf/NaN preservation.
+    pub float16: bool,
+}
+
 /// Child reference word, shared by all layouts (4 bytes): [`CHILD_EMPTY`] = empty slot;
 /// [`LEAF_BIT`] set = leaf with `count − 1` in the [`LEAF_COUNT_BITS`] bits above the
 /// [`LEAF_FIRST_BITS`] bits of its first triangle (in leaf order); otherwise the index of an
@@ -177,6 +188,14 @@ pub trait Layout: Send + Sync + Sized + 'static {
     const MATHS: &'static [Math];
     /// The GLSL hooks (`glsl/layout/<name>.glsl`); kernels include them as `layout.glsl`.
     const GLSL: &'static str;
+    /// Whether the hooks have a build without float controls (`FC_OFF`) whose hits stay
+    /// exact under any faithful rounding and without inf/NaN preservation.
+    const FLOAT_CONTROLS_OFF: bool = false;
+
+    /// What the kernels need from the device in math mode `math`.
+    fn needs(_math: Math) -> Needs {
+        Needs::default()
+    }
 
     /// The node struct at branching factor `B`.
     type Node<const B: usize>: Node;

@@ -2,7 +2,7 @@
 //! the report and `shaders --emit` read it; nothing else names a layout. Adding a layout is
 //! one line in [`REGISTRY`].
 
-use super::{Encoded, EncodeError, Layout, Math};
+use super::{Encoded, EncodeError, Layout, Math, Needs};
 use crate::bvh::WideBvh;
 use crate::gpu::kernel::RunOutput;
 use crate::gpu::{Gpu, GpuError};
@@ -143,6 +143,8 @@ pub trait DynLayout: Send + Sync {
     /// The GLSL hooks source.
     fn glsl(&self) -> &'static str;
     fn stack_entry(&self, math: Math) -> &'static [(&'static str, &'static str)];
+    fn needs(&self, math: Math) -> Needs;
+    fn float_controls_off(&self) -> bool;
     fn glsl_constants(&self) -> String;
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError>;
     /// The CPU reference: rays in packets of `p` (1: single rays) in math mode `math`.
@@ -205,6 +207,12 @@ impl<L: Layout> DynLayout for Plug<L> {
     }
     fn stack_entry(&self, math: Math) -> &'static [(&'static str, &'static str)] {
         L::stack_entry(math)
+    }
+    fn needs(&self, math: Math) -> Needs {
+        L::needs(math)
+    }
+    fn float_controls_off(&self) -> bool {
+        L::FLOAT_CONTROLS_OFF
     }
     fn glsl_constants(&self) -> String {
         L::glsl_constants()

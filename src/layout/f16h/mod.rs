@@ -13,7 +13,7 @@ pub mod hooks;
 pub use frame::{derive_child, encode_with_frames, root_frame, to_local, ChildFrame, Frame, COORD_LIMIT};
 pub use hooks::{Entry, Ray16, Visit};
 
-use super::{EncodeError, Layout, Math, Node};
+use super::{Needs, EncodeError, Layout, Math, Node};
 use crate::bvh::WideBvh;
 use crate::scene::Scene;
 use crate::trace::{Counters, RayPre};
@@ -61,6 +61,13 @@ impl Layout for F16h {
     const SUMMARY: &'static str = "fp16 child boxes in the parent's frame, frames chained (Koskela et al.), made conservative";
     const MATHS: &'static [Math] = &[Math::F16, Math::F32, Math::Mixed];
     const GLSL: &'static str = include_str!("../../../glsl/layout/f16h.glsl");
+
+    /// fp16 storage always; fp16 arithmetic in the f16 and mixed modes only: the f32 mode
+    /// emulates its few fp16 roundings (frame centres, bounds) with fp32 and integer
+    /// operations (glsl/layout/f16h.glsl, `rte16`), so it runs without `shaderFloat16`.
+    fn needs(math: Math) -> Needs {
+        Needs { storage16: true, float16: math != Math::F32 }
+    }
 
     type Node<const B: usize> = F16hNode<B>;
     type Root = Frame;

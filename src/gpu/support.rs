@@ -1,0 +1,130 @@
+//! What a device can run, per variant: the features its layout and math need, the float
+//! controls its kernel declares, and the packet implementation and subgroup size it uses. A
+//! device is never refused as a whole: what it lacks becomes one skipped line per variant.
+
+use super::DeviceInfo;
+use crate::layout::{LayoutId, Math};
+use crate::variant::{FcChoice, FloatControls, PacketImpl, Variant};
+
+/// A float-control execution mode a kernel declares: (SPIR-V execution mode, float width).
+pub type FloatMode = (u32, u32);
+pub const SIGNED_ZERO_INF_NAN_PRESERVE: u32 = 4461;
+pub const ROUNDING_MODE_RTE: u32 = 4462;
+
+/// The execution modes the kernel of `v` declares: with float controls on, round-to-nearest-even
+/// and signed-zero/inf/NaN preservation for fp32, and for fp16 when the layout computes in fp16
+/// in this math mode; with them off, none.
+pub fn float_modes(v: &Variant) -> Vec<FloatMode> {
+    if v.fc == FloatControls::Off {
+        return Vec::new();
+    }
+    let mut m = vec![(ROUNDING_MODE_RTE, 32), (SIGNED_ZERO_INF_NAN_PRESERVE, 32)];
+    if needs(v.layout, v.math).float16 {
+        m.extend([(ROUNDING_MODE_RTE, 16), (SIGNED_ZERO_INF_NAN_PRESERVE, 16)]);
+    }
+    m
+}
+
+fn needs(layout: LayoutId, math: Math) -> crate::layout::Needs {
+    layout.bvh().map(|l| l.needs(math)).unwrap_or_default()
+}
+
+/// The device feature behind a float mode.
+fn mode_feature(info: &DeviceInfo, (mode, width): FloatMode) -> (&'static str, bool) {
+    match (mode, width) {
+        (ROUNDING_MODE_RTE, 16) => ("shaderRoundingModeRTEFloat16", info.fp16_rte),
+        (ROUNDING_MODE_RTE, _) => ("shaderRoundingModeRTEFloat32", info.fp32_rte),
+        (_, 16) => ("shaderSignedZeroInfNanPreserveFloat16", info.preserve_16),
+        _ => ("shaderSignedZeroInfNanPreserveFloat32", info.preserve_32),
+    }
+}
+
+/// `Ok` when `info`'s device can run the kernels of `v` as built (its float controls
+/// included), else what it lacks, in one line.
+pub fn check(info: &DeviceInfo, v: &Variant) -> Result<(), String> {
+    let Some(l) = v.layout.bvh() else { return Err(format!("{} is not a BVH layout", v.layout)) };
+    let n = l.needs(v.math);
+    let mut missing = Vec::new();
+    if n.storage16 && !info.storage_16bit {
+        missing.push("storageBuffer16BitAccess");
+    }
+    if n.float16 && !info.shader_float16 {
+        missing.push("shaderFloat16");
+    }
+    match v.fc {
+        FloatControls::On => missing.extend(float_modes(v).into_iter().map(|m| mode_feature(info, m)).filter(|(_, ok)| !ok).map(|(n, _)| n)),
+        FloatControls::Off if !l.float_controls_off() => return Err(format!("{} has no kernel build without float controls", v.layout)),
+        FloatControls::Off => {}
+    }
+    if missing.is_empty() {
+        Ok(())
+    } else {
+        Err(format!("{} needs {}, which the device lacks", v.name(false), missing.join(", ")))
+    }
+}
+
+/// The variant this device runs for `v` under `--float-controls choice` (auto: on where the
+/// device has the modes, else off where the layout has such a build), or why it cannot run.
+pub fn resolve(info: &DeviceInfo, v: Variant, choice: FcChoice) -> Result<Variant, String> {
+    match choice {
+        FcChoice::On => check(info, &v.with_fc(FloatControls::On)).map(|_| v.with_fc(FloatControls::On)),
+        FcChoice::Off => check(info, &v.with_fc(FloatControls::Off)).map(|_| v.with_fc(FloatControls::Off)),
+        FcChoice::Auto => {
+            let on = v.with_fc(FloatControls::On);
+            match check(info, &on) {
+                Ok(()) => Ok(on),
+                Err(why) => check(info, &v.with_fc(FloatControls::Off)).map(|_| v.with_fc(FloatControls::Off)).map_err(|_| why),
+            }
+        }
+    }
+}
+
+/// The subgroup size a packet kernel of `p` rays is built for: the smallest power of two ≥ p the
+/// device can be pinned to (with `subgroupSizeControl`), else the device's reported size.
+/// `None`: no subgroup can hold the packet (the shared-memory implementation is used).
+pub fn packet_subgroup(p: usize, subgroup: u32, control: Option<(u32, u32)>) -> Option<u32> {
+    if p <= 1 {
+        return None;
+    }
+    match control {
+        Some((lo, hi)) => {
+            let want = (p as u32).next_power_of_two().max(lo);
+            (want <= hi).then_some(want)
+        }
+        None => (p <= subgroup as usize).then_some(subgroup),
+    }
+}
+
+/// The packet implementation for `p` rays and the subgroup size to pin (`None`: leave the
+/// driver's choice, which is the reported size).
+pub fn packet_plan(info: &DeviceInfo, p: usize) -> (PacketImpl, Option<u32>) {
+    let control = info.subgroup_size_control.then_some((info.min_subgroup_size, info.max_subgroup_size));
+    match packet_subgroup(p, info.subgroup_size, control) {
+        _ if p == 1 => (PacketImpl::Single, None),
+        Some(size) => (PacketImpl::Subgroup, control.map(|_| size)),
+        None => (PacketImpl::Shared, None),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packet_choice_for_every_subgroup_size() {
+        for size in [4u32, 8, 16, 32, 64, 128] {
+            for p in [1usize, 4, 8, 16, 32, 64] {
+                // Without size control: the reported size must hold the packet.
+                let fixed = packet_subgroup(p, size, None);
+                assert_eq!(fixed, (p > 1 && p <= size as usize).then_some(size), "size {size}, P {p}");
+                // With control over [4, size]: pinned to the smallest size that holds P.
+                let pinned = packet_subgroup(p, size, Some((4, size)));
+                assert_eq!(pinned, (p > 1 && p <= size as usize).then_some((p as u32).max(4)), "size {size}, P {p}");
+            }
+        }
+        // A device whose smallest size exceeds P pins its smallest (clusters of P inside it).
+        assert_eq!(packet_subgroup(4, 32, Some((32, 64))), Some(32));
+        assert_eq!(packet_subgroup(64, 32, Some((32, 64))), Some(64));
+        assert_eq!(packet_subgroup(64, 32, Some((8, 32))), None);
+    }
+}
