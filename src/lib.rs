@@ -8,6 +8,7 @@
 //! `docs/architecture.md` has the picture and how to add a layout.
 
 pub mod bvh;
+pub mod conformance;
 pub mod fp16;
 pub mod geom;
 pub mod gpu;

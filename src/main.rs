@@ -58,6 +58,9 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Check every variant on a device against the CPU references (what to run first on a new
+    /// GPU): writes conformance.md and conformance.csv, exits non-zero on any failure.
+    Conformance(ConformanceArgs),
     /// Compile the default variant matrix and write one SPIR-V file per variant.
     Shaders {
         /// Output folder (e.g. spirv/).
@@ -109,7 +112,37 @@ struct SweepArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Float-control modes of the kernels: auto, on or off (see `trace --help`).
+    #[arg(long)]
+    float_controls: Option<String>,
     /// Treat a device feature as missing (testing), e.g. rayQuery.
+    #[arg(long, hide = true)]
+    mask_feature: Vec<String>,
+}
+
+#[derive(clap::Args)]
+struct ConformanceArgs {
+    /// A covering subset (each layout, B, P, math, float-control mode and packet
+    /// implementation at least once) instead of the full cross product.
+    #[arg(long)]
+    quick: bool,
+    /// Scene file (repeat for several; default: the bundled scene).
+    #[arg(long)]
+    scene: Vec<PathBuf>,
+    /// Also every .obj / .obj.gz scene in this folder.
+    #[arg(long)]
+    scenes_dir: Option<PathBuf>,
+    /// Vulkan device: index or name substring (see `halftrace devices`).
+    #[arg(long)]
+    device: Option<String>,
+    /// Output folder for conformance.md and conformance.csv (default
+    /// reports/conformance-<UTC timestamp>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Run under the Khronos validation layer; any message fails the run.
+    #[arg(long)]
+    validation: bool,
+    /// Treat a device feature as missing (testing the fallbacks).
     #[arg(long, hide = true)]
     mask_feature: Vec<String>,
 }
@@ -470,6 +503,37 @@ fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
     out
 }
 
+fn conformance(a: ConformanceArgs) -> anyhow::Result<()> {
+    use halftrace::conformance;
+    let mut scenes = a.scene.clone();
+    if let Some(d) = &a.scenes_dir {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(d)
+            .with_context(|| format!("--scenes-dir {}", d.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.to_string_lossy().ends_with(".obj") || p.to_string_lossy().ends_with(".obj.gz"))
+            .collect();
+        anyhow::ensure!(!found.is_empty(), "--scenes-dir {}: no .obj or .obj.gz scenes in it", d.display());
+        found.sort();
+        scenes.extend(found);
+    }
+    if scenes.is_empty() {
+        scenes.push(PathBuf::from(halftrace::sweep::DEFAULT_SCENE));
+    }
+    let out = a.out.clone().unwrap_or_else(|| {
+        let d = halftrace::sweep::default_out();
+        d.with_file_name(format!("conformance-{}", d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default()))
+    });
+    let opts = conformance::Options { quick: a.quick, scenes, device: a.device.clone(), mask_features: a.mask_feature.clone(), validation: a.validation };
+    let o = conformance::run(&opts, |_| {})?;
+    conformance::write(&o, a.quick, &out)?;
+    outln!("{}", conformance::markdown(&o, a.quick));
+    outln!("written to {}", out.join("conformance.md").display());
+    let fails = o.failures();
+    anyhow::ensure!(o.validation.is_empty(), "{} validation layer message(s); see {}", o.validation.len(), out.join("conformance.md").display());
+    anyhow::ensure!(fails.is_empty(), "{} kernel(s) failed conformance: {}", fails.len(), fails.iter().map(|c| c.variant.kernel_name(c.imp, false)).collect::<Vec<_>>().join(", "));
+    Ok(())
+}
+
 fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     use halftrace::sweep::{self, Config};
     let mut c = match &a.config {
@@ -502,6 +566,9 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     c.seed = a.seed.unwrap_or(c.seed);
     if let Some(d) = &a.device {
         c.device = d.clone();
+    }
+    if let Some(f) = &a.float_controls {
+        c.float_controls = f.parse().map_err(anyhow::Error::msg).context("--float-controls")?;
     }
     c.check()?;
     let out = a.out.clone().unwrap_or_else(sweep::default_out);
@@ -544,6 +611,7 @@ fn main() {
         Cmd::Trace(a) => trace(a),
         Cmd::BvhStats { scene } => bvh_stats(&scene),
         Cmd::Devices { bench, device, mask_feature } => devices(bench, device, &mask_feature),
+        Cmd::Conformance(a) => conformance(a),
         Cmd::Shaders { emit } => shaders(&emit),
         Cmd::Sweep(a) => sweep(a),
         Cmd::Report { dirs, out } => report(&dirs, out.as_ref()),

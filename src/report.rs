@@ -21,6 +21,9 @@ pub struct Row {
     pub math: String,
     pub branching: usize,
     pub packet: usize,
+    /// Float-control modes of the kernel: `on`, `off` (a build exact without them), `n/a`.
+    #[serde(default)]
+    pub float_controls: String,
     pub kernel: String,
     pub device: String,
     pub driver: String,
@@ -228,7 +231,7 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     for f in &failed {
         md += &format!("**FAILED**: {} {} {}: {}\n\n", f.scene, f.rays, f.kernel, f.status);
     }
-    let mut skip_lines: Vec<String> = skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status)).collect();
+    let mut skip_lines: Vec<String> = skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status.trim_start_matches("skipped: "))).collect();
     skip_lines.dedup();
     for l in skip_lines {
         md += &format!("Skipped: {l}\n\n");
@@ -259,13 +262,13 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
         }
         md += "\n";
     }
-    md += "## Every variant\n\nFor baselines (`rq`), B, P and the work counters do not apply, and for user kernels that do not count, the work counters are not measured (both shown as –); a baseline's bytes are its own acceleration structures. ≠ f32 counts rays that hit where f32 misses or the reverse, or hit another triangle at a t more than 1e-5 (relative) away.\n\n| device | scene | rays | kernel | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | BVH bytes | build ms | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+    md += "## Every variant\n\nFloat controls `on`: the kernel declares round-to-nearest-even and inf/NaN preservation and matches its CPU reference bit for bit; `off`: a build whose hits stay exact without them (used on devices that lack them, or forced with `--float-controls off`). For baselines (`rq`), B, P and the work counters do not apply, and for user kernels that do not count, the work counters are not measured (both shown as –); a baseline's bytes are its own acceleration structures. ≠ f32 counts rays that hit where f32 misses or the reverse, or hit another triangle at a t more than 1e-5 (relative) away.\n\n| device | scene | rays | kernel | float controls | Mrays/s median (min–max) | ms | nodes/ray | box/ray | tri/ray | re-anchors/ray | SIMD util. | BVH bytes | build ms | B/node | stack B/ray | ≠ f32 | false misses | max abs Δt | status |\n|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
     for x in rows {
         let na = !has_counters(&x.layout) || x.nodes_per_ray.is_nan();
         let c = |v: String| if na { "–".to_string() } else { v };
         md += &format!(
-            "| {} | {} ({} tris) | {} ({}) | {} | {:.2} ({:.2}–{:.2}) | {:.3} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.3e} | {} |\n",
-            x.device, x.scene, x.triangles, x.rays, x.ray_count, x.kernel, x.mrays_median, x.mrays_min, x.mrays_max, x.ms_median,
+            "| {} | {} ({} tris) | {} ({}) | {} | {} | {:.2} ({:.2}–{:.2}) | {:.3} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.3e} | {} |\n",
+            x.device, x.scene, x.triangles, x.rays, x.ray_count, x.kernel, if x.float_controls.is_empty() { "n/a" } else { &x.float_controls }, x.mrays_median, x.mrays_min, x.mrays_max, x.ms_median,
             c(format!("{:.2}", x.nodes_per_ray)), c(format!("{:.2}", x.box_tests_per_ray)), c(format!("{:.2}", x.tri_tests_per_ray)), c(format!("{:.3}", x.reanchors_per_ray)),
             c(format!("{:.1}%", 100.0 * x.simd_utilisation)), x.bvh_bytes, x.build_ms, c(x.bytes_per_node.to_string()), c(x.stack_bytes_per_ray.to_string()),
             x.differs_from_f32, x.false_misses, x.max_abs_dt, x.status

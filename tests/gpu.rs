@@ -38,42 +38,51 @@ fn builtin<'g>(g: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Kernel<
     Kernel::build(g, v, imp, stats, &Source::Builtin).unwrap_or_else(|e| panic!("{}: {e}", v.kernel_name(imp, stats)))
 }
 
+/// `halftrace conformance --quick` over every shared scene under the validation layer: every
+/// layout, B, P, math mode, float-control mode and packet implementation runs at least once
+/// and equals the CPU reference of its layout (hits bitwise, counters exactly) and the f32
+/// hits. The full cross product is `halftrace conformance` (CI runs it after the tests).
 #[test]
-fn every_variant_equals_the_cpu_reference_on_every_scene() {
-    let g = gpu();
-    let mut checked = 0usize;
-    for path in all_scenes() {
-        let p = prepare(&path);
-        let sets = ray_sets(&p, 40, 1000);
-        for layout in LayoutId::layouts() {
-            for b in BRANCHINGS {
-                let enc = encode(&p, layout, b);
-                let gb = GpuBvh::upload(&g, &enc).unwrap();
-                let f32_enc = encode(&p, LayoutId::f32(), b);
-                for &math in layout.caps().maths {
-                    let v = Variant::new(layout, b, 1).with_math(math);
-                    let timed = builtin(&g, &v, PacketImpl::Single, false);
-                    let stats = builtin(&g, &v, PacketImpl::Single, true);
-                    for (kind, rays) in &sets {
-                        let (hits, counters) = enc.trace(rays, 1, math);
-                        assert_same_hits(&format!("{} {v} {kind}: CPU reference vs f32", p.scene.name), rays, &f32_enc.trace_default(rays).0, &hits);
-                        let what = format!("{} {v} {kind}", p.scene.name);
-                        let a = timed.run(&g, &gb, rays, 0, 1).unwrap();
-                        assert_same_hits(&format!("{what} (timed kernel) vs CPU"), rays, &hits, &a.hits);
-                        let s = stats.run(&g, &gb, rays, 0, 1).unwrap();
-                        assert_same_hits(&format!("{what} (counting kernel) vs CPU"), rays, &hits, &s.hits);
-                        let c = s.counters.unwrap();
-                        if let Some(i) = (0..rays.len()).find(|&i| c[i] != counters[i]) {
-                            panic!("{what}: ray {i} {:?}: GPU counters {:?}, CPU {:?}", rays[i], c[i], counters[i]);
-                        }
-                        checked += rays.len();
-                    }
-                }
-            }
+fn quick_conformance_covers_every_value_on_every_scene() {
+    use halftrace::conformance::{self, Status};
+    use halftrace::variant::FloatControls;
+    let mut scenes = all_scenes();
+    scenes.insert(0, repo("scenes/teapot.obj"));
+    let opts = conformance::Options { quick: true, scenes, validation: true, ..Default::default() };
+    let o = conformance::run(&opts, |_| {}).unwrap_or_else(|e| panic!("GPU TESTS CANNOT RUN: {e}"));
+    let md = conformance::markdown(&o, true);
+    assert!(o.validation.is_empty(), "validation messages:\n{}", o.validation.join("\n"));
+    let fails = o.failures();
+    assert!(fails.is_empty(), "{}", fails.iter().map(|c| format!("{}: {}", c.variant.kernel_name(c.imp, false), c.status.label())).collect::<Vec<_>>().join("\n"));
+    let passed: Vec<_> = o.checks.iter().filter(|c| c.status == Status::Pass).collect();
+    assert!(passed.iter().all(|c| c.rays > 1000), "every kernel traced every scene:\n{md}");
+    for layout in LayoutId::layouts() {
+        let of = |f: &dyn Fn(&&&conformance::Check) -> bool| passed.iter().filter(|c| c.variant.layout == layout).any(|c| f(&c));
+        for b in BRANCHINGS {
+            assert!(of(&|c| c.variant.branching == b), "{layout}: B={b} not covered\n{md}");
+        }
+        for p in PACKETS {
+            assert!(of(&|c| c.variant.packet == p), "{layout}: P={p} not covered\n{md}");
+        }
+        for &m in layout.caps().maths {
+            assert!(of(&|c| c.variant.math == m), "{layout}: math {} not covered\n{md}", m.name());
+        }
+        for imp in [PacketImpl::Single, PacketImpl::Shared, PacketImpl::Subgroup] {
+            assert!(of(&|c| c.imp == imp), "{layout}: {imp:?} packets not covered\n{md}");
+        }
+        if layout.bvh().unwrap().float_controls_off() {
+            assert!(of(&|c| c.variant.fc == FloatControls::Off && c.variant.packet == 1), "{layout}: no kernel without float controls covered\n{md}");
+            assert!(of(&|c| c.variant.fc == FloatControls::Off && c.imp == PacketImpl::Subgroup), "{layout}: no packet kernel without float controls covered\n{md}");
         }
     }
-    eprintln!("{checked} rays checked on {}", g.info.name);
-    clean(&g);
+    // Both packet implementations at every P the device's subgroup holds.
+    let g = gpu();
+    for p in PACKETS.into_iter().filter(|&p| p > 1 && p <= g.info.max_subgroup_size as usize) {
+        for imp in [PacketImpl::Shared, PacketImpl::Subgroup] {
+            assert!(passed.iter().any(|c| c.variant.packet == p && c.imp == imp), "P={p} {imp:?} not covered\n{md}");
+        }
+    }
+    eprintln!("{md}");
 }
 
 #[test]
@@ -166,22 +175,67 @@ void main() {
     clean(&g);
 }
 
+/// A device without a feature runs what does not need it, with the same hits, and skips the
+/// rest with a line naming the feature: shaderFloat16 → f32, rq and f16h with fp32 math;
+/// 16-bit storage → f32; float controls → f32 through its build without them.
 #[test]
-fn device_without_fp16_is_a_clear_error() {
-    for feature in ["shaderFloat16", "storageBuffer16BitAccess"] {
-        let e = Gpu::new(&ContextOptions { mask_features: vec![feature.into()], ..Default::default() }).err().expect("masked device must be refused");
-        let msg = e.to_string();
-        assert!(matches!(e, GpuError::MissingFeature { .. }), "{msg}");
-        assert!(msg.contains(feature) && msg.contains("lacks"), "{msg}");
+fn missing_features_fall_back_to_what_stays_exact() {
+    use halftrace::gpu::support;
+    use halftrace::variant::{FcChoice, FloatControls};
+    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let rays = &ray_sets(&p, 24, 200)[3].1;
+    let f16h = layout("f16h");
+    let cases: [(&str, Vec<Variant>, Vec<Variant>); 4] = [
+        ("shaderFloat16", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(f16h, 4, 1).with_math(Math::F32), Variant::new(f16h, 8, 8).with_math(Math::F32)], vec![Variant::new(f16h, 4, 1).with_math(Math::F16), Variant::new(f16h, 4, 1).with_math(Math::Mixed)]),
+        ("storageBuffer16BitAccess", vec![Variant::new(LayoutId::f32(), 4, 1)], vec![Variant::new(f16h, 4, 1).with_math(Math::F32)]),
+        ("floatControls", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(LayoutId::f32(), 4, 4)], vec![Variant::new(f16h, 4, 1).with_math(Math::F32)]),
+        ("subgroupSizeControl", vec![Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 8).with_math(Math::F16)], vec![]),
+    ];
+    for (feature, runs, skips) in cases {
+        let g = Gpu::new(&ContextOptions { mask_features: vec![feature.into()], validation: true, ..Default::default() }).unwrap_or_else(|e| panic!("masking {feature}: the device must still open: {e}"));
+        for v in runs {
+            let v = support::resolve(&g.info, v, FcChoice::Auto).unwrap_or_else(|e| panic!("{feature} masked: {v} must run: {e}"));
+            assert_eq!(v.fc == FloatControls::Off, feature == "floatControls", "{v}: float controls chosen {}", v.fc.name());
+            let enc = encode(&p, v.layout, v.branching);
+            let gb = GpuBvh::upload(&g, &enc).unwrap();
+            let imp = halftrace::gpu::kernel::choose_impl(&g, &v, None);
+            let k = builtin(&g, &v, imp, true);
+            assert_eq!(k.subgroup.is_some(), imp == PacketImpl::Subgroup && feature != "subgroupSizeControl", "{v}: subgroup size pinned only with subgroupSizeControl");
+            let out = k.run(&g, &gb, rays, 0, 1).unwrap();
+            let (want, counters) = enc.trace(rays, v.packet, v.math);
+            assert_same_hits(&format!("{feature} masked: {}", k.name()), rays, &want, &out.hits);
+            assert_same_hits(&format!("{feature} masked: {} vs f32", k.name()), rays, &encode(&p, LayoutId::f32(), 4).trace_default(rays).0, &out.hits);
+            assert_eq!(out.counters.unwrap(), counters, "{feature} masked: {} counters", k.name());
+        }
+        for v in skips {
+            let why = support::resolve(&g.info, v, FcChoice::Auto).err().unwrap_or_else(|| panic!("{feature} masked: {v} must be skipped"));
+            let named = if feature == "floatControls" { "shaderRoundingModeRTEFloat32".to_string() } else { feature.to_string() };
+            assert!(why.contains(&named) && why.contains("lacks"), "{why}");
+            let e = Kernel::build(&g, &v, PacketImpl::Single, false, &Source::Builtin).err().expect("an unsupported kernel is not built");
+            assert!(matches!(e, GpuError::Unsupported(_)), "{e}");
+        }
+        clean(&g);
     }
-    // Through the CLI, before anything is dispatched.
+    // The rq baseline without ray queries is one skipped line (sweep), and --float-controls
+    // off for a layout without such a build is refused by name.
+    let g = Gpu::new(&ContextOptions { mask_features: vec!["rayQuery".into()], ..Default::default() }).unwrap();
+    assert!(layout("rq").baseline().unwrap().unavailable(&g).is_some());
+    let e = support::resolve(&g.info, Variant::new(f16h, 4, 1), FcChoice::Off).unwrap_err();
+    assert!(e.contains("f16h has no kernel build without float controls"), "{e}");
+    // Through the CLI: shaderFloat16 masked, f16h with fp32 math is validated and traced.
     let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--mask-feature", "shaderFloat16"])
+        .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--layout", "f16h", "--math", "f32", "--width", "32", "--height", "32", "--mask-feature", "shaderFloat16"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("validated against the CPU reference"), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--layout", "f16h", "--math", "f16", "--mask-feature", "shaderFloat16"])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1));
-    assert!(err.contains("lacks shaderFloat16") && !err.contains("panicked"), "{err}");
+    assert!(err.contains("needs shaderFloat16") && err.contains("lacks") && !err.contains("panicked"), "{err}");
 }
 
 #[test]
@@ -336,10 +390,16 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             assert!(on_disk == bytemuck::cast_slice::<u32, u8>(&fresh), "{} is stale against glsl/; run `halftrace shaders --emit spirv/`", p.display());
             let val = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&p).output().expect("spirv-val (package spirv-tools) is required");
             assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
-            // The fp16 math modes must really compute in float16_t (m32 widens on purpose).
+            // The fp16 math modes must really compute in float16_t; fp32 math and the f32
+            // layout must not need fp16 arithmetic (they run on devices without shaderFloat16).
+            let ins = instructions(&fresh);
+            let f16_cap = ins.iter().any(|(op, o)| *op == 17 && o[0] == 9);
+            assert_eq!(f16_cap, v.layout.bvh().unwrap().needs(v.math).float16, "{name}: Float16 capability");
+            // Every float-control mode the kernel relies on is declared, per width.
+            for (mode, width) in halftrace::gpu::support::float_modes(v) {
+                assert!(ins.iter().any(|(op, o)| *op == 16 && o.len() >= 3 && o[1] == mode && o[2] == width), "{name}: execution mode {mode} for fp{width} missing");
+            }
             if v.math != Math::F32 {
-                let ins = instructions(&fresh);
-                assert!(ins.iter().any(|(op, o)| *op == 17 && o[0] == 9), "{name}: no Float16 capability");
                 let mut f16: Vec<u32> = ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
                 let vecs: Vec<u32> = ins.iter().filter(|(op, o)| *op == 23 && f16.contains(&o[1])).map(|(_, o)| o[0]).collect();
                 f16.extend(vecs);
@@ -353,67 +413,6 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
     let files = std::fs::read_dir(&dir).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "spv")).count();
     assert_eq!(files, n, "spirv/ holds files that are not in the default matrix");
     assert_eq!(n, 2 * expected.len());
-}
-
-/// Packets change the work, never the answer: for every scene, layout, math mode, B, P (both
-/// packet implementations where the device allows) and ray kind, GPU hits equal the
-/// single-ray f32 hits ray for ray, and GPU counters equal the CPU packet reference of the
-/// same mode.
-#[test]
-fn packet_variants_equal_single_ray_hits_and_packet_reference_counters() {
-    let g = gpu();
-    let mut kernels = Vec::new();
-    for layout in LayoutId::layouts() {
-        for b in BRANCHINGS {
-            for p in PACKETS.into_iter().filter(|&p| p > 1) {
-                for &math in layout.caps().maths {
-                    let v = Variant::new(layout, b, p).with_math(math);
-                    let mut imps = vec![PacketImpl::Shared];
-                    // every P on the portable kernel; the subgroup kernel where it fits (not mixed math)
-                    if p <= g.info.subgroup_size as usize && math != Math::Mixed {
-                        imps.push(PacketImpl::Subgroup);
-                    }
-                    for imp in imps {
-                        kernels.push((builtin(&g, &v, imp, false), builtin(&g, &v, imp, true)));
-                    }
-                }
-            }
-        }
-    }
-    let mut checked = 0usize;
-    for path in all_scenes() {
-        let p = prepare(&path);
-        let sets = ray_sets(&p, 12, 120);
-        for layout in LayoutId::layouts() {
-            for b in BRANCHINGS {
-                let enc = encode(&p, layout, b);
-                let gb = GpuBvh::upload(&g, &enc).unwrap();
-                // Every packet variant of every math mode must return exactly the f32 hits.
-                let f32_enc = encode(&p, LayoutId::f32(), b);
-                let single: Vec<_> = sets.iter().map(|(_, rays)| f32_enc.trace_default(rays).0).collect();
-                for (timed, stats) in kernels.iter().filter(|(k, _)| k.variant.layout == layout && k.variant.branching == b) {
-                    let pk = timed.variant.packet;
-                    for ((kind, rays), want) in sets.iter().zip(&single) {
-                        let what = format!("{} {} {kind}", p.scene.name, timed.name());
-                        let (cpu_hits, cpu_counters) = enc.trace(rays, pk, timed.variant.math);
-                        assert_same_hits(&format!("{what}: CPU packet reference vs single-ray"), rays, want, &cpu_hits);
-                        let a = timed.run(&g, &gb, rays, 0, 1).unwrap();
-                        assert_same_hits(&format!("{what} vs single-ray"), rays, want, &a.hits);
-                        let s = stats.run(&g, &gb, rays, 0, 1).unwrap();
-                        assert_same_hits(&format!("{what} (counting) vs single-ray"), rays, want, &s.hits);
-                        let c = s.counters.unwrap();
-                        if let Some(i) = (0..rays.len()).find(|&i| c[i] != cpu_counters[i]) {
-                            panic!("{what}: ray {i} (packet {}): GPU counters {:?}, CPU packet reference {:?}", i / pk, c[i], cpu_counters[i]);
-                        }
-                        checked += rays.len();
-                    }
-                }
-            }
-        }
-    }
-    eprintln!("{checked} packet-traced rays checked");
-    drop(kernels);
-    clean(&g);
 }
 
 #[test]

@@ -63,6 +63,7 @@ fn small_sweep_writes_consistent_outputs() {
         assert!(r.mrays_min <= r.mrays_median && r.mrays_median <= r.mrays_max, "{}", r.kernel);
         assert_eq!(r.timed_dispatches, 3);
         assert!(r.build_ms > 0.0 && r.bvh_bytes > 0);
+        assert_eq!(r.float_controls, if r.layout == "rq" { "n/a" } else { "on" }, "{}: float controls on where lavapipe has them", r.kernel);
         if r.layout == "rq" {
             assert_eq!((r.branching, r.packet), (0, 0), "B and P do not apply to rq");
             assert!(r.differs_from_f32 == 0 && r.false_misses == 0, "rq disagrees with f32 on the teapot");

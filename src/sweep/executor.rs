@@ -169,10 +169,16 @@ impl<'a, 'g> Executor<'a, 'g> {
 
     fn run_job(&mut self, job: &Job) -> anyhow::Result<Row> {
         match job.target {
-            Target::Variant(v) => self.run_variant(job, v, None),
+            Target::Variant(v) => match gpu::support::resolve(&self.gpu.info, v, self.cfg.float_controls) {
+                Ok(v) => self.run_variant(job, v, None),
+                Err(why) => self.skip_variant(job, v, &v.name(false), why),
+            },
             Target::Kernel(i) => {
                 let v = self.cfg.kernel[i].variant()?;
-                self.run_variant(job, v, Some(i))
+                match gpu::support::resolve(&self.gpu.info, v, self.cfg.float_controls) {
+                    Ok(v) => self.run_variant(job, v, Some(i)),
+                    Err(why) => self.skip_variant(job, v, &self.cfg.kernel[i].name.clone(), why),
+                }
             }
             Target::Baseline(b) => self.run_baseline(job, b),
         }
@@ -230,6 +236,7 @@ impl<'a, 'g> Executor<'a, 'g> {
         let node_size = enc.node_size();
         let mut row = self.base_row(job, &s.scene, set.rays.len(), v.layout, &name, &m);
         row.math = v.math.name().into();
+        row.float_controls = v.fc.name().into();
         row.branching = v.branching;
         row.packet = v.packet;
         row.bvh_bytes = enc.node_bytes() as u64;
@@ -255,6 +262,18 @@ impl<'a, 'g> Executor<'a, 'g> {
             let nodes = m.counters.as_ref().map(|c| c.iter().map(|x| x.nodes as f64).collect()).unwrap_or_default();
             self.scene.as_mut().expect("prepared").images.push((v.layout, m.hits, nodes));
         }
+        Ok(row)
+    }
+
+    /// The row of a variant the device cannot run: one line in the report, not a failure.
+    fn skip_variant(&mut self, job: &Job, v: Variant, name: &str, why: String) -> anyhow::Result<Row> {
+        self.prepare(job, None)?;
+        let s = self.scene.as_ref().expect("prepared");
+        let n = s.rays[&job.rays].rays.len();
+        let mut row = self.base_row(job, &s.scene, n, v.layout, name, &Measurement::skipped());
+        row.status = format!("skipped: {why}");
+        (row.math, row.branching, row.packet) = (v.math.name().into(), v.branching, v.packet);
+        row.float_controls = "n/a".into();
         Ok(row)
     }
 
@@ -302,6 +321,7 @@ impl<'a, 'g> Executor<'a, 'g> {
             ray_count,
             layout: layout.name().into(),
             math: "n/a".into(),
+            float_controls: "n/a".into(),
             kernel: kernel.into(),
             device: self.gpu.info.name.clone(),
             driver: self.gpu.info.driver.clone(),

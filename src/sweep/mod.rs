@@ -12,7 +12,7 @@ pub use jobs::{Job, Target};
 use crate::bvh;
 use crate::layout::{LayoutId, Math};
 use crate::rays::RayKind;
-use crate::variant::{Variant, PACKETS};
+use crate::variant::{FcChoice, FloatControls, Variant, PACKETS};
 use anyhow::Context;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -42,6 +42,9 @@ pub struct Config {
     pub repeat: usize,
     /// Vulkan device index or name substring ("" = default device).
     pub device: String,
+    /// Float-control modes of the kernels: auto (on where the device has them, else off where
+    /// the layout has such a build), on, or off.
+    pub float_controls: FcChoice,
     /// User kernels (`[[kernel]]` tables), each run as its own rows.
     pub kernel: Vec<KernelSpec>,
 }
@@ -104,6 +107,7 @@ impl Default for Config {
             warmup: 2,
             repeat: 10,
             device: String::new(),
+            float_controls: FcChoice::Auto,
             kernel: Vec::new(),
         }
     }
@@ -179,6 +183,9 @@ impl Config {
                     v.push(Variant::new(layout, self.packet_branching, p).with_math(math));
                 }
             }
+        }
+        if self.float_controls == FcChoice::Off {
+            v = v.into_iter().map(|x| x.with_fc(FloatControls::Off)).collect();
         }
         v.sort();
         v.dedup();
