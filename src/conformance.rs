@@ -89,7 +89,8 @@ impl Outcome {
 /// build the layout has × B × P, each packet size in every implementation the device can run.
 /// Quick: per layout, every B at P = 1 in the default math, every other math once, every P at
 /// B = 4 (the math modes in turn), both implementations at every P the subgroup holds, and the
-/// build without float controls at P = 1 and in a packet where the layout has one.
+/// build without float controls in every math mode at P = 1 and in a packet where the layout
+/// has one.
 pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     let mut out: Vec<(Variant, PacketImpl)> = Vec::new();
     let imps = |p: usize| -> Vec<PacketImpl> {
@@ -117,8 +118,10 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
                 out.extend(imps(p).into_iter().map(|imp| (v, imp)));
             }
             if fcs.contains(&FloatControls::Off) {
-                out.push((Variant::new(layout, 4, 1).with_fc(FloatControls::Off), PacketImpl::Single));
-                let v = Variant::new(layout, 8, 8).with_fc(FloatControls::Off);
+                for (i, &m) in maths.iter().enumerate() {
+                    out.push((Variant::new(layout, BRANCHINGS[(i + 1) % BRANCHINGS.len()], 1).with_math(m).with_fc(FloatControls::Off), PacketImpl::Single));
+                }
+                let v = Variant::new(layout, 8, 8).with_math(maths[maths.len() - 1]).with_fc(FloatControls::Off);
                 out.extend(imps(8).into_iter().map(|imp| (v, imp)));
             }
         } else {
@@ -198,7 +201,7 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&Check)) -> anyhow::Result<O
         for (layout, b) in keys {
             let enc = Encoded::new(&scene, &bin, layout, b)?;
             let gb = GpuBvh::upload(&g, &enc).with_context(|| format!("{} {layout} B={b}", scene.name))?;
-            let mut refs: HashMap<(usize, crate::layout::Math, usize), (Vec<Hit>, Vec<Counters>)> = HashMap::new();
+            let mut refs: HashMap<(usize, crate::layout::Math, FloatControls, usize), (Vec<Hit>, Vec<Counters>)> = HashMap::new();
             for (i, c) in checks.iter_mut().enumerate() {
                 if c.status != Status::Pass || c.variant.layout != layout || c.variant.branching != b {
                     continue;
@@ -207,7 +210,7 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&Check)) -> anyhow::Result<O
                 let (timed, counting) = &kernels[&i];
                 let v = c.variant;
                 for (k, (kind, rays)) in sets.iter().enumerate() {
-                    let (hits, counters) = refs.entry((v.packet, v.math, k)).or_insert_with(|| enc.trace(rays, v.packet, v.math));
+                    let (hits, counters) = refs.entry((v.packet, v.math, v.fc, k)).or_insert_with(|| enc.trace_fc(rays, v.packet, v.math, v.fc));
                     let what = format!("{} {kind}", scene.name);
                     let result = (|| -> Result<usize, String> {
                         if let Some(d) = first_diff(rays, &f32_hits[k], hits) {

@@ -103,6 +103,62 @@ pub fn rte16_emulated(x: f32) -> f32 {
     f32::from_bits(r.to_bits() | sgn)
 }
 
+/// `a + b` rounded to nearest even, computed the way the kernels built without float controls
+/// do it (`glsl/layout/f16h.glsl`, `add_rte`): integer operations on the bits (three guard
+/// bits, sticky), so the result is the IEEE sum whatever the device's own rounding. Used for the
+/// few fp32 additions a child frame is derived with, which must match the encoder bit for bit.
+/// Equal to `a + b` for all finite inputs whose sum is finite (tested).
+pub fn add_rte_emulated(a: f32, b: f32) -> f32 {
+    let (mut ua, mut ub) = (a.to_bits(), b.to_bits());
+    if (ua & 0x7fff_ffff) < (ub & 0x7fff_ffff) {
+        std::mem::swap(&mut ua, &mut ub);
+    }
+    let (ea, eb) = ((ua >> 23) & 0xff, (ub >> 23) & 0xff);
+    let ma = if ea == 0 { ua & 0x7f_ffff } else { (ua & 0x7f_ffff) | 0x80_0000 };
+    let mb = if eb == 0 { ub & 0x7f_ffff } else { (ub & 0x7f_ffff) | 0x80_0000 };
+    let (ea, eb) = (ea.max(1) as i32, eb.max(1) as i32);
+    if mb == 0 {
+        // b = ±0: a + b = a, except +0 + −0 = +0.
+        return if ma == 0 { f32::from_bits(ua & ub & 0x8000_0000) } else { f32::from_bits(ua) };
+    }
+    let sign = ua & 0x8000_0000;
+    let d = (ea - eb) as u32;
+    let big = ma << 3;
+    let small = if d > 26 {
+        1
+    } else {
+        let m = mb << 3;
+        (m >> d) | u32::from(m & ((1u32 << d) - 1) != 0)
+    };
+    let (mut s, mut e) = if (ua ^ ub) & 0x8000_0000 == 0 { (big + small, ea) } else { (big - small, ea) };
+    if s == 0 {
+        return 0.0;
+    }
+    if s >= 1 << 27 {
+        s = (s >> 1) | (s & 1);
+        e += 1;
+    } else {
+        let n = 31 - s.leading_zeros() as i32; // bit index of the leading one
+        let shift = (26 - n).min(e - 1).max(0);
+        s <<= shift;
+        e -= shift;
+    }
+    let mut m = s >> 3;
+    let rem = s & 7;
+    if rem > 4 || (rem == 4 && m & 1 == 1) {
+        m += 1;
+    }
+    if m >= 1 << 24 {
+        m >>= 1;
+        e += 1;
+    }
+    if e >= 255 {
+        return f32::from_bits(sign | 0x7f80_0000);
+    }
+    let field = if m >= 1 << 23 { (e as u32) << 23 } else { 0 };
+    f32::from_bits(sign | field | (m & 0x7f_ffff))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,5 +229,45 @@ mod tests {
             check(-x);
         }
         assert!(rte16_emulated(f32::NAN).is_nan());
+    }
+
+    #[test]
+    fn emulated_fp32_addition_equals_the_native_one() {
+        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let check = |a: f32, b: f32| {
+            let want = a + b;
+            if !want.is_finite() {
+                return;
+            }
+            let got = add_rte_emulated(a, b);
+            assert_eq!(got.to_bits(), want.to_bits(), "{a:e} + {b:e}: {got:e} vs {want:e}");
+        };
+        for _ in 0..3_000_000 {
+            let r = next();
+            // Exponents close together (cancellation, carries) and far apart (sticky bits).
+            let a = f32::from_bits(r as u32);
+            let spread = (r >> 32) as u32 % 40;
+            let b_bits = ((r >> 40) as u32 & 0x807f_ffff) | ((((a.to_bits() >> 23) & 0xff).saturating_sub(spread) & 0xff) << 23);
+            let b = f32::from_bits(b_bits);
+            if a.is_finite() && b.is_finite() {
+                check(a, b);
+                check(a, -b);
+                check(b, a);
+            }
+            let (c, d) = (f32::from_bits(next() as u32), f32::from_bits(next() as u32));
+            if c.is_finite() && d.is_finite() {
+                check(c, d);
+            }
+        }
+        for (a, b) in [(0.0f32, -0.0f32), (-0.0, -0.0), (1.0, -1.0), (1.0, f32::EPSILON / 2.0), (1.0, f32::EPSILON / 2.0 + f32::EPSILON / 4.0), (f32::MIN_POSITIVE, -f32::MIN_POSITIVE / 2.0), (1e-45, 1e-45), (16384.0, -0.000_061_035_156)] {
+            check(a, b);
+            check(-a, -b);
+        }
     }
 }

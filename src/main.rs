@@ -341,7 +341,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let rays = &t.rays;
     outln!("scene {} ({} triangles), variant {variant}, rays {}: {} rays", t.scene.name, t.scene.len(), t.kind, rays.len());
     let t1 = Instant::now();
-    let (ref_hits, ref_counters) = enc.trace(rays, a.packet, math);
+    let (ref_hits, ref_counters) = enc.trace_fc(rays, a.packet, math, variant.fc);
     let cpu_secs = t1.elapsed().as_secs_f64();
     let (hits, counters) = if backend == "cpu" {
         outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", cpu_secs * 1e3, rays.len() as f64 / cpu_secs / 1e6, t.build_ms);
@@ -349,8 +349,11 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     } else {
         let g = open_gpu(&a)?;
         outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
-        let variant = gpu::support::resolve(&g.info, variant, fc_choice).map_err(anyhow::Error::msg)?;
-        outln!("kernel {} (float controls {})", variant.name(false), variant.fc.name());
+        let resolved = gpu::support::resolve(&g.info, variant, fc_choice).map_err(anyhow::Error::msg)?;
+        outln!("kernel {} (float controls {})", resolved.name(false), resolved.fc.name());
+        // The reference of the build the device runs (without float controls its bounds differ).
+        let (ref_hits, ref_counters) = if resolved.fc == variant.fc { (ref_hits, ref_counters) } else { enc.trace_fc(rays, a.packet, math, resolved.fc) };
+        let variant = resolved;
         let imp = kernel::choose_impl(&g, &variant, force_impl);
         let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
         let gb = GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;

@@ -177,7 +177,7 @@ void main() {
 
 /// A device without a feature runs what does not need it, with the same hits, and skips the
 /// rest with a line naming the feature: shaderFloat16 → f32, rq and f16h with fp32 math;
-/// 16-bit storage → f32; float controls → f32 through its build without them.
+/// 16-bit storage → f32; float controls → every layout through its build without them.
 #[test]
 fn missing_features_fall_back_to_what_stays_exact() {
     use halftrace::gpu::support;
@@ -188,7 +188,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
     let cases: [(&str, Vec<Variant>, Vec<Variant>); 4] = [
         ("shaderFloat16", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(f16h, 4, 1).with_math(Math::F32), Variant::new(f16h, 8, 8).with_math(Math::F32)], vec![Variant::new(f16h, 4, 1).with_math(Math::F16), Variant::new(f16h, 4, 1).with_math(Math::Mixed)]),
         ("storageBuffer16BitAccess", vec![Variant::new(LayoutId::f32(), 4, 1)], vec![Variant::new(f16h, 4, 1).with_math(Math::F32)]),
-        ("floatControls", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(LayoutId::f32(), 4, 4)], vec![Variant::new(f16h, 4, 1).with_math(Math::F32)]),
+        ("floatControls", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 1).with_math(Math::F16), Variant::new(f16h, 8, 8).with_math(Math::F32)], vec![]),
         ("subgroupSizeControl", vec![Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 8).with_math(Math::F16)], vec![]),
     ];
     for (feature, runs, skips) in cases {
@@ -202,7 +202,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
             let k = builtin(&g, &v, imp, true);
             assert_eq!(k.subgroup.is_some(), imp == PacketImpl::Subgroup && feature != "subgroupSizeControl", "{v}: subgroup size pinned only with subgroupSizeControl");
             let out = k.run(&g, &gb, rays, 0, 1).unwrap();
-            let (want, counters) = enc.trace(rays, v.packet, v.math);
+            let (want, counters) = enc.trace_fc(rays, v.packet, v.math, v.fc);
             assert_same_hits(&format!("{feature} masked: {}", k.name()), rays, &want, &out.hits);
             assert_same_hits(&format!("{feature} masked: {} vs f32", k.name()), rays, &encode(&p, LayoutId::f32(), 4).trace_default(rays).0, &out.hits);
             assert_eq!(out.counters.unwrap(), counters, "{feature} masked: {} counters", k.name());
@@ -216,12 +216,9 @@ fn missing_features_fall_back_to_what_stays_exact() {
         }
         clean(&g);
     }
-    // The rq baseline without ray queries is one skipped line (sweep), and --float-controls
-    // off for a layout without such a build is refused by name.
+    // The rq baseline without ray queries is one skipped line (sweep).
     let g = Gpu::new(&ContextOptions { mask_features: vec!["rayQuery".into()], ..Default::default() }).unwrap();
     assert!(layout("rq").baseline().unwrap().unavailable(&g).is_some());
-    let e = support::resolve(&g.info, Variant::new(f16h, 4, 1), FcChoice::Off).unwrap_err();
-    assert!(e.contains("f16h has no kernel build without float controls"), "{e}");
     // Through the CLI: shaderFloat16 masked, f16h with fp32 math is validated and traced.
     let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
         .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--layout", "f16h", "--math", "f32", "--width", "32", "--height", "32", "--mask-feature", "shaderFloat16"])

@@ -2,8 +2,12 @@
 // from the stored boxes, box tests and origin moves in the variant's math (MATH_F16: the seed,
 // MATH_F32, MATH_MIXED) with a carried error bound, re-anchored from the fp32 world ray when
 // it grows too large. Mirrors src/layout/f16h/{frame,hooks}.rs operation for operation; the
-// bound is argued in hooks.rs. The constants OCAP, EMAX, EBIG, W_MARGIN, D_FLUSH, K_MIN_LOG2
-// and K_MAX_LOG2 come from interface.glsl (generated from the Rust ones).
+// bound is argued in hooks.rs. The constants OCAP, EMAX, EBIG, W_MARGIN, W_MARGIN_OFF, SAT,
+// BIG32, D_FLUSH, K_MIN_LOG2 and K_MAX_LOG2 come from interface.glsl (generated from the Rust
+// ones). FC_OFF: the build for devices without float controls (hooks.rs, "Without float
+// controls"): conversions to fp16 and the frame's fp32 additions emulated with integer
+// operations, products saturated instead of overflowing, no inf or NaN anywhere, every
+// rounding allowed a full ulp.
 //
 // Stack Entry (generated): wk = the node's frame (w.xyz, k), o = the origin in the node's
 // frame (OVEC), e = its error bound (-1: inactive), tp = the world parameter o stands for,
@@ -32,7 +36,11 @@ const float H0 = 0.0;
 #define HVEC3 f16vec3
 #define LOADH(x) (x)
 #define HINF float16_t(uintBitsToFloat(0x7f800000u))
+#ifdef FC_OFF
+#define TO_HALF(x) float16_t(rte16(x))
+#else
 #define TO_HALF(x) float16_t(x)
+#endif
 const float16_t H0 = float16_t(0.0);
 #endif
 
@@ -45,7 +53,10 @@ void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
 }
 
 const float S_BASE = 16384.0 + OCAP;
+const float TWO_M9 = 1.0 / 512.0;
 const float TWO_M10 = 1.0 / 1024.0;
+const float TWO_M19 = 1.0 / 524288.0;
+const float TWO_M20 = 1.0 / 1048576.0;
 const float TWO_M11 = 1.0 / 2048.0;
 const float TWO_M18 = 1.0 / 262144.0;
 const float TWO_M21 = 1.0 / 2097152.0;
@@ -58,7 +69,7 @@ const float TWO_M24 = 1.0 / 16777216.0;
 #define OCONV(x) (x)
 #else
 #define OVEC f16vec3
-#define OCONV(x) float16_t(x)
+#define OCONV(x) TO_HALF(x)
 #endif
 
 int frexp_exp(float x) {
@@ -90,23 +101,92 @@ float rte16(float x) {
     return uintBitsToFloat(floatBitsToUint(r) | sgn);
 }
 
-// An fp16 value >= x with one round-to-nearest conversion (fp16::up_f32).
+// a + b rounded to nearest even with integer operations only: three guard bits and a sticky
+// bit (fp16.rs, add_rte_emulated, takes the same steps and is tested against IEEE addition).
+// Without float controls, the fp32 additions a child frame is derived with go through it, so
+// frames are the encoder's bit for bit on any device.
+float add_rte(float a, float b) {
+    uint ua = floatBitsToUint(a);
+    uint ub = floatBitsToUint(b);
+    if ((ua & 0x7fffffffu) < (ub & 0x7fffffffu)) { uint t = ua; ua = ub; ub = t; }
+    uint ea = (ua >> 23) & 0xffu;
+    uint eb = (ub >> 23) & 0xffu;
+    uint ma = ea == 0u ? (ua & 0x7fffffu) : ((ua & 0x7fffffu) | 0x800000u);
+    uint mb = eb == 0u ? (ub & 0x7fffffu) : ((ub & 0x7fffffu) | 0x800000u);
+    int iea = int(max(ea, 1u));
+    int ieb = int(max(eb, 1u));
+    if (mb == 0u) return ma == 0u ? uintBitsToFloat(ua & ub & 0x80000000u) : uintBitsToFloat(ua);
+    uint sgn = ua & 0x80000000u;
+    uint d = uint(iea - ieb);
+    uint big = ma << 3;
+    uint small = 1u;
+    if (d <= 26u) {
+        uint m = mb << 3;
+        small = (m >> d) | ((m & ((1u << d) - 1u)) != 0u ? 1u : 0u);
+    }
+    uint s = ((ua ^ ub) & 0x80000000u) == 0u ? big + small : big - small;
+    int e = iea;
+    if (s == 0u) return 0.0;
+    if (s >= (1u << 27)) {
+        s = (s >> 1) | (s & 1u);
+        e += 1;
+    } else {
+        int sh = max(min(26 - findMSB(s), e - 1), 0);
+        s <<= uint(sh);
+        e -= sh;
+    }
+    uint m = s >> 3;
+    uint rem = s & 7u;
+    if (rem > 4u || (rem == 4u && (m & 1u) == 1u)) m++;
+    if (m >= (1u << 24)) { m >>= 1; e += 1; }
+    uint field = m >= (1u << 23) ? (uint(e) << 23) : 0u;
+    return uintBitsToFloat(sgn | field | (m & 0x7fffffu));
+}
+
+// An fp16 value >= x with one round-to-nearest conversion (fp16::up_f32). Without float
+// controls, the largest finite fp16 stands for inf (only where box tests are skipped).
 HALF up16(float x) {
     precise float y = x + abs(x) * (1.0 / 1024.0) + (1.0 / 16777216.0);
+#ifdef FC_OFF
+    return y > 65504.0 ? HALF(65504.0) : TO_HALF(y);
+#else
     return y > 65504.0 ? HINF : TO_HALF(y);
+#endif
 }
 HALF down16(float x) { return -up16(-x); }
+#ifdef FC_OFF
+float up32(float x) { return upper32(x); }
+#else
 float up32(float x) { return isinf(x) ? x : upper32(x); }
+#endif
 
 // Child frame from its stored box: centre c (fp16), ratio r, world origin w, scale k
 // (frame.rs, derive_child).
 void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float r, out vec3 w, out float k) {
     precise float h = 0.0;
+#ifdef FC_OFF
+    // pk is a power of two: its reciprocal from the exponent bits, exactly.
+    float inv_k = pow2(1 - frexp_exp(pk));
+#else
     precise float inv_k = 1.0 / pk;
+#endif
     float wmax = 0.0;
     for (int a = 0; a < 3; a++) {
         float l = float(lo[a]);
         float u = float(hi[a]);
+#ifdef FC_OFF
+        // The same roundings as the fp16 (lo + hi) * 0.5, emulated (see the MATH_F32 case);
+        // products by powers of two are exact on any device.
+        float ch = rte16(rte16(add_rte(l, u)) * 0.5);
+        c[a] = HALF(ch);
+        float cf = ch;
+        h = max(max(h, add_rte(u, -cf)), add_rte(cf, -l));
+        float wa = add_rte(pw[a], cf * inv_k);
+        w[a] = wa;
+        wmax = max(wmax, abs(wa));
+    }
+    float m = add_rte(add_rte(h, h * (1.0 / 1048576.0)), (wmax * pk) * (1.0 / 4194304.0));
+#else
 #ifdef MATH_F32
         // fp16's (lo + hi) * 0.5, each operation rounded to fp16: the fp32 sum of two fp16
         // values is either exact or off by less than fp16's distance to the nearest midpoint
@@ -129,6 +209,7 @@ void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float 
         wmax = max(wmax, abs(wa));
     }
     precise float m = (h + h * (1.0 / 1048576.0)) + (wmax * pk) * (1.0 / 4194304.0);
+#endif
     int pl = frexp_exp(pk) - 1;
     int j = clamp(14 - frexp_exp(m), K_MIN_LOG2 - pl, K_MAX_LOG2 - pl);
     r = pow2(j);
@@ -154,7 +235,11 @@ float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
         lmax = max(lmax, abs(lc));
         o[a] = OCONV(lc);
     }
+#ifdef FC_OFF
+    precise float e = (mag * k * TWO_M21 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
+#else
     precise float e = (mag * k * TWO_M23 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
+#endif
     return e;
 }
 
@@ -172,12 +257,21 @@ void layout_ray(RayPre r) {
     for (int a = 0; a < 3; a++) {
         precise float x = r.d[a] / lr_m;
         lr_d16[a] = abs(x) < D_FLUSH ? H0 : TO_HALF(x);
+#ifdef FC_OFF
+        // An fp32 reciprocal rounded to fp16 (no inf: a zero component's is never used).
+        precise float inv32 = 1.0 / float(lr_d16[a]);
+        lr_idir32[a] = lr_d16[a] == H0 ? 0.0 : inv32;
+#ifndef MATH_F32
+        lr_idir[a] = lr_d16[a] == H0 ? H0 : float16_t(rte16(inv32));
+#endif
+#else
 #ifndef MATH_F32
         precise float16_t inv = float16_t(1.0) / lr_d16[a];
         lr_idir[a] = lr_d16[a] == H0 ? HINF : inv;
 #endif
         precise float inv32 = 1.0 / float(lr_d16[a]);
         lr_idir32[a] = lr_d16[a] == H0 ? INF : inv32;
+#endif
     }
 }
 
@@ -192,20 +286,36 @@ float entry_t(Entry en) { return en.tlo; }
 
 #ifndef MATH_F32
 // fp16 slab test in the node frame: (tn, tn_lb, tf_ub) (hooks.rs, slab16).
+#ifdef FC_OFF
+// fp16 product saturated to +-SAT, decided on the exact fp32 product (hooks.rs, mul_sat).
+float16_t mul_sat(float16_t a, float16_t b) {
+    precise float p = float(a) * float(b);
+    if (p > SAT) return float16_t(SAT);
+    if (p < -SAT) return float16_t(-SAT);
+    precise float16_t q = a * b;
+    return q;
+}
+#define HMUL(a, b) mul_sat(a, b)
+#define UNB16 float16_t(SAT)
+#else
+#define HMUL(a, b) ((a) * (b))
+#define UNB16 HINF
+#endif
+
 f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
-    float16_t tn = -HINF;
-    float16_t tf = HINF;
+    float16_t tn = -UNB16;
+    float16_t tf = UNB16;
     for (int a = 0; a < 3; a++) {
         precise float16_t la = (lo[a] - o[a]) - w;
         precise float16_t ha = (hi[a] - o[a]) + w;
         float16_t t0, t1;
         if (lr_d16[a] == H0) {
             bool inside = la <= H0 && ha >= H0;
-            t0 = inside ? -HINF : HINF;
-            t1 = inside ? HINF : -HINF;
+            t0 = inside ? -UNB16 : UNB16;
+            t1 = inside ? UNB16 : -UNB16;
         } else {
-            precise float16_t x = la * lr_idir[a];
-            precise float16_t y = ha * lr_idir[a];
+            precise float16_t x = HMUL(la, lr_idir[a]);
+            precise float16_t y = HMUL(ha, lr_idir[a]);
             t0 = min(x, y);
             t1 = max(x, y);
         }
@@ -225,16 +335,24 @@ vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
 #if !defined(MATH_F32) && !defined(MATH_MIXED)
     return vec3(slab16(o, w, lo, hi));
 #else
-    float tn = -INF;
-    float tf = INF;
+    // Unbounded: inf, or without float controls SAT (fp16 products) / BIG32 (fp32).
+#if !defined(FC_OFF)
+    const float UNB = INF;
+#elif defined(MATH_MIXED)
+    const float UNB = SAT;
+#else
+    const float UNB = BIG32;
+#endif
+    float tn = -UNB;
+    float tf = UNB;
     for (int a = 0; a < 3; a++) {
         float t0, t1;
 #ifdef MATH_MIXED
         precise float16_t la = (lo[a] - o[a]) - w;
         precise float16_t ha = (hi[a] - o[a]) + w;
         bool inside = la <= H0 && ha >= H0;
-        precise float16_t x16 = la * lr_idir[a];
-        precise float16_t y16 = ha * lr_idir[a];
+        precise float16_t x16 = HMUL(la, lr_idir[a]);
+        precise float16_t y16 = HMUL(ha, lr_idir[a]);
         float x = float(x16);
         float y = float(y16);
 #else
@@ -246,8 +364,8 @@ vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
         precise float y = ha * lr_idir32[a];
 #endif
         if (lr_d16[a] == H0) {
-            t0 = inside ? -INF : INF;
-            t1 = inside ? INF : -INF;
+            t0 = inside ? -UNB : UNB;
+            t1 = inside ? UNB : -UNB;
         } else {
             t0 = min(x, y);
             t1 = max(x, y);
@@ -275,12 +393,21 @@ Visit visit_node(Entry en, float best) {
     precise float mk = lr_m * en.wk.w;
     precise float s_max = S_BASE + en.e + 1.0;
     precise float lim = (best - en.tp) * mk;
+#ifdef FC_OFF
+    // No inf: a limit that overflows (or comes from a clamped infinite tmax) becomes s_max,
+    // which the min below would pick anyway; tested on the bits.
+    if ((floatBitsToUint(lim) & 0x7fffffffu) >= floatBitsToUint(BIG32)) lim = s_max;
+#endif
     v.s_lim = up16(min(up32(lim), s_max));
     precise float sg = (en.tp - en.tlo) * mk;
     float sigma = up32(sg);
     v.lower = down16(max(-sigma, -s_max));
     v.prec = en.e <= EBIG;
+#ifdef FC_OFF
+    precise float we = en.e + en.e * TWO_M11 + W_MARGIN_OFF;
+#else
     precise float we = en.e + en.e * TWO_M11 + W_MARGIN;
+#endif
     v.w = up16(we);
     v.mk = mk;
     return v;
@@ -314,11 +441,24 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     float lower = float(v.lower);
     float s_lo = max(h.tn_lb, lower);
     precise float q = s_lo / v.mk;
+#ifdef FC_OFF
+    // A node visited without box tests keeps its parent's tlo (hooks.rs).
+    precise float tlo_c0 = (en.tp + q) - (abs(en.tp) + abs(q)) * TWO_M19;
+    float tlo_c = v.prec ? max(tlo_c0, en.tlo) : en.tlo;
+#else
     precise float tlo_c0 = (en.tp + q) - (abs(en.tp) + abs(q)) * TWO_M21;
     float tlo_c = max(tlo_c0, en.tlo);
+#endif
     float se = max(h.tn, lower);
     OVEC o2;
-    if (v.prec && cr <= 32768.0) {
+    bool fits = true;
+#if defined(FC_OFF) && !defined(MATH_F32)
+    // The fp16 origin move must not overflow (hooks.rs): else re-anchor.
+    float om = max(max(abs(float(en.o.x)), abs(float(en.o.y))), abs(float(en.o.z)));
+    float cm = max(max(abs(float(cc.x)), abs(float(cc.y))), abs(float(cc.z)));
+    fits = om + abs(se) + cm <= 60000.0;
+#endif
+    if (v.prec && cr <= 32768.0 && fits) {
         float emag = 0.0, ecmag = 0.0, omag = 0.0;
         bool finite = true;
         for (int a = 0; a < 3; a++) {
@@ -327,32 +467,56 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
             precise float ec = ea - float(cc[a]);
             precise float oa = ec * cr;
 #else
-            float16_t s_e = float16_t(se);
+            float16_t s_e = TO_HALF(se);
             float16_t r16c = float16_t(cr);
             precise float16_t ea = en.o[a] + s_e * lr_d16[a];
             precise float16_t ec = ea - cc[a];
+#ifdef FC_OFF
+            precise float ecr = abs(float(ec)) * cr;
+            bool big = ecr > OCAP;
+            float16_t oa = H0;
+            if (!big) {
+                precise float16_t op = ec * r16c;
+                oa = op;
+            }
+            finite = finite && !big;
+#else
             precise float16_t oa = ec * r16c;
+#endif
 #endif
             o2[a] = oa;
             emag = max(emag, abs(float(ea)));
             ecmag = max(ecmag, abs(float(ec)));
             omag = max(omag, abs(float(oa)));
+#ifndef FC_OFF
             finite = finite && !isinf(oa) && !isnan(oa);
+#endif
         }
         precise float step_t = se / v.mk;
         precise float tpn = en.tp + step_t;
         float wmax = max(max(max(0.0, abs(cw.x)), abs(cw.y)), abs(cw.z));
         precise float mk2 = lr_m * ck;
+#ifdef FC_OFF
+        precise float ee = (cr * (en.e + abs(se) * TWO_M9 + TWO_M10 * (emag + ecmag) + TWO_M22)
+            + wmax * TWO_M24 * ck
+            + (abs(en.tp) + abs(step_t)) * TWO_M20 * mk2)
+            * (1.0 + TWO_M18);
+#else
         precise float ee = (cr * (en.e + abs(se) * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
             + wmax * TWO_M24 * ck
             + (abs(en.tp) + abs(step_t)) * TWO_M22 * mk2)
             * (1.0 + TWO_M18);
+#endif
         if (finite && omag <= OCAP && ee <= EMAX) {
             return Entry(vec4(cw, ck), o2, ee, tpn, tlo_c);
         }
     }
     reanchors++;
+#ifdef FC_OFF
+    float inv_k = pow2(1 - frexp_exp(fk));
+#else
     precise float inv_k = 1.0 / fk;
+#endif
     vec3 blo, bhi;
     for (int a = 0; a < 3; a++) {
         precise float bl = fw[a] + float(lo[a]) * inv_k;

@@ -223,7 +223,7 @@ pub trait Layout: Send + Sync + Sized + 'static {
         String::new()
     }
 
-    fn ray(r: &RayPre, math: Math) -> Self::Ray;
+    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Self::Ray;
     /// The entry of the root node for a ray that enters the root box at `near`.
     fn root_entry(root: &Self::Root, r: &RayPre, lr: &Self::Ray, near: f32) -> Self::Entry;
     /// A lower bound of the world parameter of anything that can still matter under the
@@ -327,7 +327,12 @@ impl Encoded {
 
     /// Traces rays in packets of `p` (1: single rays) on the CPU reference of this layout.
     pub fn trace(&self, rays: &[Ray], p: usize, math: Math) -> (Vec<Hit>, Vec<Counters>) {
-        self.layout.bvh().expect("Encoded holds a BVH layout").trace(self, rays, p, math)
+        self.trace_fc(rays, p, math, crate::variant::FloatControls::On)
+    }
+
+    /// The CPU reference of the kernel built with float controls `fc` (their bounds differ).
+    pub fn trace_fc(&self, rays: &[Ray], p: usize, math: Math, fc: crate::variant::FloatControls) -> (Vec<Hit>, Vec<Counters>) {
+        self.layout.bvh().expect("Encoded holds a BVH layout").trace(self, rays, p, math, fc)
     }
 
     /// Single rays in the layout's default math.

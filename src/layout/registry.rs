@@ -9,6 +9,7 @@ use crate::gpu::{Gpu, GpuError};
 use crate::rays::Ray;
 use crate::scene::Scene;
 use crate::trace::{Counters, Hit};
+use crate::variant::FloatControls;
 use std::marker::PhantomData;
 
 /// Every layout and baseline, in report order.
@@ -148,7 +149,7 @@ pub trait DynLayout: Send + Sync {
     fn glsl_constants(&self) -> String;
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError>;
     /// The CPU reference: rays in packets of `p` (1: single rays) in math mode `math`.
-    fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math) -> (Vec<Hit>, Vec<Counters>);
+    fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>);
 }
 
 /// Registers a [`Layout`]: `Entry::Layout(&Plug::<MyLayout>::NEW)`.
@@ -187,9 +188,9 @@ fn encode_b<L: Layout, const B: usize>(scene: &Scene, w: &WideBvh) -> Result<Enc
     })
 }
 
-fn trace_b<L: Layout, const B: usize>(enc: &Encoded, rays: &[Ray], p: usize, math: Math) -> (Vec<Hit>, Vec<Counters>) {
+fn trace_b<L: Layout, const B: usize>(enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
     let (nodes, root) = enc.typed::<L, B>().expect("Encoded of another layout or B");
-    crate::trace::traverse::trace_all::<L, B>(nodes, root, enc, rays, p, math)
+    crate::trace::traverse::trace_all::<L, B>(nodes, root, enc, rays, p, math, fc)
 }
 
 impl<L: Layout> DynLayout for Plug<L> {
@@ -220,9 +221,9 @@ impl<L: Layout> DynLayout for Plug<L> {
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError> {
         with_branching!(w.branching, encode_b, scene, w)
     }
-    fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math) -> (Vec<Hit>, Vec<Counters>) {
+    fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
         assert!(L::MATHS.contains(&math), "{}: math {} is not one of its modes", L::NAME, math.name());
-        with_branching!(enc.branching, trace_b, enc, rays, p, math)
+        with_branching!(enc.branching, trace_b, enc, rays, p, math, fc)
     }
 }
 

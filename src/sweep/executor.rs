@@ -230,7 +230,7 @@ impl<'a, 'g> Executor<'a, 'g> {
         let set = &s.rays[&job.rays];
         let (enc, gb, build_ms) = &s.encodings[&(v.layout, v.branching)];
         // Correctness before speed: the CPU reference of the same layout, packet size and math.
-        let (ref_hits, ref_counters) = enc.trace(&set.rays, v.packet, v.math);
+        let (ref_hits, ref_counters) = enc.trace_fc(&set.rays, v.packet, v.math, v.fc);
         let target = KernelTarget { gpu: g, bvh: gb, timed, counting };
         let m = measure::validate_then_time(&target, &set.rays, Reference::Exact { hits: &ref_hits, counters: &ref_counters }, &set.f32_hits, plan).with_context(|| name.clone())?;
         let node_size = enc.node_size();

@@ -17,6 +17,7 @@
 //! Packets are P consecutive rays; the last may be partial. Packet counters (nodes the packet
 //! visited, active rays summed over them) are stored in its first ray.
 
+use crate::variant::FloatControls;
 use super::{slab32, Closest, Counters, Hit, RayPre};
 use crate::bvh::ChildRef;
 use crate::layout::{decode_child, Encoded, Layout, Math, Node, TriBuffer, CHILD_EMPTY};
@@ -80,21 +81,21 @@ impl<L: Layout> Scratch<L> {
 }
 
 /// Traces `rays` in packets of `p` consecutive rays (in parallel), keeping input order.
-pub fn trace_all<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, enc: &Encoded, rays: &[Ray], p: usize, math: Math) -> (Vec<Hit>, Vec<Counters>) {
+pub fn trace_all<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
     let p = p.max(1);
     let mut hits = vec![Hit::MISS; rays.len()];
     let mut counters = vec![Counters::default(); rays.len()];
     let box_lo: [f32; 3] = enc.root_box.min.into();
     let box_hi: [f32; 3] = enc.root_box.max.into();
     rays.par_chunks(p).zip(hits.par_chunks_mut(p)).zip(counters.par_chunks_mut(p)).for_each_init(Scratch::<L>::new, |s, ((rays, hits), counters)| {
-        packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, s, hits, counters)
+        packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters)
     });
     (hits, counters)
 }
 
 /// Traces one packet.
 #[allow(clippy::too_many_arguments)]
-fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris: &TriBuffer, root_box: ([f32; 3], [f32; 3]), rays: &[Ray], math: Math, s: &mut Scratch<L>, hits: &mut [Hit], counters: &mut [Counters]) {
+fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris: &TriBuffer, root_box: ([f32; 3], [f32; 3]), rays: &[Ray], math: Math, fc: FloatControls, s: &mut Scratch<L>, hits: &mut [Hit], counters: &mut [Counters]) {
     let p = rays.len();
     let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries } = s;
     lanes.clear();
@@ -103,7 +104,7 @@ fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris:
     let mut any_root = false;
     for ray in rays {
         let r = RayPre::new(ray);
-        let lr = L::ray(&r, math);
+        let lr = L::ray(&r, math, fc);
         let (near, far) = slab32(&r, root_box.0, root_box.1, r.tmin, r.tmax);
         let e = (near <= far).then(|| L::root_entry(root, &r, &lr, near));
         any_root |= e.is_some();

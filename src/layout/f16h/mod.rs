@@ -65,6 +65,8 @@ impl Layout for F16h {
     /// fp16 storage always; fp16 arithmetic in the f16 and mixed modes only: the f32 mode
     /// emulates its few fp16 roundings (frame centres, bounds) with fp32 and integer
     /// operations (glsl/layout/f16h.glsl, `rte16`), so it runs without `shaderFloat16`.
+    const FLOAT_CONTROLS_OFF: bool = true;
+
     fn needs(math: Math) -> Needs {
         Needs { storage16: true, float16: math != Math::F32 }
     }
@@ -100,6 +102,9 @@ impl Layout for F16h {
             glsl_float("EMAX", hooks::EMAX),
             glsl_float("EBIG", hooks::EBIG),
             glsl_float("W_MARGIN", hooks::W_MARGIN),
+            glsl_float("W_MARGIN_OFF", hooks::W_MARGIN_OFF),
+            glsl_float("SAT", hooks::SAT),
+            glsl_float("BIG32", hooks::BIG32),
             glsl_float("D_FLUSH", hooks::D_FLUSH),
             glsl_int("K_MIN_LOG2", frame::K_MIN_LOG2),
             glsl_int("K_MAX_LOG2", frame::K_MAX_LOG2),
@@ -107,8 +112,8 @@ impl Layout for F16h {
         .concat()
     }
 
-    fn ray(r: &RayPre, math: Math) -> Ray16 {
-        Ray16::new(r, math)
+    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
+        Ray16::new(r, math, fc)
     }
 
     fn root_entry(root: &Frame, r: &RayPre, lr: &Ray16, near: f32) -> Entry {

@@ -94,7 +94,7 @@ impl Layout for F32 {
         &[("t", "float")]
     }
 
-    fn ray(_: &RayPre, _: Math) {}
+    fn ray(_: &RayPre, _: Math, _: crate::variant::FloatControls) {}
 
     fn root_entry(_: &(), _: &RayPre, _: &(), near: f32) -> f32 {
         near
