@@ -154,8 +154,8 @@ fn first_diff(rays: &[Ray], want: &[Hit], got: &[Hit]) -> Option<String> {
     Some(format!("{} of {} rays differ; ray {i} {:?}: expected {:?}, got {:?}", bad.len(), got.len(), rays[i], want[i], got[i]))
 }
 
-/// Runs the checks; `progress` sees each finished check.
-pub fn run(opts: &Options, mut progress: impl FnMut(&Check)) -> anyhow::Result<Outcome> {
+/// Runs the checks; `progress` gets a line as kernels are built and as each scene finishes.
+pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Outcome> {
     let t0 = Instant::now();
     anyhow::ensure!(!opts.scenes.is_empty(), "conformance needs at least one scene");
     let g = Gpu::new(&gpu::ContextOptions { device: opts.device.clone(), mask_features: opts.mask_features.clone(), validation: opts.validation, ..Default::default() })?;
@@ -172,7 +172,12 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&Check)) -> anyhow::Result<O
         .collect();
     // Kernels (timed, counting) of every runnable check, built once.
     let mut kernels: HashMap<usize, (Kernel, Kernel)> = HashMap::new();
+    let total = checks.len();
+    progress(&format!("{total} kernels on {}: building pipelines", g.info.name));
     for (i, c) in checks.iter_mut().enumerate() {
+        if i > 0 && i % 16 == 0 {
+            progress(&format!("built {i}/{total} kernels ({:.0} s)", t0.elapsed().as_secs_f64()));
+        }
         if c.status != Status::Pass {
             continue;
         }
@@ -248,9 +253,8 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&Check)) -> anyhow::Result<O
             }
         }
         scene_names.push(scene.name.clone());
-    }
-    for c in &checks {
-        progress(c);
+        let fails = checks.iter().filter(|c| matches!(c.status, Status::Fail(_))).count();
+        progress(&format!("scene {}/{} {} checked ({fails} failing kernels so far, {:.0} s)", scene_names.len(), opts.scenes.len(), scene.name, t0.elapsed().as_secs_f64()));
     }
     drop(kernels);
     let validation = g.validation_messages();

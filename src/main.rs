@@ -500,8 +500,8 @@ fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
         })
         .collect();
     out.push(format!("packets: {}", packets.join(", ")));
-    for l in LayoutId::all().filter(|l| l.baseline().is_some()) {
-        out.push(format!("{:<5} {}", l.name(), if l.name() == "rq" && !d.ray_query { "skipped: no VK_KHR_ray_query" } else { "runs" }));
+    for (l, b) in LayoutId::all().filter_map(|l| Some((l, l.baseline()?))) {
+        out.push(format!("{:<5} {}", l.name(), b.unavailable(d).map(|why| format!("skipped: {why}")).unwrap_or_else(|| "runs".into())));
     }
     out
 }
@@ -527,7 +527,7 @@ fn conformance(a: ConformanceArgs) -> anyhow::Result<()> {
         d.with_file_name(format!("conformance-{}", d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default()))
     });
     let opts = conformance::Options { quick: a.quick, scenes, device: a.device.clone(), mask_features: a.mask_feature.clone(), validation: a.validation };
-    let o = conformance::run(&opts, |_| {})?;
+    let o = conformance::run(&opts, |line| eprintln!("{line}"))?;
     conformance::write(&o, a.quick, &out)?;
     outln!("{}", conformance::markdown(&o, a.quick));
     outln!("written to {}", out.join("conformance.md").display());

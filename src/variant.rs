@@ -77,19 +77,6 @@ pub enum PacketImpl {
     Shared,
 }
 
-impl PacketImpl {
-    /// The implementation used for packet size `p` on a device with `subgroup` lanes.
-    pub fn choose(p: usize, subgroup: u32) -> PacketImpl {
-        if p == 1 {
-            PacketImpl::Single
-        } else if p <= subgroup as usize {
-            PacketImpl::Subgroup
-        } else {
-            PacketImpl::Shared
-        }
-    }
-}
-
 /// GPU stack entries per ray for a branching factor: room for (B−1)·depth + 1 entries with
 /// depth ≤ 64, 32, 24, 16 for B = 2, 4, 8, 16.
 pub fn stack_entries(b: usize) -> usize {

@@ -218,7 +218,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
     }
     // The rq baseline without ray queries is one skipped line (sweep).
     let g = Gpu::new(&ContextOptions { mask_features: vec!["rayQuery".into()], ..Default::default() }).unwrap();
-    assert!(layout("rq").baseline().unwrap().unavailable(&g).is_some());
+    assert!(layout("rq").baseline().unwrap().unavailable(&g.info).is_some());
     // Through the CLI: shaderFloat16 masked, f16h with fp32 math is validated and traced.
     let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
         .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--layout", "f16h", "--math", "f32", "--width", "32", "--height", "32", "--mask-feature", "shaderFloat16"])
@@ -444,7 +444,7 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
 fn ray_query_baseline_agrees_with_f32_on_every_scene() {
     let g = gpu();
     let rq = layout("rq").baseline().expect("rq is a baseline");
-    assert!(rq.unavailable(&g).is_none(), "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)", g.info.name);
+    assert!(rq.unavailable(&g.info).is_none(), "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)", g.info.name);
     let dev = rq.prepare(&g).unwrap();
     let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
     for path in all_scenes() {

@@ -104,28 +104,17 @@ impl<'g> Kernel<'g> {
     /// constants, capabilities) before any pipeline is created.
     pub fn build(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source) -> Result<Kernel<'g>, GpuError> {
         super::support::check(&gpu.info, v).map_err(GpuError::Unsupported)?;
-        if imp == PacketImpl::Subgroup && v.packet > gpu.info.max_subgroup_size as usize {
-            return Err(GpuError::Unsupported(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.max_subgroup_size)));
-        }
+        let pin = subgroup_pin(gpu, v, imp, stats)?;
         let f64 = gpu.info.shader_float64;
         let code = match source {
             Source::Builtin => shader::compile(v, imp, stats, f64)?,
             Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, v, imp, stats, f64)?, v, imp, stats, gpu)?,
             Source::Spirv(p) => shader::check_user(p, &shader::read_spirv(p)?, v, imp, stats, gpu)?,
         };
-        Self::with_code(gpu, v, imp, stats, source, &code)
+        Self::with_code(gpu, v, imp, stats, source, &code, pin)
     }
 
-    fn with_code(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source, code: &[u32]) -> Result<Kernel<'g>, GpuError> {
-        // A subgroup packet kernel is pinned to the size it was planned for, where the device
-        // allows it; otherwise it runs at the reported size, which must hold the packet.
-        let pin = match imp {
-            PacketImpl::Subgroup => super::support::packet_plan(&gpu.info, v.packet).1,
-            _ => None,
-        };
-        if imp == PacketImpl::Subgroup && pin.is_none() && v.packet > gpu.info.subgroup_size as usize {
-            return Err(GpuError::Unsupported(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
-        }
+    fn with_code(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source, code: &[u32], pin: Option<u32>) -> Result<Kernel<'g>, GpuError> {
         let pipe = ComputePipeline::with_subgroup(gpu, &v.kernel_name(imp, stats), code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32, pin)?;
         Ok(Kernel { pipe, variant: *v, imp, stats, source: source.clone(), subgroup: pin })
     }
@@ -140,7 +129,7 @@ impl<'g> Kernel<'g> {
             return Ok(None);
         }
         let code = shader::check_user(p, &code, v, imp, true, gpu)?;
-        Self::with_code(gpu, v, imp, true, source, &code).map(Some)
+        Self::with_code(gpu, v, imp, true, source, &code, subgroup_pin(gpu, v, imp, true)?).map(Some)
     }
 
     /// Dispatches the kernel over `rays`: `warmup` untimed dispatches, then `repeat` timed
@@ -190,6 +179,20 @@ pub struct RunOutput {
     pub hits: Vec<Hit>,
     pub counters: Option<Vec<Counters>>,
     pub times_ms: Vec<f64>,
+}
+
+/// The subgroup size a kernel's pipeline is pinned to: for the subgroup packet implementation,
+/// the size planned for its P where the device allows pinning; otherwise none, and then the
+/// reported size must hold the packet.
+fn subgroup_pin(gpu: &Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Result<Option<u32>, GpuError> {
+    if imp != PacketImpl::Subgroup {
+        return Ok(None);
+    }
+    let pin = super::support::packet_plan(&gpu.info, v.packet).1;
+    if pin.is_none() && v.packet > gpu.info.subgroup_size as usize {
+        return Err(GpuError::Unsupported(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
+    }
+    Ok(pin)
 }
 
 /// The packet implementation this device uses for a variant (`force` overrides it).

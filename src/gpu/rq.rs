@@ -177,11 +177,11 @@ impl Baseline for Rq {
     fn kernel(&self) -> &'static str {
         KERNEL
     }
-    fn unavailable(&self, gpu: &Gpu) -> Option<String> {
-        (!gpu.info.ray_query).then(|| "the device has no VK_KHR_ray_query / VK_KHR_acceleration_structure".to_string())
+    fn unavailable(&self, info: &crate::gpu::DeviceInfo) -> Option<String> {
+        (!info.ray_query).then(|| "the device has no VK_KHR_ray_query / VK_KHR_acceleration_structure".to_string())
     }
     fn prepare<'g>(&self, gpu: &'g Gpu) -> Result<Box<dyn BaselineDevice + 'g>, GpuError> {
-        if let Some(why) = self.unavailable(gpu) {
+        if let Some(why) = self.unavailable(&gpu.info) {
             return Err(GpuError::MissingFeature { device: gpu.info.name.clone(), feature: why });
         }
         Ok(Box::new(RqDevice { gpu, pipe: pipeline(gpu)? }))

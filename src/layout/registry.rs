@@ -235,8 +235,8 @@ pub trait Baseline: Send + Sync {
     fn summary(&self) -> &'static str;
     /// The `kernel` column of its rows.
     fn kernel(&self) -> &'static str;
-    /// Why `gpu` cannot run it (one line for the report), or `None` when it can.
-    fn unavailable(&self, gpu: &Gpu) -> Option<String>;
+    /// Why a device cannot run it (one line for the report and `devices`), or `None`.
+    fn unavailable(&self, info: &crate::gpu::DeviceInfo) -> Option<String>;
     /// What it needs once per device (pipelines).
     fn prepare<'g>(&self, gpu: &'g Gpu) -> Result<Box<dyn BaselineDevice + 'g>, GpuError>;
 }

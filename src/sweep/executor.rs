@@ -38,7 +38,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
     let mut baselines: HashMap<LayoutId, Result<Box<dyn BaselineDevice + '_>, String>> = HashMap::new();
     for l in cfg.entries() {
         if let Some(b) = l.baseline() {
-            let dev = match b.unavailable(&g) {
+            let dev = match b.unavailable(&g.info) {
                 Some(why) => Err(why),
                 None => Ok(b.prepare(&g).with_context(|| l.to_string())?),
             };

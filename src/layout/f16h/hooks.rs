@@ -514,7 +514,7 @@ mod tests {
     }
 
     /// Rays and boxes of the slab property tests: a point X of the box at parameter s on the
-    /// exact line through P, and an fp16 origin O within e of P.
+    /// exact line through P = X − s·d (|P| ≤ 20000), and an fp16 origin O within e of P.
     #[allow(clippy::type_complexity)]
     fn slab_case(x: [f64; 3], off: [f64; 3], e_scale: f64, d: [f64; 3], s_frac: f64, ext: [f64; 3]) -> ([f16; 3], f32, f64, [f16; 3], [f16; 3]) {
         let mut s = s_frac * (16384.0 + 20000.0);
@@ -606,19 +606,7 @@ mod tests {
             let mut dv = dv;
             if zero_axis < 3 { dv[zero_axis] = 0.0; }
             let Some(d) = dir(dv) else { return Ok(()) };
-            // P = X − s·d with |P| ≤ 20000, so X = P + s·d lies in the box at parameter s.
-            let mut s = s_frac * (16384.0 + 20000.0);
-            for a in 0..3 {
-                if d[a] != 0.0 {
-                    s = s.signum() * s.abs().min((20000.0 - x[a].abs()) / d[a].abs());
-                }
-            }
-            let p = [0, 1, 2].map(|a| x[a] - s * d[a]);
-            let o: [f16; 3] = [0, 1, 2].map(|a| f16::from_f64((p[a] + off[a] * e_scale).clamp(-OCAP as f64, OCAP as f64)));
-            let e_true = (0..3).fold(0f64, |m, a| m.max((o[a].to_f64() - p[a]).abs()));
-            let e = (e_true as f32) * (1.0 + 1e-6) + 1e-6;
-            let lo = [0, 1, 2].map(|a| fp16::down_f64((x[a] - ext[a]).max(-16384.0)));
-            let hi = [0, 1, 2].map(|a| fp16::up_f64((x[a] + ext[a]).min(16384.0)));
+            let (o, e, s, lo, hi) = slab_case(x, off, e_scale, d, s_frac, ext);
             let pre = RayPre::new(&Ray::new(glam::Vec3::ZERO, glam::Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32), 0.0, f32::INFINITY));
             let r16 = Ray16::new(&pre, Math::F16, crate::variant::FloatControls::On);
             prop_assert_eq!(r16.m, 1.0);
