@@ -183,23 +183,26 @@ pub fn anchor(r: &RayPre, f: &Frame, t: f32, math: Math, off: bool) -> ([f32; 3]
 
 /// The fp16 slab test of one child box: returns (tn, tn_lb, tf_ub) in the node's local
 /// parameter s. An axis with d16 = 0 constrains nothing when O lies in the widened slab and
-/// rejects the box otherwise; no NaN is ever formed.
+/// rejects the box otherwise; no NaN is ever formed. Without float controls (`r16.off`),
+/// unbounded is ±SAT and products saturate there ([`mul_sat`]).
 #[inline]
 pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f16, f16, f16) {
-    let mut tn = f16::NEG_INFINITY;
-    let mut tf = f16::INFINITY;
+    let unb = if r16.off { f16::from_f32_const(SAT) } else { f16::INFINITY };
+    let mul = |a: f16, b: f16| if r16.off { mul_sat(a, b) } else { a * b };
+    let mut tn = -unb;
+    let mut tf = unb;
     for a in 0..3 {
         let la = (lo[a] - o[a]) - w;
         let ha = (hi[a] - o[a]) + w;
         let (t0, t1) = if r16.d[a] == f16::ZERO {
             if la <= f16::ZERO && ha >= f16::ZERO {
-                (f16::NEG_INFINITY, f16::INFINITY)
+                (-unb, unb)
             } else {
-                (f16::INFINITY, f16::NEG_INFINITY)
+                (unb, -unb)
             }
         } else {
-            let x = la * r16.idir[a];
-            let y = ha * r16.idir[a];
+            let x = mul(la, r16.idir[a]);
+            let y = mul(ha, r16.idir[a]);
             (x.min(y), x.max(y))
         };
         tn = tn.max(t0);
@@ -212,8 +215,6 @@ pub fn slab16(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> 
     (tn, tn_lb, tf_ub)
 }
 
-/// The box test of one child in the ray's math mode, as fp32 values (exact conversions of the
-/// fp16 results in the fp16 mode, so comparisons are unchanged): (tn, tn_lb, tf_ub).
 /// fp16 product saturated to ±SAT (the build without float controls; module docs): decided
 /// on the exact fp32 product, so no fp16 operation overflows.
 #[inline]
@@ -228,43 +229,11 @@ fn mul_sat(a: f16, b: f16) -> f16 {
     }
 }
 
-/// [`slab16`] without float controls: saturated products, ±SAT for unbounded.
-#[inline]
-pub fn slab16_off(o: &[f16; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f16, f16, f16) {
-    let sat = f16::from_f32_const(SAT);
-    let mut tn = -sat;
-    let mut tf = sat;
-    for a in 0..3 {
-        let la = (lo[a] - o[a]) - w;
-        let ha = (hi[a] - o[a]) + w;
-        let (t0, t1) = if r16.d[a] == f16::ZERO {
-            if la <= f16::ZERO && ha >= f16::ZERO {
-                (-sat, sat)
-            } else {
-                (sat, -sat)
-            }
-        } else {
-            let x = mul_sat(la, r16.idir[a]);
-            let y = mul_sat(ha, r16.idir[a]);
-            (x.min(y), x.max(y))
-        };
-        tn = tn.max(t0);
-        tf = tf.min(t1);
-    }
-    const LO_DOWN: f16 = f16::from_f32_const(1.0 - 1.0 / 256.0);
-    const LO_UP: f16 = f16::from_f32_const(1.0 + 1.0 / 256.0);
-    let tn_lb = tn * if tn > f16::ZERO { LO_DOWN } else { LO_UP };
-    let tf_ub = tf * if tf > f16::ZERO { LO_UP } else { LO_DOWN };
-    (tn, tn_lb, tf_ub)
-}
-
+/// The box test of one child in the ray's math mode, as fp32 values (exact conversions of the
+/// fp16 results in the fp16 mode, so comparisons are unchanged): (tn, tn_lb, tf_ub).
 #[inline]
 pub fn slab(o: &[f32; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f32, f32, f32) {
     let math = r16.math;
-    if r16.off && math == Math::F16 {
-        let (a, b, c) = slab16_off(&o.map(f16::from_f32), r16, w, lo, hi);
-        return (a.to_f32(), b.to_f32(), c.to_f32());
-    }
     // Unbounded: ±inf, or without float controls ±SAT (fp16 products) / ±BIG32 (fp32).
     let unb = match (r16.off, math) {
         (false, _) => f32::INFINITY,
@@ -287,11 +256,9 @@ pub fn slab(o: &[f32; 3], r16: &Ray16, w: f16, lo: [f16; 3], hi: [f16; 3]) -> (f
                     let ha = (hi[a] - o16) + w;
                     if r16.d[a] == f16::ZERO {
                         parallel(la <= f16::ZERO && ha >= f16::ZERO, unb)
-                    } else if r16.off {
-                        let (x, y) = (mul_sat(la, r16.idir[a]).to_f32(), mul_sat(ha, r16.idir[a]).to_f32());
-                        (x.min(y), x.max(y))
                     } else {
-                        let (x, y) = ((la * r16.idir[a]).to_f32(), (ha * r16.idir[a]).to_f32());
+                        let mul = |v: f16| if r16.off { mul_sat(v, r16.idir[a]) } else { v * r16.idir[a] };
+                        let (x, y) = (mul(la).to_f32(), mul(ha).to_f32());
                         (x.min(y), x.max(y))
                     }
                 } else {
@@ -481,7 +448,7 @@ mod tests {
         }
     }
 
-    /// [`slab16_off`] with every fp16 operation (and the reciprocal) rounded either way.
+    /// [`slab16`] without float controls, with every fp16 operation (and the reciprocal) rounded either way.
     fn slab16_faithful(o: &[f16; 3], d: &[f16; 3], w: f16, lo: [f16; 3], hi: [f16; 3], bits: &mut u64) -> (f64, f64) {
         let mut flip = || {
             *bits = bits.rotate_left(1);
