@@ -14,7 +14,7 @@
 //   Entry root_entry(RayPre r, float near)      the root's entry for a ray entering at near
 //   Entry no_entry(); bool has_entry(Entry e)   the marker of a ray inactive at a level
 //   float entry_t(Entry e)                      skip the node when it exceeds the closest hit
-//   Visit visit_node(Entry e, float best_t)     per node and ray
+//   Visit visit_node(uint ni, Entry e, RayPre r, float best_t)   per node and active ray
 //   bool  test_child(uint ni, uint s, Entry e, Visit v, RayPre r, out float key, out ChildHit h)
 //   Entry child_entry(uint ni, uint s, Entry e, Visit v, ChildHit h, RayPre r, inout uint reanchors)
 #include "interface.glsl"
@@ -56,7 +56,7 @@ void main() {
         pnodes++;
         asum += nact;
         if (act) cnt.x++;
-        Visit v = visit_node(en, best_t);
+        Visit v = visit_node(ni, en, r, best_t);
         uint mask = 0u;
         float key[B];
         ChildHit ch[B];

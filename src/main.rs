@@ -83,9 +83,16 @@ struct SweepArgs {
     /// Layouts, comma-separated.
     #[arg(long, value_delimiter = ',')]
     layouts: Vec<String>,
-    /// Branching factors swept at P = 1.
+    /// Layouts that get the B and P series, comma-separated (default f32,f16h; "all" for
+    /// every layout in --layouts); the others run at --scheme-branchings only.
+    #[arg(long, value_delimiter = ',')]
+    series: Vec<String>,
+    /// Branching factors swept at P = 1 (series layouts).
     #[arg(long, value_delimiter = ',')]
     branchings: Vec<usize>,
+    /// Branching factors at which every layout runs with P = 1 (default 4,8).
+    #[arg(long, value_delimiter = ',')]
+    scheme_branchings: Vec<usize>,
     /// Packet sizes swept at B = --packet-branching.
     #[arg(long, value_delimiter = ',')]
     packets: Vec<usize>,
@@ -554,6 +561,12 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     }
     if !a.branchings.is_empty() {
         c.branchings = a.branchings.clone();
+    }
+    if !a.series.is_empty() {
+        c.series = if a.series == ["all"] { c.layouts.clone() } else { a.series.clone() };
+    }
+    if !a.scheme_branchings.is_empty() {
+        c.scheme_branchings = a.scheme_branchings.clone();
     }
     if !a.packets.is_empty() {
         c.packets = a.packets.clone();

@@ -184,6 +184,69 @@ fn separated_effects(rows: &[Row]) -> String {
     md + "\n"
 }
 
+/// One (device, layout/math label, B) point of the schemes table.
+#[derive(Clone, Debug, Default)]
+struct SchemePoint {
+    n: usize,
+    /// Sums of the per-(scene, rays) ratios to f32: Mrays/s, BVH bytes, nodes, box tests,
+    /// triangle tests.
+    ratio: [f64; 5],
+    node_bytes_per_ray: f64,
+    stack_bytes: u64,
+    differs: usize,
+    false_misses: usize,
+    max_dt: f64,
+}
+
+/// A row's scheme label: the layout, its math mode where it has several, `fc off` builds marked.
+fn scheme_label(r: &Row) -> String {
+    let several = LayoutId::parse(&r.layout).map(|l| l.caps().maths.len() > 1).unwrap_or(true);
+    let mut s = if several { format!("{}/{}", r.layout, r.math) } else { r.layout.clone() };
+    if r.float_controls == "off" {
+        s += " (fc off)";
+    }
+    s
+}
+
+/// Every BVH layout and math mode at each B (P = 1) against f32 at the same B, per device:
+/// (device, registry order, label, B) → point.
+fn scheme_points(rows: &[Row]) -> BTreeMap<(String, usize, String, usize), SchemePoint> {
+    let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok" && r.packet == 1 && has_counters(&r.layout)).collect();
+    let order = |l: &str| LayoutId::layouts().position(|x| x.name() == l).unwrap_or(usize::MAX);
+    let mut acc: BTreeMap<(String, usize, String, usize), SchemePoint> = BTreeMap::new();
+    for h in ok.iter().filter(|r| LayoutId::parse(&r.layout).is_ok_and(|l| l.bvh().is_some()) && !r.kernel.is_empty()) {
+        let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.float_controls == h.float_controls && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching) else { continue };
+        let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+        let e = acc.entry((h.device.clone(), order(&h.layout), scheme_label(h), h.branching)).or_default();
+        e.n += 1;
+        for (i, v) in [div(h.mrays_median, f.mrays_median), div(h.bvh_bytes as f64, f.bvh_bytes as f64), div(h.nodes_per_ray, f.nodes_per_ray), div(h.box_tests_per_ray, f.box_tests_per_ray), div(h.tri_tests_per_ray, f.tri_tests_per_ray)].into_iter().enumerate() {
+            e.ratio[i] += v;
+        }
+        e.node_bytes_per_ray += h.node_bytes_per_ray;
+        e.stack_bytes = e.stack_bytes.max(h.stack_bytes_per_ray);
+        e.differs += h.differs_from_f32;
+        e.false_misses += h.false_misses;
+        e.max_dt = e.max_dt.max(h.max_abs_dt);
+    }
+    acc
+}
+
+/// The schemes table: which reduced-precision scheme, at which B, on this device.
+fn schemes_table(points: &BTreeMap<(String, usize, String, usize), SchemePoint>) -> String {
+    if points.is_empty() {
+        return String::new();
+    }
+    let mut md = String::from("## Schemes: every layout and math mode ÷ f32, per B (P = 1)\n\nMeans over scenes and ray kinds of each variant's ratio to `f32` at the same B (user kernels excluded). Mrays/s above 1: faster than f32; BVH bytes, nodes, box and triangle tests below 1: smaller / less work. Node bytes/ray = nodes visited × node bytes; stack bytes = the kernel's per-ray stack. ≠ f32, false misses: rays summed over scenes and ray kinds (0 for every conservative layout; `f16h-seed` is the poster's algorithm without an error bound); max |Δt| over them.\n\n| device | scheme | B | Mrays/s ÷ f32 | BVH bytes ÷ f32 | node bytes/ray | nodes ÷ f32 | box tests ÷ f32 | tri tests ÷ f32 | stack bytes/ray | ≠ f32 | false misses | max abs Δt |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for ((d, _, label, b), p) in points {
+        let m = |v: f64| fmt(v / p.n as f64);
+        md += &format!(
+            "| {d} | {label} | {b} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {:.3e} |\n",
+            m(p.ratio[0]), m(p.ratio[1]), p.node_bytes_per_ray / p.n as f64, m(p.ratio[2]), m(p.ratio[3]), m(p.ratio[4]), p.stack_bytes, p.differs, p.false_misses, p.max_dt
+        );
+    }
+    md + "\n![schemes](schemes.png)\n\n"
+}
+
 /// Mean of the ratios of each series point: (device, key) → (time, nodes, box, tri, bytes).
 fn series(r: &[Ratio], by_b: bool) -> BTreeMap<(String, usize), [f64; 5]> {
     let mut acc: BTreeMap<(String, usize), ([f64; 5], usize)> = BTreeMap::new();
@@ -249,6 +312,8 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     }
     md += "\n![ratio vs B](ratio_vs_b.png) ![ratio vs P](ratio_vs_p.png)\n\n";
     md += &separated_effects(rows);
+    let scheme_pts = scheme_points(rows);
+    md += &schemes_table(&scheme_pts);
     for b in LayoutId::all().filter(|l| l.baseline().is_some()) {
         let base: Vec<&Row> = rows.iter().filter(|r| r.layout == b.name() && r.status == "ok").collect();
         if base.is_empty() {
@@ -292,7 +357,26 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     }
     let p = out.join("report.md");
     std::fs::write(&p, md).with_context(|| format!("writing {}", p.display()))?;
-    plots(rows, &by_b, &by_p, out)
+    plots(rows, &by_b, &by_p, out)?;
+    scheme_plot(&scheme_pts, out)
+}
+
+/// Mrays/s ÷ f32 against B, one line per (device,) scheme.
+fn scheme_plot(points: &BTreeMap<(String, usize, String, usize), SchemePoint>, out: &Path) -> anyhow::Result<()> {
+    let devices: std::collections::BTreeSet<&String> = points.keys().map(|k| &k.0).collect();
+    let mut lines: Vec<(String, Vec<(usize, f64)>)> = Vec::new();
+    for ((d, o, label, b), p) in points {
+        let name = if devices.len() > 1 { format!("{label} ({d})") } else { label.clone() };
+        match lines.iter_mut().find(|l| l.0 == name) {
+            Some(l) => l.1.push((*b, p.ratio[0] / p.n as f64)),
+            None => lines.push((name, vec![(*b, p.ratio[0] / p.n as f64)])),
+        }
+        let _ = o;
+    }
+    let mut xs: Vec<usize> = points.keys().map(|k| k.3).collect();
+    xs.sort();
+    xs.dedup();
+    line_chart(out, "schemes", "Mrays/s of each scheme / f32 by branching factor (P = 1)", "branching factor B", "Mrays/s / f32", &xs, &lines, true)
 }
 
 fn font() -> anyhow::Result<()> {
@@ -342,7 +426,10 @@ fn line_chart(out: &Path, name: &str, title: &str, xlabel: &str, ylabel: &str, x
                 .x_labels(xs.len().max(2))
                 .x_label_formatter(&|v| if log2x { format!("{}", 2f64.powf(*v).round()) } else { format!("{v:.0}") })
                 .draw()?;
-            let colours = [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(148, 103, 189), RGBColor(255, 127, 14), RGBColor(23, 190, 207)];
+            let colours = [
+                RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(148, 103, 189), RGBColor(255, 127, 14), RGBColor(23, 190, 207),
+                RGBColor(140, 86, 75), RGBColor(227, 119, 194), RGBColor(127, 127, 127), RGBColor(188, 189, 34), RGBColor(0, 0, 0), RGBColor(174, 199, 232),
+            ];
             for (i, (label, pts)) in lines.iter().enumerate() {
                 let c = colours[i % colours.len()];
                 let pts: Vec<(f64, f64)> = pts.iter().filter(|p| p.1.is_finite()).map(|&(x, y)| (xmap(x), y)).collect();

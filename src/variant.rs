@@ -9,6 +9,11 @@ pub use crate::layout::Math;
 /// Packet sizes the harness supports.
 pub const PACKETS: [usize; 6] = [1, 4, 8, 16, 32, 64];
 
+/// The layouts the default sweep runs with the seed's B and P series.
+pub const SERIES_LAYOUTS: [&str; 2] = ["f32", "f16h"];
+/// The branching factors at which the default sweep compares every layout (P = 1).
+pub const SCHEME_BRANCHINGS: [usize; 2] = [4, 8];
+
 /// One traversal kernel configuration of a BVH layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Variant {
@@ -148,17 +153,24 @@ impl Variant {
         }
     }
 
-    /// The default matrix (the seed's two series): every layout in every math mode with
-    /// B ∈ {2, 4, 8, 16} at P = 1, and P ∈ {4, 8, 16, 32, 64} at B = 4.
+    /// The default matrix: the seed's two series — B ∈ {2, 4, 8, 16} at P = 1 and P ∈ {4, 8, 16,
+    /// 32, 64} at B = 4 — for the [`SERIES_LAYOUTS`], and every other layout at
+    /// [`SCHEME_BRANCHINGS`] with P = 1; every layout in every math mode.
     pub fn matrix() -> Vec<Variant> {
         let mut v = Vec::new();
         for layout in LayoutId::layouts() {
             for &math in layout.caps().maths {
-                for b in BRANCHINGS {
-                    v.push(Variant::new(layout, b, 1).with_math(math));
-                }
-                for p in PACKETS.into_iter().filter(|&p| p > 1) {
-                    v.push(Variant::new(layout, 4, p).with_math(math));
+                if SERIES_LAYOUTS.contains(&layout.name()) {
+                    for b in BRANCHINGS {
+                        v.push(Variant::new(layout, b, 1).with_math(math));
+                    }
+                    for p in PACKETS.into_iter().filter(|&p| p > 1) {
+                        v.push(Variant::new(layout, 4, p).with_math(math));
+                    }
+                } else {
+                    for b in SCHEME_BRANCHINGS {
+                        v.push(Variant::new(layout, b, 1).with_math(math));
+                    }
                 }
             }
         }

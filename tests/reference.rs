@@ -26,7 +26,9 @@ fn f32_traversal_equals_brute_force() {
 
 #[test]
 fn every_layout_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
-    let layouts: Vec<LayoutId> = LayoutId::layouts().filter(|&l| l != LayoutId::f32()).collect();
+    // Every conservative layout (f16h-seed, the poster's literal algorithm, is not: its
+    // disagreements are counted by the sweep and the test below).
+    let layouts: Vec<LayoutId> = LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
     assert!(!layouts.is_empty());
     let mut total = 0usize;
     // per (layout, math): re-anchors, box tests; and f32's box tests
@@ -75,4 +77,85 @@ fn traversal_is_deterministic_and_hits_exist() {
         assert_same_hits(kind, rays, &a.0, &b.0);
         assert!(a.0.iter().any(|x| x.is_hit()), "{kind}: nothing hit");
     }
+}
+
+/// Adversarial scenes and rays for every conservative layout, math mode and B: clusters of
+/// tiny and large triangles far from each other and from the origin (where one global fp16
+/// grid is coarse and per-node frames matter), rays aimed exactly at vertices and along edges
+/// and faces (where a box is touched only at its boundary), axis-parallel rays and rays with
+/// zero components. Each must return exactly the f32 closest hits; a layout that drops any
+/// of its outward roundings or widenings fails here.
+#[test]
+fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
+    use glam::Vec3;
+    use halftrace::rays::Ray;
+    use halftrace::scene::Scene;
+    use proptest::prelude::*;
+    use proptest::test_runner::{Config, TestRunner};
+    let layouts: Vec<LayoutId> = LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
+    let mut runner = TestRunner::new(Config { cases: 48, ..Config::default() });
+    let cluster = (prop::array::uniform3(-1.0f32..1.0), prop_oneof![Just(1e-3f32), Just(1.0f32), Just(1e3f32), Just(1e6f32)], prop_oneof![Just(1e-4f32), Just(1e-2f32), Just(1.0f32)], 1usize..40);
+    let strat = (prop::collection::vec(cluster, 1..5), any::<u64>());
+    let mut rays_total = 0usize;
+    runner
+        .run(&strat, |(clusters, seed)| {
+            let mut rng = halftrace::rays::Rng::new(seed);
+            let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+            let mut tris = Vec::new();
+            for (c, dist, size, n) in &clusters {
+                let centre = Vec3::from(*c) * *dist;
+                for _ in 0..*n {
+                    let p = centre + Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * *size * 20.0;
+                    let mut v = [p, p + Vec3::new(u(), u(), u() * 0.1) * *size, p + Vec3::new(u() * 0.1, u(), u()) * *size];
+                    if u() < 0.3 {
+                        // axis-aligned: a face in a box plane
+                        let z = v[0].z;
+                        for w in &mut v {
+                            w.z = z;
+                        }
+                    }
+                    tris.push(v);
+                }
+            }
+            let Ok(scene) = Scene::from_triangles("adversarial", tris.clone()) else { return Ok(()) };
+            let p = Prepared { bin: halftrace::bvh::build_binary(&scene), scene };
+            let lo = p.bin.nodes[0].bounds.min;
+            let hi = p.bin.nodes[0].bounds.max;
+            let diag = (hi - lo).length();
+            let mut rays = Vec::new();
+            for t in tris.iter().take(60) {
+                for (k, target) in [t[0], t[1], t[2], (t[0] + t[1]) * 0.5, (t[1] + t[2]) * 0.5, (t[0] + t[1] + t[2]) / 3.0].into_iter().enumerate() {
+                    let d = match k % 3 {
+                        0 => Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5),
+                        1 => Vec3::new(0.0, 0.0, if u() < 0.5 { 1.0 } else { -1.0 }),
+                        _ => (t[1] - t[0]) + Vec3::new(0.0, 0.0, (u() - 0.5) * 1e-6),
+                    };
+                    if d.length() == 0.0 {
+                        continue;
+                    }
+                    let d = d.normalize();
+                    let back = if u() < 0.5 { diag } else { diag * 1e-3 };
+                    rays.push(Ray::new(target - d * back, d, 0.0, f32::INFINITY));
+                    // along the edge itself, starting on it
+                    rays.push(Ray::new(t[0], (t[2] - t[0]).normalize_or_zero() + Vec3::X * 1e-7, 0.0, f32::INFINITY));
+                }
+            }
+            rays.retain(|r| r.d().length() > 0.0 && r.d().is_finite());
+            rays_total += rays.len();
+            for b in [2, 4, 8, 16] {
+                let f = encode(&p, LayoutId::f32(), b);
+                let (hf, _) = f.trace_default(&rays);
+                for &l in &layouts {
+                    let enc = encode(&p, l, b);
+                    for &math in l.caps().maths {
+                        let (h, _) = enc.trace(&rays, 1, math);
+                        let bad = (0..rays.len()).find(|&i| !hf[i].same_bits(&h[i]));
+                        prop_assert!(bad.is_none(), "{l}/{} B={b}: ray {:?}: f32 {:?}, got {:?}", math.name(), rays[bad.unwrap()], hf[bad.unwrap()], h[bad.unwrap()]);
+                    }
+                }
+            }
+            Ok(())
+        })
+        .unwrap();
+    assert!(rays_total > 1000, "only {rays_total} rays: the test would be weak");
 }

@@ -34,7 +34,7 @@ void main() {
             uint ni = st_node[sp];
             Entry en = st[sp];
             if (entry_t(en) > best_t) continue;
-            Visit v = visit_node(en, best_t);
+            Visit v = visit_node(ni, en, r, best_t);
             for (uint s = 0u; s < uint(B); s++) {
                 uint c = child_word(ni, s);
                 if (c == CHILD_EMPTY) break;

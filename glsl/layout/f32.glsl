@@ -24,7 +24,7 @@ float entry_t(Entry e) { return e.t; }
 
 // The ray's closest hit when the node is visited: the box tests' upper limit.
 struct Visit { float tmax; };
-Visit visit_node(Entry e, float best) { return Visit(best); }
+Visit visit_node(uint ni, Entry e, RayPre r, float best) { return Visit(best); }
 
 struct ChildHit { float t; };
 

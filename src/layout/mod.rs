@@ -8,8 +8,13 @@
 //! GLSL hooks file (`glsl/layout/<name>.glsl`) plus one line in [`registry::REGISTRY`]. The
 //! [`Layout`] trait says what to implement; `docs/architecture.md` walks through it.
 
+pub mod anchored;
+pub mod f16a;
 pub mod f16h;
+pub mod f16h_seed;
+pub mod f16w;
 pub mod f32;
+pub mod q8;
 pub mod registry;
 
 pub use registry::{Baseline, BaselineDevice, BaselineScene, Caps, DynLayout, Entry, LayoutId, REGISTRY};
@@ -79,6 +84,8 @@ pub enum EncodeError {
     UnknownLayout(String, String),
     #[error("{layout}: node {node} child {child}: coordinate {value} lies outside [-16384, 16384] in the parent frame")]
     OutOfRange { layout: &'static str, node: usize, child: usize, value: f64 },
+    #[error("{layout}: node {node} spans {value:e}, more than the {limit:e} its quantization can step over")]
+    Extent { layout: &'static str, node: usize, value: f64, limit: f64 },
 }
 
 /// Device features a layout's kernels use in one math mode (the shared parts — fp32 leaf tests,
@@ -191,6 +198,10 @@ pub trait Layout: Send + Sync + Sized + 'static {
     /// Whether the hooks have a build without float controls (`FC_OFF`) whose hits stay
     /// exact under any faithful rounding and without inf/NaN preservation.
     const FLOAT_CONTROLS_OFF: bool = false;
+    /// Whether the hooks are conservative, so the traversal returns exactly the f32 closest
+    /// hit (every layout but the seed's literal algorithm, `f16h-seed`, which is validated
+    /// against its own CPU reference and whose disagreements with f32 are reported).
+    const CONSERVATIVE: bool = true;
 
     /// What the kernels need from the device in math mode `math`.
     fn needs(_math: Math) -> Needs {
@@ -210,6 +221,12 @@ pub trait Layout: Send + Sync + Sized + 'static {
     /// What a hit child's box test hands to [`Layout::child_entry`].
     type ChildHit: Copy + Send + Sync;
 
+    /// A layout that needs its own order of nodes or triangles (e.g. `q8`: each node's inner
+    /// children and leaf triangles contiguous) returns the same tree rearranged; it is encoded
+    /// from that, and the shared triangle buffer follows its triangle order.
+    fn reorder(_w: &WideBvh) -> Option<WideBvh> {
+        None
+    }
     /// Encodes a wide BVH whose branching factor is `B`.
     fn encode<const B: usize>(scene: &Scene, w: &WideBvh) -> Result<(Vec<Self::Node<B>>, Self::Root), EncodeError>;
     /// The `root` vec4 of the push constants (what the kernels need from the host).
@@ -229,7 +246,8 @@ pub trait Layout: Send + Sync + Sized + 'static {
     /// A lower bound of the world parameter of anything that can still matter under the
     /// entry: the node is skipped for the ray when it exceeds the closest hit.
     fn entry_t(e: &Self::Entry) -> f32;
-    fn visit(e: &Self::Entry, lr: &Self::Ray, best_t: f32) -> Self::Visit;
+    /// Per node and active ray, before its box tests (`n` is the node being visited).
+    fn visit<const B: usize>(n: &Self::Node<B>, root: &Self::Root, e: &Self::Entry, r: &RayPre, lr: &Self::Ray, best_t: f32) -> Self::Visit;
     /// The box test of slot `s`: `Some((key, data))` when the ray may touch the child; `key`
     /// orders the children (nearest first).
     #[allow(clippy::too_many_arguments)]

@@ -16,6 +16,10 @@ use std::marker::PhantomData;
 pub static REGISTRY: &[Entry] = &[
     Entry::Layout(&Plug::<super::f32::F32>::NEW),
     Entry::Layout(&Plug::<super::f16h::F16h>::NEW),
+    Entry::Layout(&Plug::<super::f16w::F16w>::NEW),
+    Entry::Layout(&Plug::<super::f16a::F16a>::NEW),
+    Entry::Layout(&Plug::<super::q8::Q8>::NEW),
+    Entry::Layout(&Plug::<super::f16h_seed::F16hSeed>::NEW),
     Entry::Baseline(&crate::gpu::rq::Rq),
 ];
 
@@ -146,6 +150,7 @@ pub trait DynLayout: Send + Sync {
     fn stack_entry(&self, math: Math) -> &'static [(&'static str, &'static str)];
     fn needs(&self, math: Math) -> Needs;
     fn float_controls_off(&self) -> bool;
+    fn conservative(&self) -> bool;
     fn glsl_constants(&self) -> String;
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError>;
     /// The CPU reference: rays in packets of `p` (1: single rays) in math mode `math`.
@@ -174,6 +179,8 @@ macro_rules! with_branching {
 }
 
 fn encode_b<L: Layout, const B: usize>(scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError> {
+    let reordered = L::reorder(w);
+    let w = reordered.as_ref().unwrap_or(w);
     let (nodes, root) = L::encode::<B>(scene, w)?;
     let rb = w.nodes[0].bounds;
     Ok(Encoded {
@@ -214,6 +221,9 @@ impl<L: Layout> DynLayout for Plug<L> {
     }
     fn float_controls_off(&self) -> bool {
         L::FLOAT_CONTROLS_OFF
+    }
+    fn conservative(&self) -> bool {
+        L::CONSERVATIVE
     }
     fn glsl_constants(&self) -> String {
         L::glsl_constants()

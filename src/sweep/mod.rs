@@ -12,7 +12,7 @@ pub use jobs::{Job, Target};
 use crate::bvh;
 use crate::layout::{LayoutId, Math};
 use crate::rays::RayKind;
-use crate::variant::{FcChoice, FloatControls, Variant, PACKETS};
+use crate::variant::{FcChoice, FloatControls, Variant, PACKETS, SCHEME_BRANCHINGS, SERIES_LAYOUTS};
 use anyhow::Context;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -28,8 +28,12 @@ pub struct Config {
     /// Layouts and baselines from the registry (baselines are skipped, with one line in the
     /// report, on devices without what they need).
     pub layouts: Vec<String>,
-    /// Branching factors swept at P = 1.
+    /// The layouts that get the B and P series; every other one runs at `scheme_branchings`.
+    pub series: Vec<String>,
+    /// Branching factors swept at P = 1 (for the `series` layouts).
     pub branchings: Vec<usize>,
+    /// Branching factors at which every layout runs with P = 1 (the schemes comparison).
+    pub scheme_branchings: Vec<usize>,
     /// Packet sizes swept at B = `packet_branching`.
     pub packets: Vec<usize>,
     /// Math modes of the layouts that have several: f16, f32, mixed.
@@ -97,7 +101,9 @@ impl Default for Config {
             scenes: vec![PathBuf::from(DEFAULT_SCENE)],
             rays: vec!["primary".into(), "ao".into()],
             layouts: LayoutId::all().map(|l| l.name().to_string()).collect(),
+            series: SERIES_LAYOUTS.iter().map(|s| s.to_string()).collect(),
             branchings: bvh::BRANCHINGS.to_vec(),
+            scheme_branchings: SCHEME_BRANCHINGS.to_vec(),
             packets: PACKETS.to_vec(),
             maths: vec!["f16".into(), "f32".into()],
             packet_branching: 4,
@@ -131,7 +137,10 @@ impl Config {
         for l in &self.layouts {
             l.parse::<LayoutId>().context("layouts")?;
         }
-        for &b in self.branchings.iter().chain([&self.packet_branching]) {
+        for l in &self.series {
+            l.parse::<LayoutId>().context("series")?;
+        }
+        for &b in self.branchings.iter().chain(&self.scheme_branchings).chain([&self.packet_branching]) {
             bvh::check_branching(b).context("branchings")?;
         }
         for &p in &self.packets {
@@ -170,17 +179,24 @@ impl Config {
         }
     }
 
-    /// The variants: every BVH layout × its maths × (B series at P = 1 ∪ P series at
-    /// `packet_branching`), sorted (so each layout and B is contiguous).
+    /// The variants: every BVH layout × its maths × `scheme_branchings` at P = 1, and for the
+    /// `series` layouts also the B series at P = 1 and the P series at `packet_branching`;
+    /// sorted (so each layout and B is contiguous).
     pub fn variants(&self) -> Vec<Variant> {
         let mut v = Vec::new();
         for layout in self.entries().into_iter().filter(|l| l.bvh().is_some()) {
+            let series = self.series.iter().any(|s| s == layout.name());
             for math in self.maths_of(layout) {
-                for &b in &self.branchings {
+                for &b in &self.scheme_branchings {
                     v.push(Variant::new(layout, b, 1).with_math(math));
                 }
-                for &p in &self.packets {
-                    v.push(Variant::new(layout, self.packet_branching, p).with_math(math));
+                if series {
+                    for &b in &self.branchings {
+                        v.push(Variant::new(layout, b, 1).with_math(math));
+                    }
+                    for &p in &self.packets {
+                        v.push(Variant::new(layout, self.packet_branching, p).with_math(math));
+                    }
                 }
             }
         }

@@ -121,9 +121,10 @@ fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris:
         cur.clear();
         cur.extend(entries.drain(entries.len() - p..));
         visits.clear();
+        let n = &nodes[ni as usize];
         let mut active = 0;
         for (lane, e) in lanes.iter().zip(cur.iter()) {
-            let v = e.as_ref().filter(|e| L::entry_t(e) <= lane.best.t).map(|e| L::visit(e, &lane.lr, lane.best.t));
+            let v = e.as_ref().filter(|e| L::entry_t(e) <= lane.best.t).map(|e| L::visit::<B>(n, root, e, &lane.r, &lane.lr, lane.best.t));
             active += v.is_some() as u32;
             visits.push(v);
         }
@@ -132,7 +133,6 @@ fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris:
         }
         packet_nodes += 1;
         active_lanes += active;
-        let n = &nodes[ni as usize];
         res.clear();
         order.clear();
         for slot in 0..B {

@@ -311,25 +311,60 @@ pub fn root_entry(root: &Frame, r: &RayPre, r16: &Ray16, near: f32) -> Entry {
 /// Quantities fixed for one visit of one node by one ray.
 #[derive(Clone, Copy, Debug)]
 pub struct Visit {
-    mk: f32,
-    s_lim: f16,
-    lower: f16,
-    precise: bool,
-    w: f16,
+    pub mk: f32,
+    pub s_lim: f16,
+    pub lower: f16,
+    pub precise: bool,
+    pub w: f16,
 }
 
 pub fn visit(en: &Entry, r16: &Ray16, best_t: f32) -> Visit {
-    let mk = r16.m * en.frame.k;
-    let s_max = S_BASE + en.e + 1.0;
-    let lim = (best_t - en.tp) * mk;
+    visit_parts(en.frame.k, en.e, en.tp, en.tlo, r16, best_t)
+}
+
+/// The visit bounds of a node whose frame has scale `k`, for an origin with error bound `e`
+/// standing for world parameter `tp`, under the entry bound `tlo` (shared with the other
+/// layouts that test fp16 boxes in a node frame: f16w, f16a, q8).
+pub fn visit_parts(k: f32, e: f32, tp: f32, tlo: f32, r16: &Ray16, best_t: f32) -> Visit {
+    let mk = r16.m * k;
+    let s_max = S_BASE + e + 1.0;
+    let lim = (best_t - tp) * mk;
     // Without float controls no value may be inf: a limit that overflows (or comes from a
     // clamped infinite tmax) is replaced by s_max, which the min below would pick anyway.
     let lim = if r16.off && !(lim.abs() < BIG32) { s_max } else { lim };
     let s_lim = up_f32(up32(lim).min(s_max));
-    let sigma = up32((en.tp - en.tlo) * mk);
+    let sigma = up32((tp - tlo) * mk);
     let lower = down_f32((-sigma).max(-s_max));
     let w_margin = if r16.off { W_MARGIN_OFF } else { W_MARGIN };
-    Visit { mk, s_lim, lower, precise: en.e <= EBIG, w: up_f32(en.e + en.e * TWO_M11 + w_margin) }
+    Visit { mk, s_lim, lower, precise: e <= EBIG, w: up_f32(e + e * TWO_M11 + w_margin) }
+}
+
+/// The box test of one stored fp16 box against origin `o` (its error bound is in `v`):
+/// `Some((tn, tn_lb))` when the ray may touch it.
+#[inline]
+pub fn test_box(o: &[f32; 3], lo: [f16; 3], hi: [f16; 3], v: &Visit, r16: &Ray16) -> Option<(f32, f32)> {
+    let lower = v.lower.to_f32();
+    if !v.precise {
+        return Some((lower, lower));
+    }
+    let (tn, tn_lb, tf_ub) = slab(o, r16, v.w, lo, hi);
+    (tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= v.s_lim.to_f32()).then_some((tn, tn_lb))
+}
+
+/// A lower bound of the world parameter of anything that matters in a hit child: its entry
+/// bound `tn_lb` (local) mapped back to world units from `tp`, rounded down (2⁻²¹ covers the
+/// division and the addition; 2⁻¹⁹ without float controls), never below the parent's `tlo`.
+#[inline]
+pub fn child_tlo(v: &Visit, tp: f32, tlo: f32, tn_lb: f32, off: bool) -> f32 {
+    let s_lo = tn_lb.max(v.lower.to_f32());
+    let q = s_lo / v.mk;
+    // Without float controls a node visited without box tests keeps its parent's tlo (its
+    // `lower` may have saturated; the parent's bound is valid for every child).
+    if off && !v.precise {
+        tlo
+    } else {
+        ((tp + q) - (tp.abs() + q.abs()) * if off { TWO_M19 } else { TWO_M21 }).max(tlo)
+    }
 }
 
 /// The stored fp16 box of slot `s`.
@@ -341,13 +376,8 @@ pub fn slot_box<const B: usize>(n: &F16hNode<B>, s: usize) -> ([f16; 3], [f16; 3
 /// The box test of one child: `Some((tn, (tn, tn_lb)))` when the ray may touch it.
 #[inline]
 pub fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Visit, r16: &Ray16) -> Option<(f32, (f32, f32))> {
-    let lower = v.lower.to_f32();
-    if !v.precise {
-        return Some((lower, (lower, lower)));
-    }
     let (lo, hi) = slot_box(n, s);
-    let (tn, tn_lb, tf_ub) = slab(&en.o, r16, v.w, lo, hi);
-    (tn_lb <= tf_ub && tf_ub >= lower && tn_lb <= v.s_lim.to_f32()).then_some((tn, (tn, tn_lb)))
+    test_box(&en.o, lo, hi, v, r16).map(|(tn, tn_lb)| (tn, (tn, tn_lb)))
 }
 
 /// The stack entry of a hit inner child: its frame, and the origin moved into it in fp16
@@ -358,13 +388,8 @@ pub fn child_entry<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Vi
     let (mk, math) = (v.mk, r16.math);
     let cf = derive_child(&en.frame, lo, hi);
     let lower = v.lower.to_f32();
-    // Lower bound of the world parameter of anything that matters in the child.
-    let s_lo = tn_lb.max(lower);
-    let q = s_lo / mk;
     let off = r16.off;
-    // Without float controls a node visited without box tests keeps its parent's tlo (its
-    // `lower` may have saturated; the parent's bound is valid for every child).
-    let tlo = if off && !v.precise { en.tlo } else { ((en.tp + q) - (en.tp.abs() + q.abs()) * if off { TWO_M19 } else { TWO_M21 }).max(en.tlo) };
+    let tlo = child_tlo(v, en.tp, en.tlo, tn_lb, off);
     let se = tn.max(lower);
     // Without float controls the fp16 origin move must not overflow (module docs).
     let fits = !off || math == Math::F32 || {

@@ -124,7 +124,7 @@ impl Layout for F16h {
         e.tlo
     }
 
-    fn visit(e: &Entry, lr: &Ray16, best_t: f32) -> Visit {
+    fn visit<const B: usize>(_: &F16hNode<B>, _: &Frame, e: &Entry, _: &RayPre, lr: &Ray16, best_t: f32) -> Visit {
         hooks::visit(e, lr, best_t)
     }
 

@@ -104,7 +104,7 @@ impl Layout for F32 {
         *t
     }
 
-    fn visit(_: &f32, _: &(), best_t: f32) -> f32 {
+    fn visit<const B: usize>(_: &F32Node<B>, _: &(), _: &f32, _: &RayPre, _: &(), best_t: f32) -> f32 {
         best_t
     }
 

@@ -1,0 +1,86 @@
+// Hooks shared by the layouts whose child boxes are tested in a per-node (or per-BVH) frame
+// against the origin re-derived from the fp32 world ray at every node (f16w, f16a, q8;
+// src/layout/anchored.rs has the argument). Include after half.glsl, and after the layout's
+//   void node_frame(uint ni, out vec3 w, out float k)              frame x_local = (x - w) * k
+//   void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi)    fp16 box in that frame
+//   void world_box(uint ni, uint s, out vec3 lo, out vec3 hi)      fp32 world box, outward
+// MATH_F32: the stored box decoded to world fp32, rounded outward, robust fp32 slab test.
+// Otherwise: the origin anchored in the node frame at the node's entry bound (fp32, rounded to
+// fp16, with its error bound), then the widened fp16 slab test of f16h.
+// Stack Entry (generated): t = a lower bound of the world parameter of anything that can still
+// matter in the node (-1: inactive).
+
+// 1/k for a power of two k, exactly, from the exponent bits.
+float inv_pow2(float k) { return uintBitsToFloat((254u - (floatBitsToUint(k) >> 23)) << 23); }
+
+// Bounds of w + x: the fp32 sum (one rounding, at most |s| 2^-24 off) moved outward by
+// |s| 2^-22 + FLT_MIN, more than that rounding and the rounding of the move itself
+// (anchored.rs, add_down / add_up).
+float add_down(float w, float x) {
+    precise float s = w + x;
+    precise float d = abs(s) * TWO_M22 + FLT_MIN_NORMAL;
+    precise float r = s - d;
+    return r;
+}
+float add_up(float w, float x) {
+    precise float s = w + x;
+    precise float d = abs(s) * TWO_M22 + FLT_MIN_NORMAL;
+    precise float r = s + d;
+    return r;
+}
+
+Entry root_entry(RayPre r, float near_t) { return Entry(near_t); }
+Entry no_entry() { return Entry(-1.0); }
+bool has_entry(Entry e) { return e.t >= 0.0; }
+float entry_t(Entry e) { return e.t; }
+
+struct Visit {
+    float tmax;
+    float t;
+#ifndef MATH_F32
+    OVEC o;
+    HVisit h;
+#endif
+};
+
+Visit visit_node(uint ni, Entry en, RayPre r, float best) {
+    Visit v;
+    v.tmax = best;
+    v.t = en.t;
+#ifndef MATH_F32
+    vec3 w;
+    float k;
+    node_frame(ni, w, k);
+    float e = anchor(r, w, k, en.t, v.o);
+    v.h = half_visit(k, e, en.t, en.t, best);
+#endif
+    return v;
+}
+
+// (entry parameter, its lower bound): world t in fp32 math, the node frame's s otherwise.
+struct ChildHit { float tn; float tn_lb; };
+
+bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
+#ifdef MATH_F32
+    vec3 lo, hi;
+    world_box(ni, s, lo, hi);
+    vec2 q = slab32(r, lo, hi, r.tmin, v.tmax);
+    key = q.x;
+    h = ChildHit(q.x, q.x);
+    return q.x <= q.y;
+#else
+    HVEC3 lo, hi;
+    local_box(ni, s, lo, hi);
+    bool hit = half_test(v.o, v.h, lo, hi, h.tn, h.tn_lb);
+    key = h.tn;
+    return hit;
+#endif
+}
+
+Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
+#ifdef MATH_F32
+    return Entry(h.tn);
+#else
+    return Entry(half_child_tlo(v.h, v.t, v.t, h.tn_lb));
+#endif
+}

@@ -1,0 +1,409 @@
+// Shared fp16 machinery of the layouts that test fp16 boxes in a node frame against an origin
+// with an error bound (f16h, f16w, f16a, q8): fp16 value types per math mode, emulated
+// roundings, the anchored origin, the per-ray fp16 direction, the widened slab test, the visit
+// bounds. Mirrors src/layout/f16h/hooks.rs (the bound is argued there) and src/fp16.rs. Needs
+// the constants OCAP, EMAX, EBIG, W_MARGIN, W_MARGIN_OFF, SAT, BIG32, D_FLUSH, K_MIN_LOG2 and
+// K_MAX_LOG2 from interface.glsl.
+// fp16 values: `float16_t` with fp16 arithmetic (MATH_F16, MATH_MIXED); in MATH_F32 they are
+// held exactly in fp32 and the few fp16 roundings are emulated (rte16), so that mode uses 16-bit
+// storage only and runs on devices without shaderFloat16. Every value and bound is the same.
+#ifdef MATH_F32
+#define HALF float
+#define HVEC3 vec3
+#define LOADH(x) float(x)
+#define HINF INF
+#define TO_HALF(x) rte16(x)
+const float H0 = 0.0;
+#else
+#define HALF float16_t
+#define HVEC3 f16vec3
+#define LOADH(x) (x)
+#define HINF float16_t(uintBitsToFloat(0x7f800000u))
+#ifdef FC_OFF
+#define TO_HALF(x) float16_t(rte16(x))
+#else
+#define TO_HALF(x) float16_t(x)
+#endif
+const float16_t H0 = float16_t(0.0);
+#endif
+
+const float S_BASE = 16384.0 + OCAP;
+const float TWO_M9 = 1.0 / 512.0;
+const float TWO_M10 = 1.0 / 1024.0;
+const float TWO_M19 = 1.0 / 524288.0;
+const float TWO_M20 = 1.0 / 1048576.0;
+const float TWO_M11 = 1.0 / 2048.0;
+const float TWO_M18 = 1.0 / 262144.0;
+const float TWO_M21 = 1.0 / 2097152.0;
+const float TWO_M22 = 1.0 / 4194304.0;
+const float TWO_M23 = 1.0 / 8388608.0;
+const float TWO_M24 = 1.0 / 16777216.0;
+// Origin type: fp32 in the fp32 math mode, fp16 otherwise (the Entry's `o` has the same type).
+#ifdef MATH_F32
+#define OVEC vec3
+#define OCONV(x) (x)
+#else
+#define OVEC f16vec3
+#define OCONV(x) TO_HALF(x)
+#endif
+
+int frexp_exp(float x) {
+    int e = int((floatBitsToUint(x) >> 23) & 0xffu);
+    return e == 0 ? -126 : e - 126;
+}
+float pow2(int e) { return uintBitsToFloat(uint(e + 127) << 23); }
+
+// Round-to-nearest-even of x to fp16, returned exactly in fp32: integer operations on the
+// bits and one exact power-of-two product, so it needs no fp16 arithmetic (fp16.rs,
+// rte16_emulated, takes the same steps and is tested against the conversion for every fp16
+// value, midpoint and neighbour).
+float rte16(float x) {
+    uint u = floatBitsToUint(x);
+    uint sgn = u & 0x80000000u;
+    uint a = u & 0x7fffffffu;
+    if (a >= 0x7f800000u) return x;                                   // inf, NaN
+    if (a >= 0x477ff000u) return uintBitsToFloat(sgn | 0x7f800000u);  // >= 65520 rounds to inf
+    int e = int(a >> 23) - 127;
+    if (e < -25) return uintBitsToFloat(sgn);                         // below half of 2^-24
+    uint m = (a & 0x7fffffu) | 0x800000u;                             // x = m * 2^(e - 23)
+    int lsb = max(e - 10, -24);                                       // fp16's last place
+    uint sh = uint(lsb - (e - 23));                                   // 13..24
+    uint q = m >> sh;
+    uint rem = m & ((1u << sh) - 1u);
+    uint halfway = 1u << (sh - 1u);
+    if (rem > halfway || (rem == halfway && (q & 1u) == 1u)) q++;
+    precise float r = float(q) * pow2(lsb);
+    return uintBitsToFloat(floatBitsToUint(r) | sgn);
+}
+
+// a + b rounded to nearest even with integer operations only: three guard bits and a sticky
+// bit (fp16.rs, add_rte_emulated, takes the same steps and is tested against IEEE addition).
+// Without float controls, the fp32 additions a child frame is derived with go through it, so
+// frames are the encoder's bit for bit on any device.
+float add_rte(float a, float b) {
+    uint ua = floatBitsToUint(a);
+    uint ub = floatBitsToUint(b);
+    if ((ua & 0x7fffffffu) < (ub & 0x7fffffffu)) { uint t = ua; ua = ub; ub = t; }
+    uint ea = (ua >> 23) & 0xffu;
+    uint eb = (ub >> 23) & 0xffu;
+    uint ma = ea == 0u ? (ua & 0x7fffffu) : ((ua & 0x7fffffu) | 0x800000u);
+    uint mb = eb == 0u ? (ub & 0x7fffffu) : ((ub & 0x7fffffu) | 0x800000u);
+    int iea = int(max(ea, 1u));
+    int ieb = int(max(eb, 1u));
+    if (mb == 0u) return ma == 0u ? uintBitsToFloat(ua & ub & 0x80000000u) : uintBitsToFloat(ua);
+    uint sgn = ua & 0x80000000u;
+    uint d = uint(iea - ieb);
+    uint big = ma << 3;
+    uint small = 1u;
+    if (d <= 26u) {
+        uint m = mb << 3;
+        small = (m >> d) | ((m & ((1u << d) - 1u)) != 0u ? 1u : 0u);
+    }
+    uint s = ((ua ^ ub) & 0x80000000u) == 0u ? big + small : big - small;
+    int e = iea;
+    if (s == 0u) return 0.0;
+    if (s >= (1u << 27)) {
+        s = (s >> 1) | (s & 1u);
+        e += 1;
+    } else {
+        int sh = max(min(26 - findMSB(s), e - 1), 0);
+        s <<= uint(sh);
+        e -= sh;
+    }
+    uint m = s >> 3;
+    uint rem = s & 7u;
+    if (rem > 4u || (rem == 4u && (m & 1u) == 1u)) m++;
+    if (m >= (1u << 24)) { m >>= 1; e += 1; }
+    uint field = m >= (1u << 23) ? (uint(e) << 23) : 0u;
+    return uintBitsToFloat(sgn | field | (m & 0x7fffffu));
+}
+
+// An fp16 value >= x with one round-to-nearest conversion (fp16::up_f32). Without float
+// controls, the largest finite fp16 stands for inf (only where box tests are skipped).
+HALF up16(float x) {
+    precise float y = x + abs(x) * (1.0 / 1024.0) + (1.0 / 16777216.0);
+#ifdef FC_OFF
+    return y > 65504.0 ? HALF(65504.0) : TO_HALF(y);
+#else
+    return y > 65504.0 ? HINF : TO_HALF(y);
+#endif
+}
+HALF down16(float x) { return -up16(-x); }
+#ifdef FC_OFF
+float up32(float x) { return upper32(x); }
+#else
+float up32(float x) { return isinf(x) ? x : upper32(x); }
+#endif
+
+// Origin at world parameter t in frame (w, k), fp32 then fp16, clamped to +-OCAP; returns the
+// error bound (hooks.rs, anchor).
+float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
+    float mag = 0.0;
+    float clampd = 0.0;
+    float lmax = 0.0;
+    for (int a = 0; a < 3; a++) {
+        precise float td = t * r.d[a];
+        precise float x = r.o[a] + td;
+        precise float l = (x - w[a]) * k;
+        precise float s = abs(r.o[a]) + abs(td) + abs(x) + abs(w[a]);
+        mag = max(mag, s);
+        float lc = clamp(l, -OCAP, OCAP);
+        precise float cd = abs(l - lc);
+        clampd = max(clampd, cd);
+        lmax = max(lmax, abs(lc));
+        o[a] = OCONV(lc);
+    }
+#ifdef FC_OFF
+    precise float e = (mag * k * TWO_M21 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
+#else
+    precise float e = (mag * k * TWO_M23 + clampd + lmax * TWO_M11 + TWO_M24) * (1.0 + TWO_M18);
+#endif
+    return e;
+}
+
+// Per-ray constants (hooks.rs, Ray16): m = max|D|, d16 = fp16(D / m), its fp16 and fp32
+// reciprocals.
+float lr_m;
+HVEC3 lr_d16;
+#ifndef MATH_F32
+f16vec3 lr_idir;
+#endif
+vec3 lr_idir32;
+
+void layout_ray(RayPre r) {
+    lr_m = max(max(abs(r.d.x), abs(r.d.y)), abs(r.d.z));
+    for (int a = 0; a < 3; a++) {
+        precise float x = r.d[a] / lr_m;
+        lr_d16[a] = abs(x) < D_FLUSH ? H0 : TO_HALF(x);
+#ifdef FC_OFF
+        // An fp32 reciprocal rounded to fp16 (no inf: a zero component's is never used).
+        precise float inv32 = 1.0 / float(lr_d16[a]);
+        lr_idir32[a] = lr_d16[a] == H0 ? 0.0 : inv32;
+#ifndef MATH_F32
+        lr_idir[a] = lr_d16[a] == H0 ? H0 : float16_t(rte16(inv32));
+#endif
+#else
+#ifndef MATH_F32
+        precise float16_t inv = float16_t(1.0) / lr_d16[a];
+        lr_idir[a] = lr_d16[a] == H0 ? HINF : inv;
+#endif
+        precise float inv32 = 1.0 / float(lr_d16[a]);
+        lr_idir32[a] = lr_d16[a] == H0 ? INF : inv32;
+#endif
+    }
+}
+
+#ifndef MATH_F32
+// fp16 slab test in the node frame: (tn, tn_lb, tf_ub) (hooks.rs, slab16).
+#ifdef FC_OFF
+// fp16 product saturated to +-SAT, decided on the exact fp32 product (hooks.rs, mul_sat).
+float16_t mul_sat(float16_t a, float16_t b) {
+    precise float p = float(a) * float(b);
+    if (p > SAT) return float16_t(SAT);
+    if (p < -SAT) return float16_t(-SAT);
+    precise float16_t q = a * b;
+    return q;
+}
+#define HMUL(a, b) mul_sat(a, b)
+#define UNB16 float16_t(SAT)
+#else
+#define HMUL(a, b) ((a) * (b))
+#define UNB16 HINF
+#endif
+
+f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
+    float16_t tn = -UNB16;
+    float16_t tf = UNB16;
+    for (int a = 0; a < 3; a++) {
+        precise float16_t la = (lo[a] - o[a]) - w;
+        precise float16_t ha = (hi[a] - o[a]) + w;
+        float16_t t0, t1;
+        if (lr_d16[a] == H0) {
+            bool inside = la <= H0 && ha >= H0;
+            t0 = inside ? -UNB16 : UNB16;
+            t1 = inside ? UNB16 : -UNB16;
+        } else {
+            precise float16_t x = HMUL(la, lr_idir[a]);
+            precise float16_t y = HMUL(ha, lr_idir[a]);
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+        tn = max(tn, t0);
+        tf = min(tf, t1);
+    }
+    const float16_t LO_DOWN = float16_t(1.0 - 1.0 / 256.0);
+    const float16_t LO_UP = float16_t(1.0 + 1.0 / 256.0);
+    precise float16_t tn_lb = tn * (tn > H0 ? LO_DOWN : LO_UP);
+    precise float16_t tf_ub = tf * (tf > H0 ? LO_UP : LO_DOWN);
+    return f16vec3(tn, tn_lb, tf_ub);
+}
+#endif
+
+// The box test in the variant's math mode, as fp32 (tn, tn_lb, tf_ub) (hooks.rs, slab).
+vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
+#if !defined(MATH_F32) && !defined(MATH_MIXED)
+    return vec3(slab16(o, w, lo, hi));
+#else
+    // Unbounded: inf, or without float controls SAT (fp16 products) / BIG32 (fp32).
+#if !defined(FC_OFF)
+    const float UNB = INF;
+#elif defined(MATH_MIXED)
+    const float UNB = SAT;
+#else
+    const float UNB = BIG32;
+#endif
+    float tn = -UNB;
+    float tf = UNB;
+    for (int a = 0; a < 3; a++) {
+        float t0, t1;
+#ifdef MATH_MIXED
+        precise float16_t la = (lo[a] - o[a]) - w;
+        precise float16_t ha = (hi[a] - o[a]) + w;
+        bool inside = la <= H0 && ha >= H0;
+        precise float16_t x16 = HMUL(la, lr_idir[a]);
+        precise float16_t y16 = HMUL(ha, lr_idir[a]);
+        float x = float(x16);
+        float y = float(y16);
+#else
+        float w32 = float(w);
+        precise float la = (float(lo[a]) - o[a]) - w32;
+        precise float ha = (float(hi[a]) - o[a]) + w32;
+        bool inside = la <= 0.0 && ha >= 0.0;
+        precise float x = la * lr_idir32[a];
+        precise float y = ha * lr_idir32[a];
+#endif
+        if (lr_d16[a] == H0) {
+            t0 = inside ? -UNB : UNB;
+            t1 = inside ? UNB : -UNB;
+        } else {
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+        tn = max(tn, t0);
+        tf = min(tf, t1);
+    }
+    precise float tn_lb = tn * (tn > 0.0 ? (1.0 - 1.0 / 256.0) : (1.0 + 1.0 / 256.0));
+    precise float tf_ub = tf * (tf > 0.0 ? (1.0 + 1.0 / 256.0) : (1.0 - 1.0 / 256.0));
+    return vec3(tn, tn_lb, tf_ub);
+#endif
+}
+
+// Quantities fixed for one visit of one node by one ray (hooks.rs, visit): node frame scale k,
+// origin error e, the world parameter tp the origin stands for, the entry bound tlo.
+struct HVisit {
+    float mk;
+    HALF s_lim;
+    HALF lower;
+    bool prec;
+    HALF w;
+};
+
+HVisit half_visit(float k, float e, float tp, float tlo, float best) {
+    HVisit v;
+    precise float mk = lr_m * k;
+    precise float s_max = S_BASE + e + 1.0;
+    precise float lim = (best - tp) * mk;
+#ifdef FC_OFF
+    // No inf: a limit that overflows (or comes from a clamped infinite tmax) becomes s_max,
+    // which the min below would pick anyway; tested on the bits.
+    if ((floatBitsToUint(lim) & 0x7fffffffu) >= floatBitsToUint(BIG32)) lim = s_max;
+#endif
+    v.s_lim = up16(min(up32(lim), s_max));
+    precise float sg = (tp - tlo) * mk;
+    float sigma = up32(sg);
+    v.lower = down16(max(-sigma, -s_max));
+    v.prec = e <= EBIG;
+#ifdef FC_OFF
+    precise float we = e + e * TWO_M11 + W_MARGIN_OFF;
+#else
+    precise float we = e + e * TWO_M11 + W_MARGIN;
+#endif
+    v.w = up16(we);
+    v.mk = mk;
+    return v;
+}
+
+// The box test of one stored fp16 box under a visit: hit, with (tn, tn_lb) (hooks.rs, test_box).
+bool half_test(OVEC o, HVisit v, HVEC3 lo, HVEC3 hi, out float tn, out float tn_lb) {
+    if (!v.prec) {
+        tn = float(v.lower);
+        tn_lb = tn;
+        return true;
+    }
+    vec3 q = slab_math(o, v.w, lo, hi);
+    tn = q.x;
+    tn_lb = q.y;
+    return q.y <= q.z && q.z >= float(v.lower) && q.y <= float(v.s_lim);
+}
+
+// A lower bound of the world parameter of anything that matters in a hit child (hooks.rs,
+// child_tlo).
+float half_child_tlo(HVisit v, float tp, float tlo, float tn_lb) {
+    float s_lo = max(tn_lb, float(v.lower));
+    precise float q = s_lo / v.mk;
+#ifdef FC_OFF
+    // A node visited without box tests keeps its parent's tlo (hooks.rs).
+    precise float t0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M19;
+    return v.prec ? max(t0, tlo) : tlo;
+#else
+    precise float t0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M21;
+    return max(t0, tlo);
+#endif
+}
+
+// Child frame from its stored box: centre c (fp16), ratio r, world origin w, scale k
+// (frame.rs, derive_child).
+void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float r, out vec3 w, out float k) {
+    precise float h = 0.0;
+#ifdef FC_OFF
+    // pk is a power of two: its reciprocal from the exponent bits, exactly.
+    float inv_k = pow2(1 - frexp_exp(pk));
+#else
+    precise float inv_k = 1.0 / pk;
+#endif
+    float wmax = 0.0;
+    for (int a = 0; a < 3; a++) {
+        float l = float(lo[a]);
+        float u = float(hi[a]);
+#ifdef FC_OFF
+        // The same roundings as the fp16 (lo + hi) * 0.5, emulated (see the MATH_F32 case);
+        // products by powers of two are exact on any device.
+        float ch = rte16(rte16(add_rte(l, u)) * 0.5);
+        c[a] = HALF(ch);
+        float cf = ch;
+        h = max(max(h, add_rte(u, -cf)), add_rte(cf, -l));
+        float wa = add_rte(pw[a], cf * inv_k);
+        w[a] = wa;
+        wmax = max(wmax, abs(wa));
+    }
+    float m = add_rte(add_rte(h, h * (1.0 / 1048576.0)), (wmax * pk) * (1.0 / 4194304.0));
+#else
+#ifdef MATH_F32
+        // fp16's (lo + hi) * 0.5, each operation rounded to fp16: the fp32 sum of two fp16
+        // values is either exact or off by less than fp16's distance to the nearest midpoint
+        // (the smaller operand then lies below 2^-12 of the larger), so rounding it to fp16
+        // gives the fp16 sum.
+        precise float s16 = lo[a] + hi[a];
+        precise float hs = rte16(s16) * 0.5;
+        float ch = rte16(hs);
+#else
+        // fp16 arithmetic: compilers may fold an f32->f16->f32 round trip away.
+        precise float16_t ch = (lo[a] + hi[a]) * float16_t(0.5);
+#endif
+        c[a] = ch;
+        float cf = float(ch);
+        precise float du = u - cf;
+        precise float dl = cf - l;
+        h = max(max(h, du), dl);
+        precise float wa = pw[a] + cf * inv_k;
+        w[a] = wa;
+        wmax = max(wmax, abs(wa));
+    }
+    precise float m = (h + h * (1.0 / 1048576.0)) + (wmax * pk) * (1.0 / 4194304.0);
+#endif
+    int pl = frexp_exp(pk) - 1;
+    int j = clamp(14 - frexp_exp(m), K_MIN_LOG2 - pl, K_MAX_LOG2 - pl);
+    r = pow2(j);
+    precise float kk = pk * r;
+    k = kk;
+}

@@ -1,0 +1,28 @@
+// Layout f16w hooks (src/layout/f16w): every child box stored as fp16 in one global frame
+// (push constants' root = w.xyz, k), the nodes of f16h (node16.glsl); the shared anchored hooks
+// (anchored.glsl) with that one frame for every node.
+#include "half.glsl"
+#include "node16.glsl"
+
+void node_frame(uint ni, out vec3 w, out float k) {
+    w = pc.root.xyz;
+    k = pc.root.w;
+}
+void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
+    lo = slot_lo(ni, s);
+    hi = slot_hi(ni, s);
+}
+void world_box(uint ni, uint s, out vec3 lo, out vec3 hi);
+
+#include "anchored.glsl"
+
+void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
+    float ik = inv_pow2(pc.root.w);
+    vec3 l = vec3(slot_lo(ni, s));
+    vec3 u = vec3(slot_hi(ni, s));
+    for (int a = 0; a < 3; a++) {
+        // fp16 times a power of two: exact in fp32; one rounding in the sum, covered outward.
+        lo[a] = add_down(pc.root[a], l[a] * ik);
+        hi[a] = add_up(pc.root[a], u[a] * ik);
+    }
+}

@@ -1,0 +1,70 @@
+// Layout q8 hooks (src/layout/q8): compressed wide nodes after Ylitie, Karras and Laine
+// (HPG 2017): child planes quantized to 8 bits relative to the node's fp32 origin p with a
+// power-of-two step 2^e per axis, inner children and leaf triangles addressed from two base
+// indices and one 16-bit word per child. Read as 32-bit words (no 8- or 16-bit storage).
+// The shared anchored hooks (anchored.glsl): fp32 math decodes the planes to world fp32
+// (rounded outward); fp16 math tests them in the node frame (w = p, k = 2^(6 - max e)), where
+// every grid value q 2^(e_axis + 6 - max e) is exact in fp16 (the encoder keeps
+// e_axis >= max e - 30).
+#include "half.glsl"
+
+struct Node {
+    float p[3];
+    uint exps;          // e_axis + 128 in byte axis
+    uint child_base;    // index of the first inner child
+    uint tri_base;      // first triangle of the first leaf
+    uint q[3 * B / 2];  // bytes: lo[axis * B + slot], then hi[axis * B + slot]
+    uint meta[B / 2];   // 16 bits per slot: 0xffff empty, 0x8000 | rank inner, (count-1) << 8 | offset leaf
+};
+layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { Node nodes[]; };
+
+uint child_word(uint ni, uint s) {
+    uint m = (nodes[ni].meta[s >> 1u] >> ((s & 1u) * 16u)) & 0xffffu;
+    if (m == 0xffffu) return CHILD_EMPTY;
+    if ((m & 0x8000u) != 0u) return nodes[ni].child_base + (m & 0x7fffu);
+    return LEAF_BIT | ((m >> 8u) << LEAF_COUNT_SHIFT) | (nodes[ni].tri_base + (m & 0xffu));
+}
+
+uint qbyte(uint ni, uint i) { return (nodes[ni].q[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu; }
+int qexp(uint ni, int a) { return int((nodes[ni].exps >> (8u * uint(a))) & 0xffu) - 128; }
+int qexp_max(uint ni) { return max(max(qexp(ni, 0), qexp(ni, 1)), qexp(ni, 2)); }
+
+// The quantized box in grid units.
+void grid_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
+    for (int a = 0; a < 3; a++) {
+        lo[a] = float(qbyte(ni, uint(a) * uint(B) + s));
+        hi[a] = float(qbyte(ni, 3u * uint(B) + uint(a) * uint(B) + s));
+    }
+}
+
+void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) { grid_box(ni, s, lo, hi); }
+
+void node_frame(uint ni, out vec3 w, out float k) {
+    w = vec3(nodes[ni].p[0], nodes[ni].p[1], nodes[ni].p[2]);
+    k = pow2(6 - qexp_max(ni));
+}
+void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
+    vec3 l, u;
+    grid_box(ni, s, l, u);
+    int em = qexp_max(ni);
+    for (int a = 0; a < 3; a++) {
+        float f = pow2(qexp(ni, a) + 6 - em);
+        // q < 2^8 times 2^j, j >= -24: exact in fp32 and in fp16.
+        lo[a] = HALF(l[a] * f);
+        hi[a] = HALF(u[a] * f);
+    }
+}
+void world_box(uint ni, uint s, out vec3 lo, out vec3 hi);
+
+#include "anchored.glsl"
+
+void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
+    vec3 l, u;
+    grid_box(ni, s, l, u);
+    for (int a = 0; a < 3; a++) {
+        float f = pow2(qexp(ni, a));
+        // q 2^e is exact in fp32; one rounding in the sum, covered outward.
+        lo[a] = add_down(nodes[ni].p[a], l[a] * f);
+        hi[a] = add_up(nodes[ni].p[a], u[a] * f);
+    }
+}

@@ -1,0 +1,19 @@
+// The node of the layouts that store every child box as fp16 in one frame per node or per BVH
+// (f16h, f16h-seed, f16w; src/layout/f16h/mod.rs, F16hNode): lo and hi structure of arrays,
+// then the child words. Include after half.glsl (HVEC3, LOADH).
+struct Node {
+    float16_t lo[3 * B];   // lo[axis * B + slot], in the node's frame, rounded down
+    float16_t hi[3 * B];
+    uint child[B];
+};
+layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { Node nodes[]; };
+
+uint child_word(uint ni, uint s) { return nodes[ni].child[s]; }
+
+HVEC3 slot_lo(uint ni, uint s) { return HVEC3(LOADH(nodes[ni].lo[s]), LOADH(nodes[ni].lo[B + s]), LOADH(nodes[ni].lo[2 * B + s])); }
+HVEC3 slot_hi(uint ni, uint s) { return HVEC3(LOADH(nodes[ni].hi[s]), LOADH(nodes[ni].hi[B + s]), LOADH(nodes[ni].hi[2 * B + s])); }
+
+void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
+    lo = vec3(slot_lo(ni, s));
+    hi = vec3(slot_hi(ni, s));
+}

@@ -1,0 +1,181 @@
+//! Layout `f16a` (anchored): every inner node stores its own frame — an fp32 anchor `w` (the
+//! centre of its box) and a power-of-two scale `k` (its largest half extent below 16384) — and
+//! its children as fp16 in that frame, rounded outward. At each node the ray origin is moved
+//! into the node's frame from the fp32 world ray: no chain of moved origins, no re-anchoring,
+//! a stack entry of one fp32 value. The lean alternative to the seed's chained frames.
+//!
+//! Box tests in fp16 (`--math f16`, the default: origin anchored at the node's entry bound,
+//! f16h's widened fp16 slab test) or fp32 (`--math f32`: boxes decoded to world fp32, rounded
+//! outward); both argued in [`super::anchored`].
+//!
+//! Node byte layout for branching B (16 + 16·B bytes): `w` f32[3] at 0, `k` f32 at 12, `lo`
+//! f16[3][B] at 16, `hi` f16[3][B] at 16 + 6·B, `child` u32[B] at 16 + 12·B: 16 bytes per
+//! child plus 16 per node. B=2: 48 bytes, B=4: 80, B=8: 144, B=16: 272. GLSL hooks:
+//! `glsl/layout/f16a.glsl`.
+
+use super::anchored::{self, add_down, add_up, inv_pow2, Visit};
+use super::f16h::hooks::Ray16;
+use super::f16h::{root_frame, to_local, Frame, COORD_LIMIT};
+use super::{encode_child, EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY};
+use crate::bvh::WideBvh;
+use crate::scene::Scene;
+use crate::trace::{Counters, RayPre};
+use half::f16;
+
+/// The `f16a` layout.
+pub struct F16a;
+
+/// An `f16a` node (see the module docs for the byte layout).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct F16aNode<const B: usize> {
+    /// The frame's anchor (world).
+    pub w: [f32; 3],
+    /// The frame's scale, a power of two: x_local = (x − w)·k.
+    pub k: f32,
+    /// Child box minima in the node's frame, rounded down: `lo[axis][slot]`.
+    pub lo: [[f16; B]; 3],
+    /// Child box maxima, rounded up.
+    pub hi: [[f16; B]; 3],
+    pub child: [u32; B],
+}
+const _: () = {
+    assert!(std::mem::size_of::<F16aNode<2>>() == 48);
+    assert!(std::mem::size_of::<F16aNode<4>>() == 80);
+    assert!(std::mem::size_of::<F16aNode<8>>() == 144);
+    assert!(std::mem::size_of::<F16aNode<16>>() == 272);
+};
+
+impl<const B: usize> F16aNode<B> {
+    #[inline(always)]
+    fn slot(&self, s: usize) -> ([f16; 3], [f16; 3]) {
+        ([self.lo[0][s], self.lo[1][s], self.lo[2][s]], [self.hi[0][s], self.hi[1][s], self.hi[2][s]])
+    }
+
+    fn frame(&self) -> Frame {
+        Frame { w: self.w, k: self.k }
+    }
+
+    /// The stored box of slot `s` decoded to world fp32, rounded outward.
+    #[inline]
+    pub fn world_box(&self, s: usize) -> ([f32; 3], [f32; 3]) {
+        let (lo, hi) = self.slot(s);
+        let ik = inv_pow2(self.k);
+        let mut l = [0f32; 3];
+        let mut u = [0f32; 3];
+        for a in 0..3 {
+            l[a] = add_down(self.w[a], lo[a].to_f32() * ik);
+            u[a] = add_up(self.w[a], hi[a].to_f32() * ik);
+        }
+        (l, u)
+    }
+}
+
+impl<const B: usize> Node for F16aNode<B> {
+    #[inline(always)]
+    fn child(&self, s: usize) -> u32 {
+        self.child[s]
+    }
+    fn child_box(&self, s: usize) -> ([f32; 3], [f32; 3]) {
+        let (lo, hi) = self.slot(s);
+        (lo.map(f16::to_f32), hi.map(f16::to_f32))
+    }
+    fn write_bytes(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(bytemuck::cast_slice(&self.w[..]));
+        out.extend_from_slice(&self.k.to_le_bytes());
+        out.extend_from_slice(bytemuck::cast_slice(&self.lo[..]));
+        out.extend_from_slice(bytemuck::cast_slice(&self.hi[..]));
+        out.extend_from_slice(bytemuck::cast_slice(&self.child[..]));
+    }
+}
+
+impl Layout for F16a {
+    const NAME: &'static str = "f16a";
+    const SUMMARY: &'static str = "fp16 child boxes in a per-node fp32 anchored frame, origin re-derived per node";
+    const MATHS: &'static [Math] = &[Math::F16, Math::F32];
+    const GLSL: &'static str = include_str!("../../../glsl/layout/f16a.glsl");
+
+    fn needs(math: Math) -> Needs {
+        Needs { storage16: true, float16: math == Math::F16 }
+    }
+
+    type Node<const B: usize> = F16aNode<B>;
+    type Root = ();
+    type Ray = Ray16;
+    /// The node's entry bound (world parameter).
+    type Entry = f32;
+    type Visit = Visit;
+    /// (entry parameter, its lower bound).
+    type ChildHit = (f32, f32);
+
+    fn encode<const B: usize>(_scene: &Scene, w: &WideBvh) -> Result<(Vec<F16aNode<B>>, ()), EncodeError> {
+        let mut out = Vec::with_capacity(w.nodes.len());
+        for (i, n) in w.nodes.iter().enumerate() {
+            let mut bounds = crate::geom::Aabb::EMPTY;
+            for (b, _) in &n.children {
+                bounds.grow(b.min);
+                bounds.grow(b.max);
+            }
+            let f = root_frame(&bounds);
+            let mut node = F16aNode { w: f.w, k: f.k, lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
+            for (slot, (b, c)) in n.children.iter().enumerate() {
+                let (lo, hi, _) = to_local(&f, b);
+                for v in lo.iter().chain(&hi) {
+                    if !(v.to_f32().abs() <= COORD_LIMIT) {
+                        return Err(EncodeError::OutOfRange { layout: Self::NAME, node: i, child: slot, value: v.to_f64() });
+                    }
+                }
+                for a in 0..3 {
+                    node.lo[a][slot] = lo[a];
+                    node.hi[a][slot] = hi[a];
+                }
+                node.child[slot] = encode_child(c);
+            }
+            out.push(node);
+        }
+        Ok((out, ()))
+    }
+
+    fn push_root(_: &()) -> [f32; 4] {
+        [0.0; 4]
+    }
+
+    fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
+        anchored::STACK_ENTRY
+    }
+
+    fn glsl_constants() -> String {
+        <super::f16h::F16h as Layout>::glsl_constants()
+    }
+
+    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
+        Ray16::new(r, math, fc)
+    }
+
+    fn root_entry(_: &(), _: &RayPre, _: &Ray16, near: f32) -> f32 {
+        near
+    }
+
+    fn entry_t(t: &f32) -> f32 {
+        *t
+    }
+
+    fn visit<const B: usize>(n: &F16aNode<B>, _: &(), t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> Visit {
+        anchored::visit(&n.frame(), *t, r, lr, best_t)
+    }
+
+    #[inline]
+    fn test_child<const B: usize>(n: &F16aNode<B>, s: usize, _: &f32, v: &Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
+        if lr.math == Math::F32 {
+            let (lo, hi) = n.world_box(s);
+            anchored::test_world(lo, hi, v, r)
+        } else {
+            let (lo, hi) = n.slot(s);
+            anchored::test_local(lo, hi, v, lr)
+        }
+    }
+
+    fn child_entry<const B: usize>(_: &F16aNode<B>, _: usize, _: &f32, v: &Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
+        anchored::child_entry(v, *h, lr)
+    }
+}

@@ -1,0 +1,128 @@
+//! Layout `f16w`: every child box stored as fp16 in one global frame (Koskela et al., CGI 2015,
+//! *Using Half-Precision Floating-Point Numbers for Storing Bounding Volume Hierarchies*): the
+//! scene is translated to its box centre and scaled by one power of two so its largest half
+//! extent lies below 16384, and every box is rounded outward to fp16 there. No hierarchy of
+//! frames: it shows what fp16 storage costs where small geometry lies far from the scene
+//! centre (the fp16 grid is uniform over the whole scene).
+//!
+//! Box tests in fp32 (`--math f32`, the paper's: boxes decoded to world fp32, rounded outward)
+//! or fp16 (`--math f16`: the origin anchored in the global frame at each node's entry bound,
+//! f16h's widened fp16 slab test); both argued in [`super::anchored`].
+//!
+//! Node byte layout for branching B (16·B bytes, the nodes of `f16h`): `lo` f16[3][B] at 0,
+//! `hi` f16[3][B] at 6·B, `child` u32[B] at 12·B; 12 bytes of box + 4 of child word per
+//! child. The global frame (w.xyz, k) travels in the push constants' `root`. GLSL hooks:
+//! `glsl/layout/f16w.glsl`.
+
+use super::anchored::{self, add_down, add_up, inv_pow2, Visit};
+use super::f16h::hooks::{slot_box, Ray16};
+use super::f16h::{root_frame, to_local, F16hNode, Frame, COORD_LIMIT};
+use super::{encode_child, EncodeError, Layout, Math, Needs, CHILD_EMPTY};
+use crate::bvh::WideBvh;
+use crate::scene::Scene;
+use crate::trace::{Counters, RayPre};
+use half::f16;
+
+/// The `f16w` layout.
+pub struct F16w;
+
+/// The stored box of slot `s` decoded to world fp32, rounded outward.
+#[inline]
+pub fn world_box<const B: usize>(n: &F16hNode<B>, s: usize, f: &Frame) -> ([f32; 3], [f32; 3]) {
+    let (lo, hi) = slot_box(n, s);
+    let ik = inv_pow2(f.k);
+    let mut l = [0f32; 3];
+    let mut u = [0f32; 3];
+    for a in 0..3 {
+        // fp16 times a power of two is exact in fp32; the sum rounds once (anchored::add_down).
+        l[a] = add_down(f.w[a], lo[a].to_f32() * ik);
+        u[a] = add_up(f.w[a], hi[a].to_f32() * ik);
+    }
+    (l, u)
+}
+
+impl Layout for F16w {
+    const NAME: &'static str = "f16w";
+    const SUMMARY: &'static str = "fp16 child boxes in one global frame (Koskela et al. 2015)";
+    const MATHS: &'static [Math] = &[Math::F32, Math::F16];
+    const GLSL: &'static str = include_str!("../../../glsl/layout/f16w.glsl");
+
+    fn needs(math: Math) -> Needs {
+        Needs { storage16: true, float16: math == Math::F16 }
+    }
+
+    type Node<const B: usize> = F16hNode<B>;
+    type Root = Frame;
+    type Ray = Ray16;
+    /// The node's entry bound (world parameter).
+    type Entry = f32;
+    type Visit = Visit;
+    /// (entry parameter, its lower bound).
+    type ChildHit = (f32, f32);
+
+    fn encode<const B: usize>(_scene: &Scene, w: &WideBvh) -> Result<(Vec<F16hNode<B>>, Frame), EncodeError> {
+        let frame = root_frame(&w.nodes[0].bounds);
+        let mut out = Vec::with_capacity(w.nodes.len());
+        for (i, n) in w.nodes.iter().enumerate() {
+            let mut node = F16hNode { lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
+            for (slot, (b, c)) in n.children.iter().enumerate() {
+                let (lo, hi, _) = to_local(&frame, b);
+                for v in lo.iter().chain(&hi) {
+                    if !(v.to_f32().abs() <= COORD_LIMIT) {
+                        return Err(EncodeError::OutOfRange { layout: Self::NAME, node: i, child: slot, value: v.to_f64() });
+                    }
+                }
+                for a in 0..3 {
+                    node.lo[a][slot] = lo[a];
+                    node.hi[a][slot] = hi[a];
+                }
+                node.child[slot] = encode_child(c);
+            }
+            out.push(node);
+        }
+        Ok((out, frame))
+    }
+
+    fn push_root(root: &Frame) -> [f32; 4] {
+        [root.w[0], root.w[1], root.w[2], root.k]
+    }
+
+    fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
+        anchored::STACK_ENTRY
+    }
+
+    fn glsl_constants() -> String {
+        <super::f16h::F16h as Layout>::glsl_constants()
+    }
+
+    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
+        Ray16::new(r, math, fc)
+    }
+
+    fn root_entry(_: &Frame, _: &RayPre, _: &Ray16, near: f32) -> f32 {
+        near
+    }
+
+    fn entry_t(t: &f32) -> f32 {
+        *t
+    }
+
+    fn visit<const B: usize>(_: &F16hNode<B>, root: &Frame, t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> Visit {
+        anchored::visit(root, *t, r, lr, best_t)
+    }
+
+    #[inline]
+    fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, _: &f32, v: &Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
+        if lr.math == Math::F32 {
+            let (lo, hi) = world_box(n, s, &v.frame);
+            anchored::test_world(lo, hi, v, r)
+        } else {
+            let (lo, hi) = slot_box(n, s);
+            anchored::test_local(lo, hi, v, lr)
+        }
+    }
+
+    fn child_entry<const B: usize>(_: &F16hNode<B>, _: usize, _: &f32, v: &Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
+        anchored::child_entry(v, *h, lr)
+    }
+}
