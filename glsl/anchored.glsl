@@ -3,8 +3,9 @@
 // src/layout/anchored.rs has the argument). Include after half.glsl, and after the layout's
 //   void node_frame(uint ni, out vec3 w, out float k)              frame x_local = (x - w) * k
 //   void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi)    fp16 box in that frame
-//   void world_box(uint ni, uint s, out vec3 lo, out vec3 hi)      fp32 world box, outward
-// MATH_F32: the stored box decoded to world fp32, rounded outward, robust fp32 slab test.
+//   void world_box(uint ni, uint s, out vec3 lo, out vec3 hi)      fp32 world box (decode_plane)
+// MATH_F32: the stored box decoded to world fp32 (still containing the true box), then the
+// robust fp32 slab test.
 // Otherwise: the origin anchored in the node frame at the node's entry bound (fp32, rounded to
 // fp16, with its error bound), then the widened fp16 slab test of f16h.
 // Stack Entry (generated): t = a lower bound of the world parameter of anything that can still
@@ -13,20 +14,12 @@
 // 1/k for a power of two k, exactly, from the exponent bits.
 float inv_pow2(float k) { return uintBitsToFloat((254u - (floatBitsToUint(k) >> 23)) << 23); }
 
-// Bounds of w + x: the fp32 sum (one rounding, at most |s| 2^-24 off) moved outward by
-// |s| 2^-22 + FLT_MIN, more than that rounding and the rounding of the move itself
-// (anchored.rs, add_down / add_up).
-float add_down(float w, float x) {
+// A stored plane decoded to world fp32: w + x with x exact (fp16 or 8-bit times a power of
+// two), one rounding; monotone rounding keeps it outward of the true (fp32) plane
+// (anchored.rs, decode_plane). precise: no fused multiply-add.
+float decode_plane(float w, float x) {
     precise float s = w + x;
-    precise float d = abs(s) * TWO_M22 + FLT_MIN_NORMAL;
-    precise float r = s - d;
-    return r;
-}
-float add_up(float w, float x) {
-    precise float s = w + x;
-    precise float d = abs(s) * TWO_M22 + FLT_MIN_NORMAL;
-    precise float r = s + d;
-    return r;
+    return s;
 }
 
 Entry root_entry(RayPre r, float near_t) { return Entry(near_t); }

@@ -61,3 +61,25 @@ fn every_node_of_every_scene_satisfies_the_f16h_invariants() {
     assert!(total > 1_000_000, "only {total} child boxes checked");
     eprintln!("{total} child boxes checked");
 }
+
+/// q8 keeps 8 bytes per child plus 24 per node: at B = 8 its node array is at most 0.4 of
+/// f32's on every shared scene (CWBVH: 80 bytes per 8-wide node), and every layout encodes
+/// every shared scene at every B.
+#[test]
+fn q8_nodes_take_at_most_four_tenths_of_f32_at_b8() {
+    use halftrace::layout::LayoutId;
+    for path in all_scenes() {
+        let p = prepare(&path);
+        for b in halftrace::bvh::BRANCHINGS {
+            let f = encode(&p, LayoutId::f32(), b);
+            for l in LayoutId::layouts() {
+                let e = encode(&p, l, b);
+                assert_eq!(e.node_count(), f.node_count(), "{} {l} B={b}: the same tree", p.scene.name);
+                if l.name() == "q8" && b == 8 {
+                    let r = e.node_bytes() as f64 / f.node_bytes() as f64;
+                    assert!(r <= 0.4, "{}: q8 ÷ f32 node bytes {r:.3}", p.scene.name);
+                }
+            }
+        }
+    }
+}

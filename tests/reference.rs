@@ -96,7 +96,7 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
     let mut runner = TestRunner::new(Config { cases: 48, ..Config::default() });
     let cluster = (prop::array::uniform3(-1.0f32..1.0), prop_oneof![Just(1e-3f32), Just(1.0f32), Just(1e3f32), Just(1e6f32)], prop_oneof![Just(1e-4f32), Just(1e-2f32), Just(1.0f32)], 1usize..40);
     let strat = (prop::collection::vec(cluster, 1..5), any::<u64>());
-    let mut rays_total = 0usize;
+    let rays_total = std::sync::atomic::AtomicUsize::new(0);
     runner
         .run(&strat, |(clusters, seed)| {
             let mut rng = halftrace::rays::Rng::new(seed);
@@ -141,7 +141,7 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
                 }
             }
             rays.retain(|r| r.d().length() > 0.0 && r.d().is_finite());
-            rays_total += rays.len();
+            rays_total.fetch_add(rays.len(), std::sync::atomic::Ordering::Relaxed);
             for b in [2, 4, 8, 16] {
                 let f = encode(&p, LayoutId::f32(), b);
                 let (hf, _) = f.trace_default(&rays);
@@ -157,5 +157,6 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
             Ok(())
         })
         .unwrap();
-    assert!(rays_total > 1000, "only {rays_total} rays: the test would be weak");
+    let n = rays_total.into_inner();
+    assert!(n > 1000, "only {n} rays: the test would be weak");
 }

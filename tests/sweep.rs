@@ -228,3 +228,39 @@ fn user_kernels_run_as_their_own_rows() {
     let r = rows.iter().find(|r| r.kernel == "wrong-layout").unwrap();
     assert!(r.status.starts_with("FAILED") && r.status.contains("differ from the CPU reference"), "{}", r.status);
 }
+
+/// The schemes comparison: every layout and math mode at one B beside f32, one table row and
+/// one plot line each; the conservative ones agree with f32 on every ray, and q8's nodes take
+/// at most 0.4 of f32's bytes at B = 8.
+#[test]
+fn schemes_table_sets_every_layout_beside_f32() {
+    let out = tmp("schemes");
+    let o = sweep(&out, &["--rays", "primary,grazing", "--layouts", "f32,f16h,f16w,f16a,q8,f16h-seed", "--maths", "f16,f32", "--series", "f32", "--branchings", "8", "--packets", "1", "--packet-branching", "8", "--scheme-branchings", "8"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = read_rows(&out).unwrap();
+    // f32, f16h ×2, f16w ×2, f16a ×2, q8 ×2, f16h-seed: 10 variants × 2 ray kinds
+    assert_eq!(rows.len(), 20, "{:?}", rows.iter().map(|r| &r.kernel).collect::<Vec<_>>());
+    let f32_bytes = rows.iter().find(|r| r.layout == "f32").unwrap().bvh_bytes as f64;
+    for r in &rows {
+        assert_eq!(r.status, "ok", "{}: {}", r.kernel, r.status);
+        assert_eq!(r.branching, 8);
+        if r.layout != "f16h-seed" {
+            assert_eq!((r.differs_from_f32, r.false_misses), (0, 0), "{} {}: a conservative layout differs from f32", r.kernel, r.rays);
+        }
+        if r.layout == "q8" {
+            assert!(r.bvh_bytes as f64 <= 0.4 * f32_bytes, "q8 {} bytes vs f32 {f32_bytes}", r.bvh_bytes);
+        }
+    }
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let table = &md[md.find("## Schemes").expect("schemes table")..];
+    let table = &table[..table.find("\n\n![schemes]").unwrap()];
+    for label in ["| f32 | 8 |", "| f16h/f16 | 8 |", "| f16h/f32 | 8 |", "| f16w/f32 | 8 |", "| f16w/f16 | 8 |", "| f16a/f16 | 8 |", "| f16a/f32 | 8 |", "| q8/f32 | 8 |", "| q8/f16 | 8 |", "| f16h-seed | 8 |"] {
+        assert!(table.contains(label), "no schemes row {label}:\n{table}");
+    }
+    // f32 against itself is 1 in every ratio.
+    let f32_line = table.lines().find(|l| l.contains("| f32 | 8 |")).unwrap();
+    assert!(f32_line.contains("| 1.000 | 1.000 |"), "{f32_line}");
+    for f in ["schemes.png", "schemes.svg"] {
+        assert!(std::fs::metadata(out.join(f)).map(|m| m.len() > 0).unwrap_or(false), "{f} missing");
+    }
+}

@@ -40,7 +40,7 @@ void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     vec3 u = vec3(slot_hi(ni, s));
     for (int a = 0; a < 3; a++) {
         float w = nodes[ni].w[a];
-        lo[a] = add_down(w, l[a] * ik);
-        hi[a] = add_up(w, u[a] * ik);
+        lo[a] = decode_plane(w, l[a] * ik);
+        hi[a] = decode_plane(w, u[a] * ik);
     }
 }

@@ -21,8 +21,8 @@ void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     vec3 l = vec3(slot_lo(ni, s));
     vec3 u = vec3(slot_hi(ni, s));
     for (int a = 0; a < 3; a++) {
-        // fp16 times a power of two: exact in fp32; one rounding in the sum, covered outward.
-        lo[a] = add_down(pc.root[a], l[a] * ik);
-        hi[a] = add_up(pc.root[a], u[a] * ik);
+        // fp16 times a power of two: exact in fp32; one rounding in the sum (decode_plane).
+        lo[a] = decode_plane(pc.root[a], l[a] * ik);
+        hi[a] = decode_plane(pc.root[a], u[a] * ik);
     }
 }

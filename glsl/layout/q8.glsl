@@ -3,7 +3,7 @@
 // power-of-two step 2^e per axis, inner children and leaf triangles addressed from two base
 // indices and one 16-bit word per child. Read as 32-bit words (no 8- or 16-bit storage).
 // The shared anchored hooks (anchored.glsl): fp32 math decodes the planes to world fp32
-// (rounded outward); fp16 math tests them in the node frame (w = p, k = 2^(6 - max e)), where
+// ; fp16 math tests them in the node frame (w = p, k = 2^(6 - max e)), where
 // every grid value q 2^(e_axis + 6 - max e) is exact in fp16 (the encoder keeps
 // e_axis >= max e - 30).
 #include "half.glsl"
@@ -63,8 +63,8 @@ void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     grid_box(ni, s, l, u);
     for (int a = 0; a < 3; a++) {
         float f = pow2(qexp(ni, a));
-        // q 2^e is exact in fp32; one rounding in the sum, covered outward.
-        lo[a] = add_down(nodes[ni].p[a], l[a] * f);
-        hi[a] = add_up(nodes[ni].p[a], u[a] * f);
+        // q 2^e is exact in fp32; one rounding in the sum (decode_plane).
+        lo[a] = decode_plane(nodes[ni].p[a], l[a] * f);
+        hi[a] = decode_plane(nodes[ni].p[a], u[a] * f);
     }
 }

@@ -2,14 +2,13 @@
 //! against the ray origin re-derived from the fp32 world ray at every node — `f16w`, `f16a`,
 //! `q8` — with `glsl/anchored.glsl` doing the same operations in the same order. A layout
 //! supplies its node frame, the child's box in that frame as fp16 (exact or rounded outward),
-//! and the child's box decoded to world fp32 (rounded outward, [`add_down`] / [`add_up`]).
+//! and the child's box decoded to world fp32 ([`decode_plane`]).
 //!
 //! # fp32 math (`Math::F32`)
-//! The stored box is decoded to world fp32 and rounded outward; the robust fp32 slab test of
-//! the `f32` layout follows. The decoded box contains the stored box (see [`add_down`]), which
-//! contains the true box, and the slab test is conservative (`trace::slab32`), so no ray that
-//! reaches the true box within its interval is rejected. Stack entries carry the child's
-//! entry distance, as in `f32`.
+//! The stored box is decoded to world fp32 (one rounding, monotone: [`decode_plane`]), which
+//! still contains the true box; the robust fp32 slab test of the `f32` layout follows
+//! (`trace::slab32`), so no ray that reaches the true box within its interval is rejected.
+//! Stack entries carry the child's entry distance, as in `f32`.
 //!
 //! # fp16 math (`Math::F16`)
 //! At each visited node the origin is placed at the node's entry bound `t` (the stack entry)
@@ -52,23 +51,15 @@ pub fn inv_pow2(k: f32) -> f32 {
     f32::from_bits((254 - (k.to_bits() >> 23)) << 23)
 }
 
-const TWO_M22: f32 = 1.0 / 4_194_304.0;
-
-/// A lower bound of the real w + x. The fp32 sum s is at most |s|·2⁻²⁴ off (exact when
-/// subnormal); subtracting d = fl(|s|·2⁻²² + 2⁻¹²⁶) ≥ |s|·2⁻²²·(1 − 2⁻²⁴) and rounding once more
-/// (at most (|s| + d)·2⁻²⁴) still lands below w + x, since d·(1 − 2⁻²⁴) > 2·|s|·2⁻²⁴; the 2⁻¹²⁶
-/// keeps a zero sum strict.
+/// A stored plane decoded to world fp32: `w + x`, where `x` (a stored fp16 or 8-bit value times
+/// a power of two) is exact in fp32, so the sum is the only rounding. It needs no widening:
+/// rounding to nearest is monotone, and the true plane is an fp32 value (a triangle vertex
+/// coordinate) on the inner side of the exact stored plane, so the rounded plane stays on the
+/// outer side of it — a lower plane v ≤ w + x gives v = fl(v) ≤ fl(w + x), and likewise above.
+/// (The kernels compute it with `precise`, so no fused multiply-add changes the rounding.)
 #[inline]
-pub fn add_down(w: f32, x: f32) -> f32 {
-    let s = w + x;
-    s - (s.abs() * TWO_M22 + f32::MIN_POSITIVE)
-}
-
-/// An upper bound of the real w + x (see [`add_down`]).
-#[inline]
-pub fn add_up(w: f32, x: f32) -> f32 {
-    let s = w + x;
-    s + (s.abs() * TWO_M22 + f32::MIN_POSITIVE)
+pub fn decode_plane(w: f32, x: f32) -> f32 {
+    w + x
 }
 
 /// The visit of a node with frame `frame` by a ray whose entry bound there is `t`.
@@ -112,28 +103,35 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// Operands as the decoders produce them: an fp32 anchor and an fp16 (or 8-bit) value times
-    /// a power of two, including values that cancel, tiny and huge ones.
-    fn operand() -> impl Strategy<Value = (f32, f32)> {
+    /// A true plane v (an fp32 value), a stored value x outward of it on the decoder's grid
+    /// (fp16 or 8-bit times a power of two, as the encoders round), and the anchor w: the
+    /// decoded plane is never on the inner side of v — including sums that cancel, tiny and
+    /// huge values. (A decode whose product is off by 2⁻²⁰ fails it.)
+    fn case() -> impl Strategy<Value = (f32, f32, f32, bool)> {
         let w = prop_oneof![any::<f32>().prop_filter("finite", |x| x.is_finite() && x.abs() < 1e30), -1e4f32..1e4, -1.0f32..1.0];
-        let frac = prop_oneof![-16384.0f32..16384.0, 0.0f32..256.0, Just(0.0f32)];
-        (w, frac, -60i32..60).prop_map(|(w, f, e)| {
-            let x = f16::from_f32(f).to_f32() * 2f32.powi(e);
-            // sometimes make the sum cancel almost exactly
-            if e == 0 { (w, -w + x * 1e-3) } else { (w, x) }
+        (w, -16384.0f64..16384.0, -60i32..60, any::<bool>(), prop_oneof![Just(0.0f64), 0.0f64..1.0]).prop_map(|(w, local, e, lower, frac)| {
+            let k = 2f64.powi(e);
+            // the true plane: an fp32 value near w + local / k
+            let v = (w as f64 + local / k) as f32;
+            // the stored value: the true plane mapped to local units, rounded outward to fp16
+            let l = (v as f64 - w as f64) * k;
+            let l16 = if lower { crate::fp16::down_f64(l) } else { crate::fp16::up_f64(l) };
+            let _ = frac;
+            (w, v, l16.to_f32() * (1.0 / k as f32), lower)
         })
     }
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200_000))]
-        /// The outward decode holds for every operand pair (exactly, in f64); a plain fp32 sum
-        /// (or a move of |s|·2⁻²⁴ only) fails it.
         #[test]
-        fn outward_decode_contains_the_exact_sum((w, x) in operand()) {
-            let exact = w as f64 + x as f64;
-            prop_assume!(exact.abs() < 3e38);
-            prop_assert!((add_down(w, x) as f64) <= exact, "add_down({w:e}, {x:e}) = {:e} > {exact:e}", add_down(w, x));
-            prop_assert!((add_up(w, x) as f64) >= exact, "add_up({w:e}, {x:e}) = {:e} < {exact:e}", add_up(w, x));
+        fn decoded_planes_stay_outward_of_the_true_planes((w, v, x, lower) in case()) {
+            prop_assume!(x.is_finite() && (w as f64 + x as f64).abs() < 3e38);
+            let d = decode_plane(w, x);
+            if lower {
+                prop_assert!(d <= v, "lower plane {v:e} decoded as {d:e} (w {w:e}, x {x:e})");
+            } else {
+                prop_assert!(d >= v, "upper plane {v:e} decoded as {d:e} (w {w:e}, x {x:e})");
+            }
         }
     }
 

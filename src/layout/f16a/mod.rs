@@ -5,15 +5,15 @@
 //! a stack entry of one fp32 value. The lean alternative to the seed's chained frames.
 //!
 //! Box tests in fp16 (`--math f16`, the default: origin anchored at the node's entry bound,
-//! f16h's widened fp16 slab test) or fp32 (`--math f32`: boxes decoded to world fp32, rounded
-//! outward); both argued in [`super::anchored`].
+//! f16h's widened fp16 slab test) or fp32 (`--math f32`: boxes decoded to world fp32); both
+//! argued in [`super::anchored`].
 //!
 //! Node byte layout for branching B (16 + 16·B bytes): `w` f32[3] at 0, `k` f32 at 12, `lo`
 //! f16[3][B] at 16, `hi` f16[3][B] at 16 + 6·B, `child` u32[B] at 16 + 12·B: 16 bytes per
 //! child plus 16 per node. B=2: 48 bytes, B=4: 80, B=8: 144, B=16: 272. GLSL hooks:
 //! `glsl/layout/f16a.glsl`.
 
-use super::anchored::{self, add_down, add_up, inv_pow2, Visit};
+use super::anchored::{self, decode_plane, inv_pow2, Visit};
 use super::f16h::hooks::Ray16;
 use super::f16h::{root_frame, to_local, Frame, COORD_LIMIT};
 use super::{encode_child, EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY};
@@ -56,7 +56,7 @@ impl<const B: usize> F16aNode<B> {
         Frame { w: self.w, k: self.k }
     }
 
-    /// The stored box of slot `s` decoded to world fp32, rounded outward.
+    /// The stored box of slot `s` decoded to world fp32 (still containing the true box).
     #[inline]
     pub fn world_box(&self, s: usize) -> ([f32; 3], [f32; 3]) {
         let (lo, hi) = self.slot(s);
@@ -64,8 +64,8 @@ impl<const B: usize> F16aNode<B> {
         let mut l = [0f32; 3];
         let mut u = [0f32; 3];
         for a in 0..3 {
-            l[a] = add_down(self.w[a], lo[a].to_f32() * ik);
-            u[a] = add_up(self.w[a], hi[a].to_f32() * ik);
+            l[a] = decode_plane(self.w[a], lo[a].to_f32() * ik);
+            u[a] = decode_plane(self.w[a], hi[a].to_f32() * ik);
         }
         (l, u)
     }

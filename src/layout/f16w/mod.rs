@@ -5,7 +5,7 @@
 //! frames: it shows what fp16 storage costs where small geometry lies far from the scene
 //! centre (the fp16 grid is uniform over the whole scene).
 //!
-//! Box tests in fp32 (`--math f32`, the paper's: boxes decoded to world fp32, rounded outward)
+//! Box tests in fp32 (`--math f32`, the paper's: boxes decoded to world fp32)
 //! or fp16 (`--math f16`: the origin anchored in the global frame at each node's entry bound,
 //! f16h's widened fp16 slab test); both argued in [`super::anchored`].
 //!
@@ -14,7 +14,7 @@
 //! child. The global frame (w.xyz, k) travels in the push constants' `root`. GLSL hooks:
 //! `glsl/layout/f16w.glsl`.
 
-use super::anchored::{self, add_down, add_up, inv_pow2, Visit};
+use super::anchored::{self, decode_plane, inv_pow2, Visit};
 use super::f16h::hooks::{slot_box, Ray16};
 use super::f16h::{root_frame, to_local, F16hNode, Frame, COORD_LIMIT};
 use super::{encode_child, EncodeError, Layout, Math, Needs, CHILD_EMPTY};
@@ -26,7 +26,7 @@ use half::f16;
 /// The `f16w` layout.
 pub struct F16w;
 
-/// The stored box of slot `s` decoded to world fp32, rounded outward.
+/// The stored box of slot `s` decoded to world fp32 (still containing the true box).
 #[inline]
 pub fn world_box<const B: usize>(n: &F16hNode<B>, s: usize, f: &Frame) -> ([f32; 3], [f32; 3]) {
     let (lo, hi) = slot_box(n, s);
@@ -34,9 +34,9 @@ pub fn world_box<const B: usize>(n: &F16hNode<B>, s: usize, f: &Frame) -> ([f32;
     let mut l = [0f32; 3];
     let mut u = [0f32; 3];
     for a in 0..3 {
-        // fp16 times a power of two is exact in fp32; the sum rounds once (anchored::add_down).
-        l[a] = add_down(f.w[a], lo[a].to_f32() * ik);
-        u[a] = add_up(f.w[a], hi[a].to_f32() * ik);
+        // fp16 times a power of two is exact in fp32; the sum rounds once (anchored::decode_plane).
+        l[a] = decode_plane(f.w[a], lo[a].to_f32() * ik);
+        u[a] = decode_plane(f.w[a], hi[a].to_f32() * ik);
     }
     (l, u)
 }

@@ -9,8 +9,8 @@
 //! first and the triangles leaf by leaf; a 16-bit word per child says empty, inner (its rank
 //! among the inner children) or leaf (triangle count − 1 and offset from the base).
 //!
-//! Box tests in fp32 (`--math f32`, the paper's: planes decoded to world fp32, p + q·2^e,
-//! rounded outward) or fp16 (`--math f16`: the node frame w = p, k = 2^(6 − max e), in which
+//! Box tests in fp32 (`--math f32`, the paper's: planes decoded to world fp32, p + q·2^e with
+//! one rounding) or fp16 (`--math f16`: the node frame w = p, k = 2^(6 − max e), in which
 //! every grid value is q·2^(e_axis + 6 − max e) ≤ 16320, exact in fp16 because the encoder keeps
 //! e_axis ≥ max e − 30; then the anchored origin and f16h's widened fp16 test); both argued in
 //! [`super::anchored`]. Steps are kept in 2^[−54, 66] so that every scale and product stays a
@@ -22,7 +22,7 @@
 //! B=2: 40 bytes, B=4: 56, B=8: 88 (CWBVH: 80), B=16: 152. The kernels read it as 32-bit words,
 //! so it needs no 8- or 16-bit storage. GLSL hooks: `glsl/layout/q8.glsl`.
 
-use super::anchored::{self, add_down, add_up, Visit};
+use super::anchored::{self, decode_plane, Visit};
 use super::f16h::hooks::Ray16;
 use super::f16h::Frame;
 use super::{EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY, LEAF_BIT, LEAF_FIRST_BITS};
@@ -100,7 +100,7 @@ impl<const B: usize> Q8Node<B> {
         ([0, 1, 2].map(|a| f16::from_f32(l[a] * f[a])), [0, 1, 2].map(|a| f16::from_f32(u[a] * f[a])))
     }
 
-    /// The box of slot `s` decoded to world fp32, rounded outward.
+    /// The box of slot `s` decoded to world fp32 (still containing the true box).
     #[inline]
     pub fn world_box(&self, s: usize) -> ([f32; 3], [f32; 3]) {
         let (l, u) = self.grid(s);
@@ -108,8 +108,8 @@ impl<const B: usize> Q8Node<B> {
         let mut hi = [0f32; 3];
         for a in 0..3 {
             let f = pow2(self.exp(a));
-            lo[a] = add_down(self.p[a], l[a] * f);
-            hi[a] = add_up(self.p[a], u[a] * f);
+            lo[a] = decode_plane(self.p[a], l[a] * f);
+            hi[a] = decode_plane(self.p[a], u[a] * f);
         }
         (lo, hi)
     }
