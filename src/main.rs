@@ -468,7 +468,7 @@ fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Resu
     for l in LayoutId::all() {
         let c = l.caps();
         let maths = if c.maths.is_empty() { "n/a".to_string() } else { c.maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ") };
-        outln!("  {:<6} {} ({}; math: {maths})", l.name(), l.summary(), if l.baseline().is_some() { "baseline" } else { "layout" });
+        outln!("  {:<9} {} ({}; math: {maths})", l.name(), l.summary(), if l.baseline().is_some() { "baseline" } else { "layout" });
     }
     if bench {
         let g = gpu::Gpu::new(&gpu::ContextOptions { device, ..Default::default() })?;
@@ -494,7 +494,7 @@ fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
                 Ok(r) => format!("runs, float controls {}", r.fc.name()),
                 Err(why) => format!("skipped: {why}"),
             };
-            out.push(format!("{:<5} math {:<6} {what}", l.name(), m.name()));
+            out.push(format!("{:<9} math {:<6} {what}", l.name(), m.name()));
         }
     }
     let packets: Vec<String> = halftrace::variant::PACKETS
@@ -508,7 +508,7 @@ fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
         .collect();
     out.push(format!("packets: {}", packets.join(", ")));
     for (l, b) in LayoutId::all().filter_map(|l| Some((l, l.baseline()?))) {
-        out.push(format!("{:<5} {}", l.name(), b.unavailable(d).map(|why| format!("skipped: {why}")).unwrap_or_else(|| "runs".into())));
+        out.push(format!("{:<9} {}", l.name(), b.unavailable(d).map(|why| format!("skipped: {why}")).unwrap_or_else(|| "runs".into())));
     }
     out
 }
