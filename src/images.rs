@@ -4,12 +4,11 @@
 use crate::rays::{self, Ray};
 use crate::scene::Scene;
 use crate::trace::Hit;
-use anyhow::Context;
 use std::path::Path;
 
 /// Writes a shaded PNG of primary hits: grey by |cos| between ray and geometric normal.
 pub fn render(path: &Path, scene: &Scene, rays: &[Ray], hits: &[Hit], width: u32, height: u32) -> anyhow::Result<()> {
-    anyhow::ensure!(rays.len() == (width * height) as usize, "--image needs primary rays ({}x{} = {} rays, got {})", width, height, width * height, rays.len());
+    anyhow::ensure!(rays.len() as u64 == width as u64 * height as u64, "--image needs primary rays ({}x{} = {} rays, got {})", width, height, width as u64 * height as u64, rays.len());
     let mut img = image::RgbImage::new(width, height);
     for (&(x, y), (r, h)) in rays::pixel_order(width, height).iter().zip(rays.iter().zip(hits)) {
         let px = if h.is_hit() {
@@ -22,7 +21,7 @@ pub fn render(path: &Path, scene: &Scene, rays: &[Ray], hits: &[Hit], width: u32
         };
         img.put_pixel(x, y, image::Rgb(px));
     }
-    img.save(path).with_context(|| format!("writing {}", path.display()))
+    crate::fsx::with_temp(path, |t| img.save(t).map_err(anyhow::Error::from))
 }
 
 /// Writes a heat map of a per-pixel value (pixel order of primary rays) with a fixed scale.
@@ -40,7 +39,7 @@ pub fn heat_map(path: &Path, w: u32, h: u32, values: &[f64], max: f64) -> anyhow
         };
         img.put_pixel(x, y, image::Rgb(c.map(|v| (v * 255.0) as u8)));
     }
-    img.save(path).with_context(|| format!("writing {}", path.display()))
+    crate::fsx::with_temp(path, |t| img.save(t).map_err(anyhow::Error::from))
 }
 
 /// Writes a mask image: white where `mask` is set, black elsewhere.
@@ -49,5 +48,5 @@ pub fn mask_image(path: &Path, w: u32, h: u32, mask: &[bool]) -> anyhow::Result<
     for (&(x, y), &m) in rays::pixel_order(w, h).iter().zip(mask) {
         img.put_pixel(x, y, image::Rgb(if m { [255; 3] } else { [0; 3] }));
     }
-    img.save(path).with_context(|| format!("writing {}", path.display()))
+    crate::fsx::with_temp(path, |t| img.save(t).map_err(anyhow::Error::from))
 }

@@ -10,6 +10,7 @@
 pub mod bvh;
 pub mod conformance;
 pub mod fp16;
+pub mod fsx;
 pub mod geom;
 pub mod gpu;
 pub mod images;

@@ -113,9 +113,16 @@ struct SweepArgs {
     seed: Option<u64>,
     #[arg(long)]
     device: Option<String>,
-    /// Output folder (default reports/<UTC timestamp>/).
+    /// Output folder (default reports/<UTC timestamp>/). A folder that already holds files is
+    /// refused unless --resume or --force.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Continue the sweep in --out: keep its rows, run only the jobs they do not record.
+    #[arg(long)]
+    resume: bool,
+    /// Replace the sweep's files in --out (other files there are left alone).
+    #[arg(long)]
+    force: bool,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -283,6 +290,21 @@ fn open_gpu(a: &TraceArgs) -> anyhow::Result<gpu::Gpu> {
 fn trace_baseline(a: &TraceArgs, layout: LayoutId) -> anyhow::Result<()> {
     let b = layout.baseline().expect("a baseline");
     anyhow::ensure!(a.backend.as_deref() != Some("cpu"), "--layout {layout} runs on the GPU only");
+    // A baseline has no B, P, math, float controls, counters or kernel of ours: say so rather
+    // than ignore the flag.
+    let na = |flag: &str| anyhow::anyhow!("{flag} does not apply to --layout {layout} (a baseline: the driver's traversal has no B, P, math mode, float controls, work counters or user kernel)");
+    if a.branching != 4 {
+        bvh::check_branching(a.branching).context("--branching")?;
+        return Err(na("--branching"));
+    }
+    if a.packet != 1 {
+        return Err(na("--packet"));
+    }
+    for (flag, given) in [("--math", a.math.is_some()), ("--packet-impl", a.packet_impl.is_some()), ("--stats", a.stats), ("--kernel", a.kernel.is_some()), ("--float-controls", a.float_controls != "auto")] {
+        if given {
+            return Err(na(flag));
+        }
+    }
     let t = trace_inputs(a)?;
     let g = open_gpu(a)?;
     outln!("scene {} ({} triangles), layout {layout}, rays {}: {} rays; device {} ({})", t.scene.name, t.scene.len(), t.kind, t.rays.len(), g.info.name, g.info.driver);
@@ -299,11 +321,56 @@ fn trace_baseline(a: &TraceArgs, layout: LayoutId) -> anyhow::Result<()> {
         npy::write_hits(p, &m.hits)?;
         outln!("hits written to {}", p.display());
     }
+    if let Some(p) = &a.save_rays {
+        npy::write_rays(p, &t.rays)?;
+        outln!("rays written to {}", p.display());
+    }
+    if let Some(p) = &a.image {
+        halftrace::images::render(p, &t.scene, &t.rays, &m.hits, a.width, a.height)?;
+        outln!("image written to {}", p.display());
+    }
+    Ok(())
+}
+
+/// Checks the output files before anything is traced: each is distinct from every input and
+/// from each other (an input is never overwritten), and `--image` is a PNG of primary rays.
+fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
+    let same = |x: &std::path::Path, y: &std::path::Path| {
+        let c = |p: &std::path::Path| {
+            let parent = p.parent().filter(|q| !q.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+            parent.canonicalize().ok().map(|d| d.join(p.file_name().unwrap_or_default()))
+        };
+        x == y || (c(x).is_some() && c(x) == c(y))
+    };
+    let mut inputs: Vec<(&str, PathBuf)> = vec![("--scene", a.scene.clone())];
+    if let Ok(RayKind::File(p)) = a.rays.parse::<RayKind>() {
+        inputs.push(("--rays", p));
+    }
+    if let Some(k) = &a.kernel {
+        inputs.push(("--kernel", k.clone()));
+    }
+    let outputs: Vec<(&str, &PathBuf)> = [("--out", a.out.as_ref()), ("--save-rays", a.save_rays.as_ref()), ("--image", a.image.as_ref())].into_iter().filter_map(|(n, p)| Some((n, p?))).collect();
+    for (i, (n, p)) in outputs.iter().enumerate() {
+        for (m, q) in &inputs {
+            anyhow::ensure!(!same(p, q), "{n} {} is also the {m} input: an input is never overwritten", p.display());
+        }
+        for (m, q) in &outputs[..i] {
+            anyhow::ensure!(!same(p, q), "{n} and {m} are the same file ({})", p.display());
+        }
+        if p.is_dir() {
+            anyhow::bail!("{n} {} is a folder; name a file", p.display());
+        }
+    }
+    if let Some(p) = &a.image {
+        anyhow::ensure!(p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")), "--image {}: name a .png file (the image is written as PNG)", p.display());
+        anyhow::ensure!(a.rays == "primary", "--image needs --rays primary (got --rays {})", a.rays);
+    }
     Ok(())
 }
 
 fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let layout: LayoutId = a.layout.parse()?;
+    check_outputs(&a)?;
     if layout.baseline().is_some() {
         return trace_baseline(&a, layout);
     }
@@ -588,8 +655,11 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     }
     c.check()?;
     let out = a.out.clone().unwrap_or_else(sweep::default_out);
+    anyhow::ensure!(!(a.resume && a.force), "--resume and --force exclude each other");
+    let mode = if a.resume { sweep::OutMode::Resume } else if a.force { sweep::OutMode::Force } else { sweep::OutMode::New };
+    let kept = sweep::prepare_out(&out, mode)?;
     let t0 = Instant::now();
-    let s = sweep::run(&c, &out, a.quiet, &a.mask_feature)?;
+    let s = sweep::run(&c, &out, a.quiet, &a.mask_feature, kept)?;
     outln!("{} variants in {:.0} s; report: {}", s.rows, t0.elapsed().as_secs_f64(), s.out.join("report.md").display());
     if !s.failed.is_empty() {
         anyhow::bail!("{} variant(s) failed validation: {}", s.failed.len(), s.failed.join(", "));
@@ -599,8 +669,29 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
 
 fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
     let mut rows = Vec::new();
-    for d in dirs {
-        rows.extend(halftrace::report::read_rows(d)?);
+    // (identity of a row) → (folder, CSV line) of its first occurrence
+    let mut seen: std::collections::HashMap<String, (usize, usize)> = std::collections::HashMap::new();
+    let mut canon = Vec::new();
+    for (i, d) in dirs.iter().enumerate() {
+        let c = d.canonicalize().unwrap_or_else(|_| d.clone());
+        if let Some(j) = canon.iter().position(|x| *x == c) {
+            anyhow::bail!("{} is named twice (as {} and {}): its rows would count twice", c.display(), dirs[j].display(), d.display());
+        }
+        canon.push(c);
+        for (k, r) in halftrace::report::read_rows(d)?.into_iter().enumerate() {
+            let id = format!("{} | {} | {} | {} | {} | {}/{}/B{}/P{} fc {}", r.device, r.driver, r.scene, r.rays, r.kernel, r.layout, r.math, r.branching, r.packet, r.float_controls);
+            if let Some(&(f, line)) = seen.get(&id) {
+                anyhow::bail!(
+                    "{}/results.csv line {} and {}/results.csv line {} are the same variant ({id}); a merged report would average or double-count them — remove one, or report the folders separately",
+                    dirs[f].display(),
+                    line,
+                    d.display(),
+                    k + 2
+                );
+            }
+            seen.insert(id, (i, k + 2));
+            rows.push(r);
+        }
     }
     let out = out.cloned().unwrap_or_else(|| dirs[0].clone());
     halftrace::report::render(&rows, &out, dirs)?;

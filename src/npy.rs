@@ -5,7 +5,6 @@
 
 use crate::rays::Ray;
 use crate::trace::Hit;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -85,14 +84,14 @@ fn write_npy(path: &Path, descr: &str, shape: &str, data: &[u8]) -> Result<(), N
     let unpadded = 10 + header.len() + 1;
     header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
     header.push('\n');
-    let io = |source| NpyError::Io { path: path.into(), source };
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
-    f.write_all(MAGIC).map_err(io)?;
-    f.write_all(&[1, 0]).map_err(io)?;
-    f.write_all(&(header.len() as u16).to_le_bytes()).map_err(io)?;
-    f.write_all(header.as_bytes()).map_err(io)?;
-    f.write_all(data).map_err(io)?;
-    f.flush().map_err(io)
+    let mut bytes = Vec::with_capacity(MAGIC.len() + 4 + header.len() + data.len());
+    bytes.extend_from_slice(MAGIC);
+    bytes.extend_from_slice(&[1, 0]);
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes.extend_from_slice(data);
+    // Through a temporary file and a rename: a failed write never leaves a truncated file.
+    crate::fsx::write_atomic(path, &bytes).map_err(|e| NpyError::Io { path: path.into(), source: std::io::Error::other(format!("{e:#}")) })
 }
 
 /// Reads rays from a float32 array of shape (N, 8): `ox oy oz tmin dx dy dz tmax`.
@@ -110,8 +109,10 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
         return Err(NpyError::Shape { path: path.into(), expected: "shape (N, 8)".into(), found: format!("shape {:?}", h.shape) });
     }
     let n = h.shape[0];
-    let need = n * 32;
     let data = &b[h.data_offset..];
+    let Some(need) = n.checked_mul(32) else {
+        return Err(NpyError::Shape { path: path.into(), expected: "a ray count whose data fits in memory".into(), found: format!("shape ({n}, 8)") });
+    };
     if data.len() != need {
         return Err(NpyError::Shape { path: path.into(), expected: format!("{need} data bytes for {n} rays"), found: format!("{} bytes", data.len()) });
     }
@@ -142,8 +143,8 @@ pub fn read_hits(path: &Path) -> Result<Vec<Hit>, NpyError> {
         return Err(NpyError::Shape { path: path.into(), expected: "structured hits (t, prim, u, v), shape (N,)".into(), found: format!("{} {:?}", h.descr, h.shape) });
     }
     let data = &b[h.data_offset..];
-    if data.len() != h.shape[0] * 16 {
-        return Err(NpyError::Shape { path: path.into(), expected: format!("{} bytes", h.shape[0] * 16), found: format!("{} bytes", data.len()) });
+    if h.shape[0].checked_mul(16) != Some(data.len()) {
+        return Err(NpyError::Shape { path: path.into(), expected: format!("{} hits × 16 bytes", h.shape[0]), found: format!("{} bytes", data.len()) });
     }
     Ok(data.chunks_exact(16).map(|c| bytemuck::pod_read_unaligned(c)).collect())
 }

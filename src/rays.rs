@@ -124,7 +124,7 @@ pub const TILE: u32 = 8;
 /// inside a full tile is then a compact block (2×2, 4×2, 4×4, 8×4, 8×8), so packets of
 /// neighbouring rays are coherent for every packet size at once.
 pub fn pixel_order(width: u32, height: u32) -> Vec<(u32, u32)> {
-    let mut v = Vec::with_capacity((width * height) as usize);
+    let mut v = Vec::with_capacity(width as usize * height as usize);
     for ty in (0..height).step_by(TILE as usize) {
         for tx in (0..width).step_by(TILE as usize) {
             for m in 0..TILE * TILE {
@@ -144,10 +144,27 @@ pub fn pixel_order(width: u32, height: u32) -> Vec<(u32, u32)> {
     v
 }
 
+/// Most rays one image may have (2^26: 6.4 GiB of rays, hits and counters on the device).
+pub const MAX_IMAGE_RAYS: u64 = 1 << 26;
+
+/// Refuses an image whose ray count exceeds [`MAX_IMAGE_RAYS`] (computed without overflow).
+pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {
+    let n = width as u64 * height as u64;
+    if n > MAX_IMAGE_RAYS {
+        return Err(format!("image size {width}x{height} = {n} rays: more than the {MAX_IMAGE_RAYS} (2^26) one ray set may have"));
+    }
+    Ok(())
+}
+
 /// One normalised primary ray per pixel centre, in [`pixel_order`], `tmin = 0`, `tmax = +inf`.
 pub fn primary(cam: &Camera, width: u32, height: u32) -> Result<Vec<Ray>, RayError> {
     if width == 0 || height == 0 {
         return Err(RayError::Param(format!("image size {width}x{height}: width and height must be positive")));
+    }
+    check_image_size(width, height).map_err(RayError::Param)?;
+    let finite = |v: Vec3| v.is_finite();
+    if !(finite(cam.eye) && finite(cam.target) && cam.fov_deg.is_finite() && cam.fov_deg > 0.0 && cam.fov_deg < 180.0) || cam.eye == cam.target {
+        return Err(RayError::Param(format!("camera eye {} target {} fov {}: eye and target must be finite and distinct, fov in (0, 180) degrees", cam.eye, cam.target, cam.fov_deg)));
     }
     let fwd = (cam.target - cam.eye).normalize();
     let up0 = if fwd.cross(Vec3::Y).length() < 1e-4 { Vec3::Z } else { Vec3::Y };
@@ -162,7 +179,17 @@ pub fn primary(cam: &Camera, width: u32, height: u32) -> Result<Vec<Ray>, RayErr
             let py = (1.0 - (y as f32 + 0.5) / height as f32 * 2.0) * h;
             Ray::new(cam.eye, (fwd + right * px + up * py).normalize(), 0.0, f32::INFINITY)
         })
-        .collect())
+        .collect::<Vec<Ray>>())
+    .and_then(|rays| match rays.iter().find(|r| !(r.d().is_finite() && r.d().length() > 0.0)) {
+        // e.g. an eye 1e20 from the target: its squared distance overflows fp32.
+        Some(r) => Err(RayError::Param(format!(
+            "camera eye {} target {}: the primary ray directions are not finite ({:?}); the distance is beyond what fp32 can normalise — move the camera closer or scale the scene",
+            cam.eye,
+            cam.target,
+            r.d()
+        ))),
+        None => Ok(rays),
+    })
 }
 
 /// SplitMix64: a tiny, stable, seedable generator (its stream never changes across versions).

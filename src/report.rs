@@ -61,29 +61,31 @@ pub struct Row {
     pub device_fp16_ratio: f64,
 }
 
-/// Appends rows to `results.csv` and rewrites `results.json` after each one, so an
-/// interrupted sweep keeps everything finished.
+/// Keeps `results.csv` and `results.json` current: after each row both are rewritten through a
+/// temporary file and a rename ([`crate::fsx`]), so an interrupted sweep keeps every finished
+/// row and no write ever leaves a truncated file.
 pub struct Writer {
     dir: PathBuf,
-    csv: csv::Writer<std::fs::File>,
     rows: Vec<Row>,
 }
 
 impl Writer {
-    pub fn create(dir: &Path) -> anyhow::Result<Writer> {
+    /// A writer into `dir` that starts from `rows` (the rows a resumed sweep keeps). Nothing is
+    /// written until the first [`Writer::push`].
+    pub fn create(dir: &Path, rows: Vec<Row>) -> anyhow::Result<Writer> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let p = dir.join("results.csv");
-        let f = std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))?;
-        Ok(Writer { dir: dir.into(), csv: csv::Writer::from_writer(f), rows: Vec::new() })
+        Ok(Writer { dir: dir.into(), rows })
     }
 
     pub fn push(&mut self, row: Row) -> anyhow::Result<()> {
-        self.csv.serialize(&row)?;
-        self.csv.flush()?;
         self.rows.push(row);
-        let p = self.dir.join("results.json");
-        std::fs::write(&p, serde_json::to_string_pretty(&self.rows)?).with_context(|| format!("writing {}", p.display()))?;
-        Ok(())
+        let mut csv = csv::Writer::from_writer(Vec::new());
+        for r in &self.rows {
+            csv.serialize(r)?;
+        }
+        let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
+        crate::fsx::write_atomic(&self.dir.join("results.csv"), &bytes)?;
+        crate::fsx::write_atomic(&self.dir.join("results.json"), serde_json::to_string_pretty(&self.rows)?.as_bytes())
     }
 
     pub fn rows(&self) -> &[Row] {
@@ -100,6 +102,18 @@ fn has_counters(layout: &str) -> bool {
 /// The BVH layouts that have rows, in registry order.
 fn layouts_in(rows: &[&Row]) -> Vec<&'static str> {
     LayoutId::layouts().map(|l| l.name()).filter(|n| rows.iter().any(|r| r.layout == *n)).collect()
+}
+
+/// The files a sweep writes into its folder (besides per-layout images, [`is_output`]).
+pub const OUTPUTS: &[&str] = &["results.csv", "results.json", "report.md", "device_bench.json", "render.png"];
+const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "schemes"];
+
+/// Whether a file name is one a sweep writes (so `--force` may replace it).
+pub fn is_output(name: &str) -> bool {
+    OUTPUTS.contains(&name)
+        || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg"))
+        || (name.starts_with("heat_") && name.ends_with(".png"))
+        || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
 }
 
 /// Reads the rows of `DIR/results.csv`.
@@ -355,8 +369,7 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
         }
         md += "\n";
     }
-    let p = out.join("report.md");
-    std::fs::write(&p, md).with_context(|| format!("writing {}", p.display()))?;
+    crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
     plots(rows, &by_b, &by_p, out)?;
     scheme_plot(&scheme_pts, out)
 }
@@ -440,11 +453,14 @@ fn line_chart(out: &Path, name: &str, title: &str, xlabel: &str, ylabel: &str, x
             root.present()?;
         }};
     }
-    let png = out.join(format!("{name}.png"));
-    draw!(BitMapBackend::new(&png, (800, 480)).into_drawing_area());
-    let svg = out.join(format!("{name}.svg"));
-    draw!(SVGBackend::new(&svg, (800, 480)).into_drawing_area());
-    Ok(())
+    crate::fsx::with_temp(&out.join(format!("{name}.png")), |png| {
+        draw!(BitMapBackend::new(png, (800, 480)).into_drawing_area());
+        Ok(())
+    })?;
+    crate::fsx::with_temp(&out.join(format!("{name}.svg")), |svg| {
+        draw!(SVGBackend::new(svg, (800, 480)).into_drawing_area());
+        Ok(())
+    })
 }
 
 fn ratio_lines(s: &Series) -> (Vec<usize>, Vec<(String, Vec<(usize, f64)>)>) {

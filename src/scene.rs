@@ -87,7 +87,8 @@ impl Scene {
     }
 }
 
-fn scene_name(path: &Path) -> String {
+/// The short name a scene file gets (file name without `.obj`/`.obj.gz`).
+pub fn scene_name(path: &Path) -> String {
     let f = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
     f.trim_end_matches(".gz").trim_end_matches(".obj").to_string()
 }

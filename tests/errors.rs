@@ -177,3 +177,60 @@ fn ray_file_round_trip_and_hits_file() {
     assert!(a.iter().any(|h| h.is_hit()) && a.iter().any(|h| !h.is_hit()));
     assert!(a.iter().filter(|h| !h.is_hit()).all(|h| h.t == f32::INFINITY && h.prim == -1));
 }
+
+/// Rays the program makes itself are checked like rays from a file, and sizes are computed
+/// without overflow: an eye 1e20 from its target (fp32 cannot normalise the distance), a
+/// scene spanning ±2e38 (its default camera overflows), an image of 10^10 or 2^32 pixels, a
+/// `.npy` header claiming more rays than memory can address.
+#[test]
+fn generated_rays_and_sizes_are_checked() {
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    let e = fails(&["trace", "--scene", t, "--width", "8", "--height", "8", "--camera", "0.1,0.1,1e20,0.1,0.1,0,45"]);
+    assert!(e.contains("camera") && e.contains("not finite"), "{e}");
+    let p = obj("huge.obj", "v -2e38 -2e38 -2e38\nv 2e38 -2e38 -2e38\nv 0 2e38 2e38\nf 1 2 3\n");
+    let e = trace_scene(&p);
+    assert!(e.contains("camera") || e.contains("huge.obj"), "{e}");
+    for (w, h) in [("100000", "100000"), ("65536", "65536")] {
+        let e = fails(&["trace", "--scene", t, "--width", w, "--height", h]);
+        assert!(e.contains(&format!("{w}x{h}")) && e.contains("2^26"), "{e}");
+        let e = fails(&["sweep", "--scene", t, "--width", w, "--height", h, "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("2^26"), "{e}");
+    }
+    let p = write_raw_npy("overflow.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (576460752303423490, 8), }", &[0u8; 64]);
+    let e = fails(&["trace", "--scene", t, "--rays", p.to_str().unwrap()]);
+    assert!(e.contains("overflow.npy") && e.contains("576460752303423490"), "{e}");
+}
+
+/// Outputs never overwrite inputs or each other, `--image` must be a PNG of primary rays, and
+/// all of it is refused before anything is traced (the files are untouched); a baseline says
+/// which flags do not apply to it instead of ignoring them.
+#[test]
+fn outputs_are_checked_before_tracing_and_baselines_refuse_what_does_not_apply() {
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    let rays = tmp("inputs.npy");
+    npy::write_rays(&rays, &[Ray { origin: [0.0, 0.0, 10.0], tmin: 0.0, dir: [0.0, 0.0, -1.0], tmax: f32::INFINITY }]).unwrap();
+    let before = std::fs::read(&rays).unwrap();
+    let r = rays.to_str().unwrap();
+    let e = fails(&["trace", "--scene", t, "--rays", r, "--out", r]);
+    assert!(e.contains("--out") && e.contains("--rays input"), "{e}");
+    assert_eq!(std::fs::read(&rays).unwrap(), before, "the input was touched");
+    let x = tmp("x.npy");
+    let x = x.to_str().unwrap();
+    let e = fails(&["trace", "--scene", t, "--out", x, "--save-rays", x]);
+    assert!(e.contains("same file"), "{e}");
+    let photo = tmp("photo.jpg");
+    std::fs::write(&photo, b"my holiday").unwrap();
+    let e = fails(&["trace", "--scene", t, "--image", photo.to_str().unwrap()]);
+    assert!(e.contains(".png"), "{e}");
+    assert_eq!(std::fs::read(&photo).unwrap(), b"my holiday");
+    let e = fails(&["trace", "--scene", t, "--rays", "ao", "--image", tmp("ao.png").to_str().unwrap()]);
+    assert!(e.contains("--rays primary"), "{e}");
+    for flag in [&["--stats"][..], &["--branching", "7"], &["--packet", "8"], &["--math", "f16"], &["--kernel", "x.comp"], &["--float-controls", "off"]] {
+        let mut args = vec!["trace", "--scene", t, "--layout", "rq"];
+        args.extend_from_slice(flag);
+        let e = fails(&args);
+        assert!(e.contains(flag[0]) && (e.contains("does not apply") || e.contains("branching factor 7")), "{flag:?}: {e}");
+    }
+}

@@ -469,3 +469,15 @@ fn ray_query_baseline_agrees_with_f32_on_every_scene() {
     drop(dev);
     clean(&g);
 }
+
+/// The baseline writes the image, rays and hits it is asked for, like every layout.
+#[test]
+fn ray_query_baseline_writes_its_outputs() {
+    let (img, rays, hits) = (tmp("rq.png"), tmp("rq_rays.npy"), tmp("rq_hits.npy"));
+    let scene = scenes_dir().join("teapot.obj");
+    let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "rq", "--width", "24", "--height", "24", "--image", img.to_str().unwrap(), "--save-rays", rays.to_str().unwrap(), "--out", hits.to_str().unwrap()]);
+    assert!(ok, "{out}{err}");
+    assert_eq!(image::open(&img).unwrap().width(), 24);
+    assert_eq!(halftrace::npy::read_rays(&rays).unwrap().len(), 576);
+    assert_eq!(halftrace::npy::read_hits(&hits).unwrap().len(), 576);
+}

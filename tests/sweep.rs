@@ -264,3 +264,60 @@ fn schemes_table_sets_every_layout_beside_f32() {
         assert!(std::fs::metadata(out.join(f)).map(|m| m.len() > 0).unwrap_or(false), "{f} missing");
     }
 }
+
+/// A folder with results is never overwritten by accident: refused without a flag (nothing
+/// touched), `--resume` keeps its rows and runs only the missing jobs, `--force` replaces the
+/// sweep's own files and nothing else.
+#[test]
+fn existing_out_folder_is_refused_resumed_or_replaced() {
+    let out = tmp("resume");
+    let args = ["--rays", "primary,ao", "--layouts", "f32,rq", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4"];
+    let o = sweep(&out, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let full = read_rows(&out).unwrap();
+    assert_eq!(full.len(), 4);
+    // As after an interrupt: the last row is missing.
+    let csv = out.join("results.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let cut: String = text.lines().take(full.len()).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&csv, &cut).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let o = sweep(&out, &args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--resume") && err.contains("--force"), "{err}");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), cut, "a refused sweep touched results.csv");
+    let mut resume = args.to_vec();
+    resume.push("--resume");
+    let o = sweep(&out, &resume);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let resumed = read_rows(&out).unwrap();
+    assert_eq!(resumed.len(), 4, "resume ran the missing job once");
+    assert_eq!(&resumed[..3], &full[..3], "resume kept the recorded rows as they were");
+    assert_eq!((resumed[3].scene.as_str(), resumed[3].rays.as_str(), resumed[3].layout.as_str()), (full[3].scene.as_str(), full[3].rays.as_str(), full[3].layout.as_str()));
+    let mut force = args.to_vec();
+    force.push("--force");
+    let o = sweep(&out, &force);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(read_rows(&out).unwrap().len(), 4);
+    assert_eq!(std::fs::read_to_string(out.join("notes.txt")).unwrap(), "mine", "--force touched a file that is not the sweep's");
+    let both: Vec<&str> = args.iter().copied().chain(["--resume", "--force"]).collect();
+    assert!(!sweep(&out, &both).status.success());
+}
+
+/// `report` refuses to merge a folder with itself or two folders holding the same variant
+/// (it would average or double-count them), naming both places.
+#[test]
+fn report_refuses_duplicate_rows() {
+    let a = tmp("dup-a");
+    assert!(sweep(&a, &["--rays", "primary", "--layouts", "f32", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4"]).status.success());
+    let b = tmp("dup-b");
+    std::fs::create_dir_all(&b).unwrap();
+    std::fs::copy(a.join("results.csv"), b.join("results.csv")).unwrap();
+    let run = |dirs: &[&Path]| Command::new(env!("CARGO_BIN_EXE_halftrace")).arg("report").args(dirs).args(["--out", tmp("dup-out").to_str().unwrap()]).output().unwrap();
+    let o = run(&[&a, &a]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("named twice"), "{e}");
+    let o = run(&[&a, &b]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("same variant") && e.contains("line 2"), "{e}");
+}

@@ -27,9 +27,78 @@ pub struct Summary {
     pub out: PathBuf,
 }
 
+/// What to do with an output folder that already holds files.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum OutMode {
+    /// Refuse it (the default: a user's results are never overwritten by accident).
+    #[default]
+    New,
+    /// Keep its rows and run only the jobs they do not record (after an interrupt, or to add
+    /// variants).
+    Resume,
+    /// Replace the sweep's own files in it (nothing else in the folder is touched).
+    Force,
+}
+
+/// Checks the output folder against `mode` before anything runs; returns the rows a resumed
+/// sweep keeps. A non-empty folder is refused unless `Resume` or `Force`.
+pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
+    let entries: Vec<String> = match std::fs::read_dir(out) {
+        Ok(d) => d.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().to_string()).collect(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
+    };
+    if entries.is_empty() {
+        return Ok(Vec::new());
+    }
+    match mode {
+        OutMode::New => anyhow::bail!(
+            "--out {} already holds results ({} file(s)); nothing was changed. Pass --resume to keep its rows and run only the missing jobs, or --force to replace it, or choose another folder",
+            out.display(),
+            entries.len()
+        ),
+        OutMode::Resume => {
+            if !out.join("results.csv").is_file() {
+                anyhow::bail!("--resume: {} has no results.csv to resume", out.display());
+            }
+            report::read_rows(out)
+        }
+        OutMode::Force => {
+            for e in entries.iter().filter(|e| report::is_output(e)) {
+                let p = out.join(e);
+                std::fs::remove_file(&p).with_context(|| format!("--force: removing {}", p.display()))?;
+            }
+            Ok(Vec::new())
+        }
+    }
+}
+
+/// The identity of a job's row: scene, rays and what traced them (a built-in variant by
+/// layout, math, B and P; a baseline by name; a user kernel by its name).
+fn job_key(cfg: &Config, kinds: &[RayKind], job: &Job) -> String {
+    let scene = crate::scene::scene_name(&cfg.scenes[job.scene]);
+    let what = match job.target {
+        Target::Variant(v) => format!("{}/{}/{}/{}", v.layout, v.math.name(), v.branching, v.packet),
+        Target::Baseline(b) => format!("baseline {b}"),
+        Target::Kernel(i) => format!("kernel {}", cfg.kernel[i].name),
+    };
+    format!("{scene}|{}|{what}", kinds[job.rays])
+}
+
+/// The identity of a recorded row, as [`job_key`] spells it.
+fn row_key(r: &Row) -> String {
+    let what = match LayoutId::parse(&r.layout) {
+        Ok(l) if l.baseline().is_some() => format!("baseline {}", r.layout),
+        _ if r.kernel.starts_with("trav_") => format!("{}/{}/{}/{}", r.layout, r.math, r.branching, r.packet),
+        _ => format!("kernel {}", r.kernel),
+    };
+    format!("{}|{}|{what}", r.scene, r.rays)
+}
+
 /// Runs a sweep, writing `results.csv`/`.json` as it goes, then the report. `mask`: device
-/// features to treat as missing (testing).
-pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Result<Summary> {
+/// features to treat as missing (testing). `kept`: rows of a resumed sweep ([`prepare_out`]);
+/// their jobs are not run again.
+pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row>) -> anyhow::Result<Summary> {
     cfg.check()?;
     let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), ..Default::default() };
     let g = Gpu::new(&opts)?;
@@ -45,9 +114,16 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String]) -> anyhow::Re
             baselines.insert(l, dev);
         }
     }
-    let mut writer = report::Writer::create(out)?;
+    let done: std::collections::HashSet<String> = kept.iter().map(row_key).collect();
+    let kinds = jobs::kinds(cfg);
+    let jobs: Vec<Job> = jobs.into_iter().filter(|j| !done.contains(&job_key(cfg, &kinds, j))).collect();
+    let resumed = kept.len();
+    let mut writer = report::Writer::create(out, kept)?;
     let bench = gpu::bench::run(&g, 16384, 256, 3)?;
-    std::fs::write(out.join("device_bench.json"), serde_json::to_string_pretty(&bench)?)?;
+    crate::fsx::write_atomic(&out.join("device_bench.json"), serde_json::to_string_pretty(&bench)?.as_bytes())?;
+    if resumed > 0 && !quiet {
+        eprintln!("resuming {}: {resumed} row(s) kept, {} job(s) to run", out.display(), jobs.len());
+    }
     let bar = if quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(jobs.len() as u64) };
     bar.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} ETA {eta}] {msg}").unwrap());
     let mut ex = Executor { gpu: &g, cfg, kinds: jobs::kinds(cfg), baselines: &baselines, bench, kernels: HashMap::new(), user: HashMap::new(), scene: None, failed: Vec::new(), out, bar: &bar };

@@ -6,7 +6,7 @@
 pub mod executor;
 pub mod jobs;
 
-pub use executor::{run, Summary};
+pub use executor::{prepare_out, run, OutMode, Summary};
 pub use jobs::{Job, Target};
 
 use crate::bvh;
@@ -151,6 +151,7 @@ impl Config {
         }
         anyhow::ensure!(self.repeat >= 1, "repeat must be at least 1");
         anyhow::ensure!(self.width > 0 && self.height > 0, "width and height must be positive");
+        crate::rays::check_image_size(self.width, self.height).map_err(anyhow::Error::msg)?;
         for (i, k) in self.kernel.iter().enumerate() {
             k.variant()?;
             for r in k.rays.iter().flatten() {
