@@ -724,7 +724,17 @@ fn main() {
         Cmd::Report { dirs, out } => report(&dirs, out.as_ref()),
     };
     if let Err(e) = r {
-        eprintln!("error: {e:#}");
+        // The context chain, each cause once: an error whose message already quotes its
+        // source (an OS or gzip error) does not print it again.
+        let mut msg = e.to_string();
+        for c in e.chain().skip(1) {
+            let t = c.to_string();
+            if !msg.contains(&t) {
+                msg += ": ";
+                msg += &t;
+            }
+        }
+        eprintln!("error: {msg}");
         std::process::exit(1);
     }
 }

@@ -95,6 +95,11 @@ pub fn scene_name(path: &Path) -> String {
 
 /// Loads an OBJ or `.obj.gz` file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    // Only regular files: a FIFO would block and a device such as /dev/zero never ends.
+    let meta = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
+    if !meta.is_file() {
+        return Err(SceneError::Io { path: path.into(), source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file") });
+    }
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
     let bytes = if path.extension().is_some_and(|e| e == "gz") {
         let mut out = Vec::new();
@@ -113,12 +118,19 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut reader = BufReader::new(&bytes[..]);
-    let (models, materials) = tobj::load_obj_buf(&mut reader, &opts, |p| tobj::load_mtl(dir.join(p)))
-        .map_err(|e| SceneError::Parse { path: path.into(), msg: e.to_string() })?;
-    let mut warnings = Vec::new();
-    if let Err(e) = materials {
-        warnings.push(format!("{}: materials not loaded ({e}); geometry is unaffected", path.display()));
-    }
+    // Materials do not affect geometry, so they are never read (an `mtllib /dev/zero` or a FIFO
+    // cannot stall the load); a missing or irregular material file is only named in a warning.
+    let mtl_warnings = std::cell::RefCell::new(Vec::new());
+    let (models, _) = tobj::load_obj_buf(&mut reader, &opts, |p| {
+        let f = dir.join(p);
+        if !f.is_file() {
+            let what = if f.exists() { "is not a regular file" } else { "was not found" };
+            mtl_warnings.borrow_mut().push(format!("{}: mtllib {} {what} (materials are not used; geometry is unaffected)", path.display(), f.display()));
+        }
+        Err(tobj::LoadError::OpenFileFailed)
+    })
+    .map_err(|e| SceneError::Parse { path: path.into(), msg: e.to_string() })?;
+    let warnings = mtl_warnings.into_inner();
 
     let mut tris = Vec::new();
     for m in &models {

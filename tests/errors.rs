@@ -234,3 +234,25 @@ fn outputs_are_checked_before_tracing_and_baselines_refuse_what_does_not_apply()
         assert!(e.contains(flag[0]) && (e.contains("does not apply") || e.contains("branching factor 7")), "{flag:?}: {e}");
     }
 }
+
+/// A scene that is not a regular file (a FIFO would block, /dev/zero never ends) is refused;
+/// material files are never read, so `mtllib /dev/zero` cannot stall the load, and a missing
+/// one is named in the warning; OS errors are printed once.
+#[test]
+fn special_files_never_stall_a_load() {
+    let e = trace_scene(Path::new("/dev/zero"));
+    assert!(e.contains("/dev/zero") && e.contains("not a regular file"), "{e}");
+    assert_eq!(e.matches("not a regular file").count(), 1, "{e}");
+    let fifo = tmp("scene_fifo.obj");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let e = trace_scene(&fifo);
+    assert!(e.contains("scene_fifo.obj") && e.contains("not a regular file"), "{e}");
+    let e = trace_scene(Path::new("/nonexistent/scene.obj"));
+    assert_eq!(e.matches("No such file or directory").count(), 1, "{e}");
+    let p = obj("mtl_zero.obj", "mtllib /dev/zero\nmtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["trace", "--scene", p.to_str().unwrap(), "--backend", "cpu", "--width", "4", "--height", "4"]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("/dev/zero is not a regular file") && err.contains("nowhere.mtl was not found"), "{err}");
+}
