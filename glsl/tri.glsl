@@ -9,6 +9,21 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float u, out float v) {
     A[0] = tri_v[b] - r.o.x;       A[1] = tri_v[b + 1u] - r.o.y;  A[2] = tri_v[b + 2u] - r.o.z;
     Bv[0] = tri_v[b + 3u] - r.o.x; Bv[1] = tri_v[b + 4u] - r.o.y; Bv[2] = tri_v[b + 5u] - r.o.z;
     C[0] = tri_v[b + 6u] - r.o.x;  C[1] = tri_v[b + 7u] - r.o.y;  C[2] = tri_v[b + 8u] - r.o.z;
+    // Huge coordinates (beyond 2^40 from the ray origin): scaled by a power of two, exactly,
+    // so the products cannot overflow; t is scaled back (tri.rs).
+    float m = 0.0;
+    for (int k = 0; k < 3; k++) m = max(max(m, abs(A[k])), max(abs(Bv[k]), abs(C[k])));
+    float back = 1.0;
+    if (m > 1099511627776.0) {
+        int shift = int((floatBitsToUint(m) >> 23) & 0xffu) - 127 - 39;
+        float down = uintBitsToFloat(uint(127 - shift) << 23);
+        back = uintBitsToFloat(uint(127 + shift) << 23);
+        for (int k = 0; k < 3; k++) {
+            A[k] *= down;
+            Bv[k] *= down;
+            C[k] *= down;
+        }
+    }
     precise float ax = A[r.kx] - r.sx * A[r.kz];
     precise float ay = A[r.ky] - r.sy * A[r.kz];
     precise float bx = Bv[r.kx] - r.sx * Bv[r.kz];
@@ -35,7 +50,8 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float u, out float v) {
     precise float bz = r.sz * Bv[r.kz];
     precise float cz = r.sz * C[r.kz];
     precise float T = U * az + V * bz + W * cz;
-    precise float tt = T / det;
+    precise float tq = T / det;
+    precise float tt = tq * back;
     precise float uu = V / det;
     precise float vv = W / det;
     t = tt; u = uu; v = vv;

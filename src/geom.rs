@@ -48,7 +48,8 @@ impl Aabb {
 
     #[inline]
     pub fn center(&self) -> Vec3 {
-        (self.min + self.max) * 0.5
+        // Halves first: min + max may overflow for boxes near fp32's range.
+        self.min * 0.5 + self.max * 0.5
     }
 
     #[inline]
@@ -56,7 +57,9 @@ impl Aabb {
         if self.is_empty() {
             0.0
         } else {
-            (self.max - self.min).length()
+            // In f64: the squared extent of a box beyond 1.8e19 overflows fp32.
+            let d = (self.max - self.min).as_dvec3();
+            d.length() as f32
         }
     }
 

@@ -166,7 +166,8 @@ pub fn primary(cam: &Camera, width: u32, height: u32) -> Result<Vec<Ray>, RayErr
     if !(finite(cam.eye) && finite(cam.target) && cam.fov_deg.is_finite() && cam.fov_deg > 0.0 && cam.fov_deg < 180.0) || cam.eye == cam.target {
         return Err(RayError::Param(format!("camera eye {} target {} fov {}: eye and target must be finite and distinct, fov in (0, 180) degrees", cam.eye, cam.target, cam.fov_deg)));
     }
-    let fwd = (cam.target - cam.eye).normalize();
+    // Normalised in f64: the squared distance of an eye 1e20 away overflows fp32.
+    let fwd = (cam.target.as_dvec3() - cam.eye.as_dvec3()).normalize().as_vec3();
     let up0 = if fwd.cross(Vec3::Y).length() < 1e-4 { Vec3::Z } else { Vec3::Y };
     let right = fwd.cross(up0).normalize();
     let up = right.cross(fwd);

@@ -481,3 +481,28 @@ fn ray_query_baseline_writes_its_outputs() {
     assert_eq!(halftrace::npy::read_rays(&rays).unwrap().len(), 576);
     assert_eq!(halftrace::npy::read_hits(&hits).unwrap().len(), 576);
 }
+
+/// The kernels keep every hit of a scene with coordinates near 1e20 (their triangle test
+/// scales huge coordinates like the CPU reference; a mismatch fails the trace).
+#[test]
+fn huge_coordinates_trace_on_the_gpu() {
+    let src = std::fs::read_to_string(scenes_dir().join("teapot.obj")).unwrap();
+    let mut obj = String::new();
+    for l in src.lines() {
+        if let Some(v) = l.strip_prefix("v ") {
+            let c: Vec<f64> = v.split_whitespace().take(3).map(|x| x.parse::<f64>().unwrap() * 1e20).collect();
+            obj += &format!("v {} {} {}\n", c[0], c[1], c[2]);
+        } else if l.starts_with("f ") {
+            obj += l;
+            obj.push('\n');
+        }
+    }
+    let p = tmp("teapot_1e20.obj");
+    std::fs::write(&p, obj).unwrap();
+    for layout in ["f32", "f16h", "q8"] {
+        let (ok, out, err) = cli(&["trace", "--scene", p.to_str().unwrap(), "--layout", layout, "--width", "32", "--height", "32"]);
+        assert!(ok, "{layout}: {out}{err}");
+        let hits: usize = out.lines().find_map(|l| l.strip_suffix(" hits")?.parse().ok()).unwrap_or(0);
+        assert!(hits > 100, "{layout}: {hits} hits\n{out}");
+    }
+}

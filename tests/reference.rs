@@ -160,3 +160,31 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
     let n = rays_total.into_inner();
     assert!(n > 1000, "only {n} rays: the test would be weak");
 }
+
+/// Finite but huge coordinates (the teapot scaled by 2^66, about 1e20): every layout returns
+/// the hits of the unscaled scene — the same triangles at t scaled by exactly 2^66 — where
+/// products of coordinates used to overflow fp32 and lose every hit.
+#[test]
+fn huge_coordinates_keep_every_hit() {
+    use glam::Vec3;
+    use halftrace::scene::Scene;
+    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let k = 2f32.powi(66);
+    let big = Scene::from_triangles("teapot_2e66", p.scene.tris.iter().map(|t| t.map(|v: Vec3| v * k)).collect()).unwrap();
+    let q = Prepared { bin: halftrace::bvh::build_binary(&big), scene: big };
+    let rays = &ray_sets(&p, 32, 0)[0].1;
+    let big_rays = &ray_sets(&q, 32, 0)[0].1;
+    let base = encode(&p, LayoutId::f32(), 4).trace_default(rays).0;
+    assert!(base.iter().filter(|h| h.is_hit()).count() > 100);
+    for l in LayoutId::layouts().filter(|l| l.bvh().unwrap().conservative()) {
+        for b in [4, 8] {
+            let enc = encode(&q, l, b);
+            for &math in l.caps().maths {
+                let got = enc.trace(big_rays, 1, math).0;
+                for (i, (g, e)) in got.iter().zip(&base).enumerate() {
+                    assert!(g.prim == e.prim && (g.prim < 0 || g.t == e.t * k), "{l}/{} B={b} ray {i}: {g:?} vs unscaled {e:?} (t × 2^66 = {})", math.name(), e.t * k);
+                }
+            }
+        }
+    }
+}

@@ -82,7 +82,7 @@ impl std::str::FromStr for Math {
 pub enum EncodeError {
     #[error("unknown layout '{0}' (use {1})")]
     UnknownLayout(String, String),
-    #[error("{layout}: node {node} child {child}: coordinate {value} lies outside [-16384, 16384] in the parent frame")]
+    #[error("{layout}: node {node} child {child}: coordinate {value:e} lies outside [-16384, 16384] in its frame (frame scales stop at 2^-60, so boxes wider than about 1.9e22 do not fit this layout)")]
     OutOfRange { layout: &'static str, node: usize, child: usize, value: f64 },
     #[error("{layout}: node {node} spans {value:e}, more than the {limit:e} its quantization can step over")]
     Extent { layout: &'static str, node: usize, value: f64, limit: f64 },

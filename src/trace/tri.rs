@@ -7,9 +7,23 @@ use super::RayPre;
 /// ray's interval), or `None`. Degenerate triangles (zero determinant) never hit.
 #[inline]
 pub fn intersect(r: &RayPre, v: &[f32; 9]) -> Option<(f32, f32, f32)> {
-    let a = [v[0] - r.o.x, v[1] - r.o.y, v[2] - r.o.z];
-    let b = [v[3] - r.o.x, v[4] - r.o.y, v[5] - r.o.z];
-    let c = [v[6] - r.o.x, v[7] - r.o.y, v[8] - r.o.z];
+    let mut a = [v[0] - r.o.x, v[1] - r.o.y, v[2] - r.o.z];
+    let mut b = [v[3] - r.o.x, v[4] - r.o.y, v[5] - r.o.z];
+    let mut c = [v[6] - r.o.x, v[7] - r.o.y, v[8] - r.o.z];
+    // Huge coordinates (beyond 2^40 from the ray origin): the edge functions (products of two
+    // coordinates) and t's numerator (of three) would overflow fp32, so the translated
+    // vertices are scaled by a power of two (exact) and t scaled back. Never taken below 2^40,
+    // so ordinary scenes compute exactly as without it.
+    let m = a.iter().chain(&b).chain(&c).fold(0f32, |m, x| m.max(x.abs()));
+    let mut back = 1.0f32;
+    if m > BIG_COORD {
+        let shift = ((m.to_bits() >> 23) & 0xff) as i32 - 127 - 39;
+        let down = f32::from_bits(((127 - shift) as u32) << 23);
+        back = f32::from_bits(((127 + shift) as u32) << 23);
+        for x in a.iter_mut().chain(b.iter_mut()).chain(c.iter_mut()) {
+            *x *= down;
+        }
+    }
     let (kx, ky, kz) = (r.kx, r.ky, r.kz);
     let ax = a[kx] - r.sx * a[kz];
     let ay = a[ky] - r.sy * a[kz];
@@ -37,8 +51,11 @@ pub fn intersect(r: &RayPre, v: &[f32; 9]) -> Option<(f32, f32, f32)> {
     let bz = r.sz * b[kz];
     let cz = r.sz * c[kz];
     let t = (u * az + vv * bz + w * cz) / det;
-    Some((t, vv / det, w / det))
+    Some((t * back, vv / det, w / det))
 }
+
+/// Translated coordinates above this are scaled down before the test (2^40).
+pub const BIG_COORD: f32 = 1_099_511_627_776.0;
 
 #[cfg(test)]
 mod tests {

@@ -136,10 +136,10 @@ pub fn encode_with_frames<const B: usize>(w: &WideBvh) -> Result<(Vec<F16hNode<B
         let f = frames[i].expect("wide BVH nodes are in depth-first order");
         let mut node = F16hNode { lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
         for (slot, (b, c)) in n.children.iter().enumerate() {
-            let (lo, hi, _) = to_local(&f, b);
-            for v in lo.iter().chain(&hi) {
+            let (lo, hi, exact) = to_local(&f, b);
+            for (k, v) in lo.iter().chain(&hi).enumerate() {
                 if !(v.to_f32().abs() <= COORD_LIMIT) {
-                    return Err(EncodeError::OutOfRange { layout: "f16h", node: i, child: slot, value: v.to_f64() });
+                    return Err(EncodeError::OutOfRange { layout: "f16h", node: i, child: slot, value: exact[k] });
                 }
             }
             for a in 0..3 {

@@ -66,10 +66,10 @@ impl Layout for F16w {
         for (i, n) in w.nodes.iter().enumerate() {
             let mut node = F16hNode { lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
             for (slot, (b, c)) in n.children.iter().enumerate() {
-                let (lo, hi, _) = to_local(&frame, b);
-                for v in lo.iter().chain(&hi) {
+                let (lo, hi, exact) = to_local(&frame, b);
+                for (k, v) in lo.iter().chain(&hi).enumerate() {
                     if !(v.to_f32().abs() <= COORD_LIMIT) {
-                        return Err(EncodeError::OutOfRange { layout: Self::NAME, node: i, child: slot, value: v.to_f64() });
+                        return Err(EncodeError::OutOfRange { layout: Self::NAME, node: i, child: slot, value: exact[k] });
                     }
                 }
                 for a in 0..3 {
