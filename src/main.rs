@@ -312,7 +312,7 @@ fn trace_baseline(a: &TraceArgs, layout: LayoutId) -> anyhow::Result<()> {
     let bs = dev.scene(&t.scene)?;
     outln!("acceleration structures: {} bytes, built in {:.2} ms", bs.bytes(), bs.build_ms());
     let f32_hits = Encoded::new(&t.scene, &t.bin, LayoutId::f32(), 4)?.trace_default(&t.rays).0;
-    let plan = Plan { warmup: a.warmup, repeat: a.repeat.max(1), count: false };
+    let plan = Plan { warmup: a.warmup, repeat: a.repeat, count: false };
     let m = measure::validate_then_time(&BaselineTarget { name: b.kernel(), scene: bs.as_ref() }, &t.rays, Reference::Agreement, &f32_hits, plan)?;
     let agree = m.vs_f32;
     outln!("agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)", 100.0 * agree.rate(), agree.agree, agree.total);
@@ -370,6 +370,7 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
 
 fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let layout: LayoutId = a.layout.parse()?;
+    anyhow::ensure!(a.repeat >= 1, "--repeat {}: at least one timed dispatch is needed", a.repeat);
     check_outputs(&a)?;
     if layout.baseline().is_some() {
         return trace_baseline(&a, layout);
@@ -424,7 +425,10 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let g = open_gpu(&a)?;
         outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
         let resolved = gpu::support::resolve(&g.info, variant, fc_choice).map_err(anyhow::Error::msg)?;
-        outln!("kernel {} (float controls {})", resolved.name(false), resolved.fc.name());
+        match &a.kernel {
+            Some(k) => outln!("kernel {} (the user's, in place of {}; float controls {})", k.display(), resolved.name(false), resolved.fc.name()),
+            None => outln!("kernel {} (float controls {})", resolved.name(false), resolved.fc.name()),
+        }
         // The reference of the build the device runs (without float controls its bounds differ).
         let (ref_hits, ref_counters) = if resolved.fc == variant.fc { (ref_hits, ref_counters) } else { enc.trace_fc(rays, a.packet, math, resolved.fc) };
         let variant = resolved;
@@ -445,7 +449,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         };
         let f32_hits = if layout == LayoutId::f32() { ref_hits.clone() } else { Encoded::new(&t.scene, &t.bin, LayoutId::f32(), a.branching)?.trace_default(rays).0 };
         let target = KernelTarget { gpu: &g, bvh: &gb, timed: &timed, counting: counting.as_ref() };
-        let plan = Plan { warmup: a.warmup, repeat: a.repeat.max(1), count: counting.is_some() };
+        let plan = Plan { warmup: a.warmup, repeat: a.repeat, count: counting.is_some() };
         // Correctness before speed: the CPU reference of the same layout, packet size and math.
         let m = measure::validate_then_time(&target, rays, Reference::Exact { hits: &ref_hits, counters: &ref_counters }, &f32_hits, plan)?;
         if let Some(f) = m.failure {
@@ -513,6 +517,12 @@ fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Resu
     let mut list = gpu::list_devices()?;
     if list.is_empty() {
         outln!("no Vulkan devices");
+    }
+    if let Some(want) = &device {
+        // The same choice --device makes everywhere: an index, or a name substring.
+        let all: Vec<String> = list.iter().map(|d| format!("{}: {}", d.index, d.name)).collect();
+        list.retain(|d| d.index.to_string() == *want || d.name.contains(want.as_str()));
+        anyhow::ensure!(!list.is_empty(), "--device {want}: no such device (found: {})", all.join("; "));
     }
     for d in &mut list {
         for m in mask {

@@ -117,7 +117,10 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 
     let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mut reader = BufReader::new(&bytes[..]);
+    // Non-UTF-8 bytes (in a comment, say) become U+FFFD instead of failing the whole read; in a
+    // statement, prescan has already named the line.
+    let text = String::from_utf8_lossy(&bytes);
+    let mut reader = BufReader::new(text.as_bytes());
     // Materials do not affect geometry, so they are never read (an `mtllib /dev/zero` or a FIFO
     // cannot stall the load); a missing or irregular material file is only named in a warning.
     let mtl_warnings = std::cell::RefCell::new(Vec::new());

@@ -256,3 +256,23 @@ fn special_files_never_stall_a_load() {
     assert!(o.status.success(), "{err}");
     assert!(err.contains("/dev/zero is not a regular file") && err.contains("nowhere.mtl was not found"), "{err}");
 }
+
+/// Small things a careless user meets: a non-UTF-8 byte in a comment loads (in a statement it
+/// is named with its line), `--repeat 0` is refused rather than silently 1, `devices --device`
+/// with no such device says so.
+#[test]
+fn small_input_mistakes_get_clear_answers() {
+    let p = tmp("latin1.obj");
+    std::fs::write(&p, b"# caf\xe9 comment\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["trace", "--scene", p.to_str().unwrap(), "--backend", "cpu", "--width", "4", "--height", "4"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let p = tmp("latin1_vertex.obj");
+    std::fs::write(&p, b"v 0 0 0\nv 1 0 0\nv 0 1 \xff\nf 1 2 3\n").unwrap();
+    let e = trace_scene(&p);
+    assert!(e.contains("latin1_vertex.obj:3"), "{e}");
+    let t = teapot();
+    let e = fails(&["trace", "--scene", t.to_str().unwrap(), "--repeat", "0"]);
+    assert!(e.contains("--repeat 0"), "{e}");
+    let e = fails(&["devices", "--device", "no-such-gpu"]);
+    assert!(e.contains("no-such-gpu") && e.contains("no such device"), "{e}");
+}

@@ -506,3 +506,19 @@ fn huge_coordinates_trace_on_the_gpu() {
         assert!(hits > 100, "{layout}: {hits} hits\n{out}");
     }
 }
+
+/// A module of another variant of the same layout cannot stand in for the requested one (it
+/// would return the same hits and be timed under the wrong name): another math mode or a
+/// packet kernel is refused naming the file and why; the user's module is labelled as such.
+#[test]
+fn user_modules_of_another_variant_are_refused() {
+    let scene = scenes_dir().join("teapot.obj");
+    let s = scene.to_str().unwrap();
+    let spv = |n: &str| repo(&format!("spirv/{n}.spv")).display().to_string();
+    for (module, want) in [("trav_f16h_m32_b4_p1", "another math mode"), ("trav_f16h_m16_b4_p8_subgroup", "packet kernel")] {
+        let (ok, out, err) = cli(&["trace", "--scene", s, "--layout", "f16h", "--math", "f16", "--kernel", &spv(module), "--width", "8", "--height", "8"]);
+        assert!(!ok && err.contains(module) && err.contains(want), "{module}: {out}{err}");
+    }
+    let (ok, out, err) = cli(&["trace", "--scene", s, "--layout", "f16h", "--math", "f16", "--kernel", &spv("trav_f16h_m16_b4_p1"), "--width", "8", "--height", "8"]);
+    assert!(ok && out.contains("the user's, in place of trav_f16h_m16_b4_p1"), "{out}{err}");
+}

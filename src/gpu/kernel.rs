@@ -150,7 +150,15 @@ impl<'g> Kernel<'g> {
         let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(wg), warmup, repeat)?;
         let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
         if let Some(bad) = hits.iter().position(|h| h.prim == PRIM_OVERFLOW) {
-            return Err(GpuError::Other(format!("{}: ray {bad} overflowed the traversal stack", self.label())));
+            return Err(GpuError::Other(match &self.source {
+                Source::Builtin => format!("{}: ray {bad} overflowed the traversal stack", self.name()),
+                Source::Glsl(p) | Source::Spirv(p) => format!(
+                    "the user's kernel {} (in place of {}): ray {bad} overflowed its traversal stack — was it built for another branching factor or layout than B = {}?",
+                    p.display(),
+                    self.name(),
+                    self.variant.branching
+                ),
+            }));
         }
         let counters = if self.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
         Ok(RunOutput { hits, counters, times_ms: times })

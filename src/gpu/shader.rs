@@ -351,6 +351,20 @@ pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stat
     if !itf.spec_ids.is_empty() {
         return Err(err(format!("it has specialization constants (SpecId {:?}); the host sets none", itf.spec_ids)));
     }
+    // What the module computes must be the variant's: another variant's module of the same
+    // layout would return the same hits and be timed under the wrong name.
+    let needs = v.layout.bvh().map(|l| l.needs(v.math)).unwrap_or_default();
+    let f16 = itf.capabilities.contains(&9);
+    if f16 != needs.float16 {
+        return Err(err(if f16 {
+            format!("it computes in fp16 (Float16 capability), but math {} of {} does not; is it a kernel of another math mode?", v.math.name(), v.layout)
+        } else {
+            format!("it has no fp16 arithmetic (no Float16 capability), but math {} of {} computes in fp16; is it a kernel of another math mode?", v.math.name(), v.layout)
+        }));
+    }
+    if v.packet == 1 && itf.capabilities.iter().any(|c| (61..=68).contains(c)) {
+        return Err(err("it uses subgroup operations: it is a packet kernel, and the variant traces single rays (P = 1)".into()));
+    }
     for &c in &itf.capabilities {
         match capability(gpu, c) {
             Some((_, true)) => {}
