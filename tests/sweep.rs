@@ -219,7 +219,7 @@ fn user_kernels_run_as_their_own_rows() {
 
     // The f32 layout's kernel over an f16h BVH: it runs, and returns other hits.
     let f32_module = root.join("spirv/trav_f32_b4_p1.spv");
-    let bad = format!("[[kernel]]\nname = \"wrong-layout\"\nlayout = \"f16h\"\nfile = {:?}\nrays = [\"primary\"]\n", f32_module.display().to_string());
+    let bad = format!("[[kernel]]\nname = \"wrong-layout\"\nlayout = \"f16h\"\nmath = \"f32\"\nfile = {:?}\nrays = [\"primary\"]\n", f32_module.display().to_string());
     let out = tmp("kernels-bad");
     let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--quiet", "--config", cfg(&bad).to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
