@@ -524,3 +524,20 @@ fn user_modules_of_another_variant_are_refused() {
     let (ok, out, err) = cli(&["trace", "--scene", s, "--layout", "f16h", "--math", "f16", "--kernel", &spv("trav_f16h_m16_b4_p1"), "--width", "8", "--height", "8"]);
     assert!(ok && out.contains("the user's, in place of trav_f16h_m16_b4_p1"), "{out}{err}");
 }
+
+/// An invalid SPIR-V module is refused with the SPIRV-Tools validator's own message, naming
+/// the file, before any pipeline is created (not a driver's "unknown error").
+#[test]
+fn invalid_spirv_gets_the_validators_message() {
+    // Well formed (its interface reads fine) but invalid: the Physical32 addressing model,
+    // which Vulkan does not allow.
+    let good = std::fs::read(repo("spirv/trav_f32_b4_p1.spv")).unwrap();
+    let mut words: Vec<u32> = bytemuck::pod_collect_to_vec(&good);
+    let i = (5..words.len() - 2).find(|&i| words[i] == (3 << 16 | 14)).expect("OpMemoryModel");
+    words[i + 1] = 1;
+    let cut = tmp("cut.spv");
+    std::fs::write(&cut, bytemuck::cast_slice::<u32, u8>(&words)).unwrap();
+    let scene = scenes_dir().join("teapot.obj");
+    let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "f32", "--kernel", cut.to_str().unwrap(), "--width", "8", "--height", "8"]);
+    assert!(!ok && err.contains("cut.spv") && err.contains("spirv-val"), "{out}{err}");
+}

@@ -109,7 +109,13 @@ impl<'g> Kernel<'g> {
         let code = match source {
             Source::Builtin => shader::compile(v, imp, stats, f64)?,
             Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, v, imp, stats, f64)?, v, imp, stats, gpu)?,
-            Source::Spirv(p) => shader::check_user(p, &shader::read_spirv(p)?, v, imp, stats, gpu)?,
+            Source::Spirv(p) => {
+                // The interface first (its messages say what a kernel must look like), then the
+                // SPIRV-Tools validator (its message instead of a driver's "unknown error").
+                let words = shader::check_user(p, &shader::read_spirv(p)?, v, imp, stats, gpu)?;
+                shader::validate_user(p, &words)?;
+                words
+            }
         };
         Self::with_code(gpu, v, imp, stats, source, &code, pin)
     }

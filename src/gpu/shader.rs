@@ -279,7 +279,8 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
     Ok(itf)
 }
 
-/// Reads a SPIR-V file as words.
+/// Reads a SPIR-V file as words (its interface is checked by [`check_user`], then the module by
+/// [`validate_user`]).
 pub fn read_spirv(path: &Path) -> Result<Vec<u32>, GpuError> {
     let err = |msg: String| GpuError::Spirv { path: path.display().to_string(), msg };
     let bytes = std::fs::read(path).map_err(|e| err(format!("cannot read: {e}")))?;
@@ -287,6 +288,75 @@ pub fn read_spirv(path: &Path) -> Result<Vec<u32>, GpuError> {
         return Err(err(format!("size {} is not a multiple of 4 bytes", bytes.len())));
     }
     Ok(bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+}
+
+/// [`validate`] as the error of a user's module at `path`.
+pub fn validate_user(path: &Path, words: &[u32]) -> Result<(), GpuError> {
+    validate(words).map_err(|m| GpuError::Spirv { path: path.display().to_string(), msg: format!("spirv-val: {m}") })
+}
+
+mod spirv_tools {
+    //! The SPIRV-Tools validator's C API (libspirv.h), from the static library shaderc links.
+    use std::ffi::{c_char, c_void};
+
+    #[repr(C)]
+    pub struct Position {
+        pub line: usize,
+        pub column: usize,
+        pub index: usize,
+    }
+
+    #[repr(C)]
+    pub struct Diagnostic {
+        pub position: Position,
+        pub error: *mut c_char,
+        pub is_text_source: bool,
+    }
+
+    /// `SPV_ENV_VULKAN_1_2` and `SPV_ENV_VULKAN_1_3` of `spv_target_env`.
+    pub const ENV_VULKAN_1_2: u32 = 23;
+    pub const ENV_VULKAN_1_3: u32 = 25;
+
+    extern "C" {
+        pub fn spvContextCreate(env: u32) -> *mut c_void;
+        pub fn spvContextDestroy(ctx: *mut c_void);
+        pub fn spvValidateBinary(ctx: *const c_void, words: *const u32, num_words: usize, diagnostic: *mut *mut Diagnostic) -> i32;
+        pub fn spvDiagnosticDestroy(d: *mut Diagnostic);
+    }
+}
+
+/// Validates a module for Vulkan 1.2 (SPIR-V up to 1.5) or 1.3 (SPIR-V 1.6); the validator's
+/// message on failure.
+pub fn validate(words: &[u32]) -> Result<(), String> {
+    use spirv_tools::*;
+    let env = if words.get(1).is_some_and(|&v| v >= 0x0001_0600) { ENV_VULKAN_1_3 } else { ENV_VULKAN_1_2 };
+    // SAFETY: the context and diagnostic are created and destroyed here, exactly once each; the
+    // validator reads `words` only within its length; the message is copied before the
+    // diagnostic is destroyed.
+    unsafe {
+        let ctx = spvContextCreate(env);
+        if ctx.is_null() {
+            return Err("SPIRV-Tools could not create a validation context".into());
+        }
+        let mut diag: *mut Diagnostic = std::ptr::null_mut();
+        let r = spvValidateBinary(ctx, words.as_ptr(), words.len(), &mut diag);
+        let msg = if diag.is_null() || (*diag).error.is_null() {
+            None
+        } else {
+            let m = std::ffi::CStr::from_ptr((*diag).error).to_string_lossy().trim().to_string();
+            let word = (*diag).position.index;
+            Some(if word > 0 { format!("{m} (at word {word})") } else { m })
+        };
+        if !diag.is_null() {
+            spvDiagnosticDestroy(diag);
+        }
+        spvContextDestroy(ctx);
+        match (r, msg) {
+            (0, _) => Ok(()),
+            (_, Some(m)) => Err(m),
+            (code, None) => Err(format!("invalid module (SPIRV-Tools result {code})")),
+        }
+    }
 }
 
 /// SPIR-V capabilities a traversal kernel may declare, and whether `gpu` (as halftrace opens
