@@ -124,7 +124,10 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     if resumed > 0 && !quiet {
         eprintln!("resuming {}: {resumed} row(s) kept, {} job(s) to run", out.display(), jobs.len());
     }
-    let bar = if quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(jobs.len() as u64) };
+    use std::io::IsTerminal;
+    let lines = !quiet && !std::io::stderr().is_terminal();
+    let t0 = std::time::Instant::now();
+    let bar = if quiet || lines { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(jobs.len() as u64) };
     bar.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} ETA {eta}] {msg}").unwrap());
     let mut ex = Executor { gpu: &g, cfg, kinds: jobs::kinds(cfg), baselines: &baselines, bench, kernels: HashMap::new(), user: HashMap::new(), scene: None, failed: Vec::new(), out, bar: &bar };
     let last = jobs::last_uses(cfg, &jobs);
@@ -134,6 +137,13 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
         if row.status.starts_with("FAILED") {
             ex.bar.suspend(|| eprintln!("error: {} {} {}: {}", row.scene, row.rays, row.kernel, row.status));
             ex.failed.push(format!("{} {} {}", row.scene, row.rays, row.kernel));
+        }
+        if lines {
+            // Not a terminal (CI logs, nohup, Slurm): one line per finished job instead of a bar.
+            let done = i + 1;
+            let el = t0.elapsed().as_secs_f64();
+            let eta = el / done as f64 * (jobs.len() - done) as f64;
+            eprintln!("[{done}/{}] {} {} {}: {} ({:.2} Mrays/s) — {:.0} s elapsed, ETA {:.0} s", jobs.len(), row.scene, row.rays, row.kernel, row.status, row.mrays_median, el, eta);
         }
         writer.push(row)?;
         if let Some(s) = ex.scene.as_mut() {
