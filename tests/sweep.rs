@@ -321,3 +321,19 @@ fn report_refuses_duplicate_rows() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("same variant") && e.contains("line 2"), "{e}");
 }
+
+/// Without a terminal (CI logs, nohup, Slurm) the sweep prints one line per finished job with
+/// elapsed time and ETA instead of a progress bar.
+#[test]
+fn progress_lines_when_not_a_terminal() {
+    let out = tmp("lines");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["sweep", "--scene", &teapot(), "--width", "16", "--height", "16", "--repeat", "1", "--warmup", "0", "--rays", "primary", "--layouts", "f32,q8", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with('[')).collect();
+    assert_eq!(lines.len(), 3, "{err}");
+    assert!(lines[0].starts_with("[1/3] teapot primary trav_") && lines[2].contains("ETA 0 s"), "{err}");
+}
