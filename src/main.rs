@@ -132,6 +132,9 @@ struct SweepArgs {
     /// Treat a device feature as missing (testing), e.g. rayQuery.
     #[arg(long, hide = true)]
     mask_feature: Vec<String>,
+    /// Seconds a dispatch may run before its kernel is declared hung (default 600).
+    #[arg(long)]
+    kernel_timeout: Option<f64>,
 }
 
 #[derive(clap::Args)]
@@ -235,6 +238,9 @@ struct TraceArgs {
     /// storageBuffer16BitAccess, floatControls, subgroupSizeControl, rayQuery.
     #[arg(long, hide = true)]
     mask_feature: Vec<String>,
+    /// Seconds a dispatch may run before its kernel is declared hung (default 600).
+    #[arg(long)]
+    kernel_timeout: Option<f64>,
 }
 
 fn load_scene(path: &PathBuf) -> anyhow::Result<scene::Scene> {
@@ -281,7 +287,7 @@ fn trace_inputs(a: &TraceArgs) -> anyhow::Result<Traced> {
 }
 
 fn open_gpu(a: &TraceArgs) -> anyhow::Result<gpu::Gpu> {
-    let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), ..Default::default() };
+    let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), kernel_timeout_s: a.kernel_timeout, ..Default::default() };
     Ok(gpu::Gpu::new(&opts)?)
 }
 
@@ -371,6 +377,7 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
 fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let layout: LayoutId = a.layout.parse()?;
     anyhow::ensure!(a.repeat >= 1, "--repeat {}: at least one timed dispatch is needed", a.repeat);
+    anyhow::ensure!(a.kernel_timeout.is_none_or(|t| t > 0.0), "--kernel-timeout must be a positive number of seconds");
     check_outputs(&a)?;
     if layout.baseline().is_some() {
         return trace_baseline(&a, layout);
@@ -657,6 +664,7 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     c.warmup = a.warmup.unwrap_or(c.warmup);
     c.repeat = a.repeat.unwrap_or(c.repeat);
     c.seed = a.seed.unwrap_or(c.seed);
+    c.kernel_timeout = a.kernel_timeout.unwrap_or(c.kernel_timeout);
     if let Some(d) = &a.device {
         c.device = d.clone();
     }

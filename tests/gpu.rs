@@ -541,3 +541,29 @@ fn invalid_spirv_gets_the_validators_message() {
     let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "f32", "--kernel", cut.to_str().unwrap(), "--width", "8", "--height", "8"]);
     assert!(!ok && err.contains("cut.spv") && err.contains("spirv-val"), "{out}{err}");
 }
+
+/// A kernel that never terminates is declared hung after --kernel-timeout instead of hanging
+/// the process; in a sweep it is recorded as a FAILED row, the sweep stops (the device is still
+/// busy with it) and `--resume` continues after it.
+#[test]
+fn a_kernel_that_never_ends_is_reported_hung() {
+    let k = tmp("hang.comp");
+    std::fs::write(&k, "#version 460\n#include \"interface.glsl\"\n#include \"ray.glsl\"\nvoid main() {\n    uint i = ray_index();\n    if (i >= pc.ray_count) return;\n    float t = ray_f[8u * i];\n    while (t == t) { t += 1.0; hits[i] = Hit(t, 0, 0.0, 0.0); }\n}\n").unwrap();
+    let scene = scenes_dir().join("teapot.obj");
+    let t0 = std::time::Instant::now();
+    let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "f32", "--kernel", k.to_str().unwrap(), "--kernel-timeout", "2", "--width", "8", "--height", "8"]);
+    assert!(!ok && err.contains("within 2 s"), "{out}{err}");
+    assert!(t0.elapsed().as_secs() < 60, "took {:?}", t0.elapsed());
+    let cfg = tmp("hang.toml");
+    std::fs::write(&cfg, format!("scenes = [{:?}]\nrays = [\"primary\"]\nlayouts = [\"f32\"]\nbranchings = [4]\npackets = [1]\nscheme_branchings = [4]\nwidth = 8\nheight = 8\nrepeat = 1\nwarmup = 0\nkernel_timeout = 2.0\n\n[[kernel]]\nname = \"hang\"\nlayout = \"f32\"\nfile = {:?}\n", scene.display().to_string(), k.display().to_string())).unwrap();
+    let out_dir = tmp("hang-sweep");
+    let _ = std::fs::remove_dir_all(&out_dir);
+    let (ok, _, err) = cli(&["sweep", "--quiet", "--config", cfg.to_str().unwrap(), "--out", out_dir.to_str().unwrap()]);
+    assert!(!ok && err.contains("hang") && err.contains("--resume"), "{err}");
+    let rows = halftrace::report::read_rows(&out_dir).unwrap();
+    assert_eq!(rows.len(), 2, "{rows:?}");
+    assert!(rows[0].status == "ok" && rows[1].kernel == "hang" && rows[1].status.starts_with("FAILED: hung"), "{rows:?}");
+    let (ok, _, err) = cli(&["sweep", "--quiet", "--config", cfg.to_str().unwrap(), "--out", out_dir.to_str().unwrap(), "--resume"]);
+    assert!(ok, "{err}");
+    assert_eq!(halftrace::report::read_rows(&out_dir).unwrap().len(), 2);
+}

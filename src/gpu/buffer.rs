@@ -90,6 +90,9 @@ impl<'g> Buffer<'g> {
 
 impl Drop for Buffer<'_> {
     fn drop(&mut self) {
+        if self.gpu.hung() {
+            return;
+        }
         unsafe { self.gpu.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.alloc.take() {
             let _ = self.gpu.allocator.lock().map(|mut al| al.free(a));

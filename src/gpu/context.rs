@@ -92,7 +92,14 @@ pub struct ContextOptions {
     pub validation: bool,
     /// Pretend the device's storage-buffer limit is this many bytes (testing).
     pub max_buffer: Option<u64>,
+    /// How long one submission may run before it is declared hung (default
+    /// [`DEFAULT_KERNEL_TIMEOUT_S`]).
+    pub kernel_timeout_s: Option<f64>,
 }
+
+/// Seconds a submission may take before the kernel is declared hung: generous, since one
+/// dispatch of a slow variant over a million rays on a CPU device can take minutes.
+pub const DEFAULT_KERNEL_TIMEOUT_S: f64 = 600.0;
 
 /// An open Vulkan device with its queue, allocator and command pool.
 pub struct Gpu {
@@ -106,6 +113,10 @@ pub struct Gpu {
     pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
     pub info: DeviceInfo,
     pub validation_enabled: bool,
+    kernel_timeout: std::time::Duration,
+    /// Set when a submission did not finish in time: the device is still running it, so
+    /// nothing it may use is destroyed any more (the process ends without freeing it).
+    hung: std::sync::atomic::AtomicBool,
 }
 
 // The raw messages pointer is only touched through its Mutex.
@@ -365,7 +376,11 @@ impl Gpu {
                 return Err((GpuError::Other(format!("creating the allocator: {e}")), debug));
             }
         };
-        Ok(Gpu { _entry: entry, instance, physical, debug, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info, validation_enabled: use_layer })
+        Ok(Gpu { _entry: entry, instance, physical, debug, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info,
+            validation_enabled: use_layer,
+            kernel_timeout: std::time::Duration::from_secs_f64(opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).max(0.001)),
+            hung: std::sync::atomic::AtomicBool::new(false),
+        })
     }
 
     /// Bytes currently allocated through the allocator (0 once every buffer is dropped).
@@ -381,7 +396,14 @@ impl Gpu {
         }
     }
 
-    /// Records commands with `record`, submits them and waits for completion.
+    /// Whether a submission hung (then nothing the device may still use is destroyed).
+    pub fn hung(&self) -> bool {
+        self.hung.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Records commands with `record`, submits them and waits for completion, at most the
+    /// kernel timeout: past it the work is declared hung ([`GpuError::Hung`]) and its command
+    /// buffer and fence are left to the device.
     pub fn submit_and_wait(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
         let d = &self.device;
         unsafe {
@@ -395,11 +417,21 @@ impl Gpu {
                 let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
                 let cmds = [cmd];
                 let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
-                let r = d.queue_submit(self.queue, &submit, fence).vk("vkQueueSubmit").and_then(|_| d.wait_for_fences(&[fence], true, u64::MAX).vk("vkWaitForFences"));
-                d.destroy_fence(fence, None);
-                r
+                d.queue_submit(self.queue, &submit, fence).vk("vkQueueSubmit")?;
+                match d.wait_for_fences(&[fence], true, self.kernel_timeout.as_nanos().min(u64::MAX as u128) as u64) {
+                    Err(vk::Result::TIMEOUT) => {
+                        self.hung.store(true, std::sync::atomic::Ordering::SeqCst);
+                        Err(GpuError::Hung { secs: self.kernel_timeout.as_secs_f64() })
+                    }
+                    r => {
+                        d.destroy_fence(fence, None);
+                        r.vk("vkWaitForFences")
+                    }
+                }
             })();
-            d.free_command_buffers(self.pool, &[cmd]);
+            if !self.hung() {
+                d.free_command_buffers(self.pool, &[cmd]);
+            }
             result
         }
     }
@@ -407,6 +439,11 @@ impl Gpu {
 
 impl Drop for Gpu {
     fn drop(&mut self) {
+        if self.hung() {
+            // The device is still running the hung work: waiting would never return and
+            // destroying would pull memory from under it. The process exit reclaims it all.
+            return;
+        }
         unsafe {
             let _ = self.device.device_wait_idle();
             self.device.destroy_command_pool(self.pool, None);

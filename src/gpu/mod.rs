@@ -40,6 +40,8 @@ pub enum GpuError {
     /// The device lacks what this variant needs (a skipped line, not a failure).
     #[error("{0}")]
     Unsupported(String),
+    #[error("the device did not finish a submission within {secs} s (a kernel that never terminates?); it is still busy with it, so nothing more can run on it in this process")]
+    Hung { secs: f64 },
     #[error("{0}")]
     Other(String),
 }

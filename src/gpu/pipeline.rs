@@ -125,6 +125,9 @@ impl<'g> ComputePipeline<'g> {
 
 impl Drop for ComputePipeline<'_> {
     fn drop(&mut self) {
+        if self.gpu.hung() {
+            return;
+        }
         let d = &self.gpu.device;
         unsafe {
             if self.pool != vk::DescriptorPool::null() {

@@ -125,6 +125,9 @@ impl<'g> RqScene<'g> {
 
 impl Drop for RqScene<'_> {
     fn drop(&mut self) {
+        if self.gpu.hung() {
+            return;
+        }
         unsafe {
             let _ = self.gpu.device.device_wait_idle();
             if self.tlas != vk::AccelerationStructureKHR::null() {

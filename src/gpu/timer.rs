@@ -35,6 +35,9 @@ impl<'g> Timer<'g> {
 
 impl Drop for Timer<'_> {
     fn drop(&mut self) {
+        if self.gpu.hung() {
+            return;
+        }
         unsafe { self.gpu.device.destroy_query_pool(self.pool, None) };
     }
 }

@@ -73,6 +73,15 @@ pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
     }
 }
 
+/// The layout, math, B and P fields of a job's row (for a row written without a result).
+fn hung_identity(job: &Job) -> Row {
+    match job.target {
+        Target::Variant(v) => Row { layout: v.layout.name().into(), math: v.math.name().into(), branching: v.branching, packet: v.packet, float_controls: v.fc.name().into(), ..Default::default() },
+        Target::Baseline(b) => Row { layout: b.name().into(), math: "n/a".into(), float_controls: "n/a".into(), ..Default::default() },
+        Target::Kernel(_) => Row { math: "n/a".into(), float_controls: "n/a".into(), ..Default::default() },
+    }
+}
+
 /// The identity of a job's row: scene, rays and what traced them (a built-in variant by
 /// layout, math, B and P; a baseline by name; a user kernel by its name).
 fn job_key(cfg: &Config, kinds: &[RayKind], job: &Job) -> String {
@@ -100,7 +109,7 @@ fn row_key(r: &Row) -> String {
 /// their jobs are not run again.
 pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row>) -> anyhow::Result<Summary> {
     cfg.check()?;
-    let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), ..Default::default() };
+    let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), kernel_timeout_s: Some(cfg.kernel_timeout), ..Default::default() };
     let g = Gpu::new(&opts)?;
     let jobs = jobs::list(cfg);
     // Baselines need per-device state (pipelines); a device that cannot run one gets a line.
@@ -133,7 +142,29 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     let last = jobs::last_uses(cfg, &jobs);
     for (i, job) in jobs.iter().enumerate() {
         ex.bar.set_message(ex.describe(job));
-        let row = ex.run_job(job)?;
+        let row = match ex.run_job(job) {
+            Ok(row) => row,
+            Err(e) if g.hung() => {
+                // Recorded, so that --resume continues after it; the device is still busy with
+                // it, so this process can run nothing more.
+                let kind = &ex.kinds[job.rays];
+                let what = ex.describe(job);
+                let row = Row {
+                    scene: crate::scene::scene_name(&cfg.scenes[job.scene]),
+                    rays: kind.to_string(),
+                    kernel: ex.target_name(job.target),
+                    device: g.info.name.clone(),
+                    driver: g.info.driver.clone(),
+                    status: format!("FAILED: hung: {e:#}"),
+                    ..hung_identity(job)
+                };
+                writer.push(row)?;
+                bar.finish_and_clear();
+                report::render(writer.rows(), out, &[out.to_path_buf()])?;
+                anyhow::bail!("{what} hung (no result within {} s) and was recorded as FAILED in {}; the device stays busy with it, so the sweep stops here — rerun with --resume to continue after it", cfg.kernel_timeout, out.display());
+            }
+            Err(e) => return Err(e),
+        };
         if row.status.starts_with("FAILED") {
             ex.bar.suspend(|| eprintln!("error: {} {} {}: {}", row.scene, row.rays, row.kernel, row.status));
             ex.failed.push(format!("{} {} {}", row.scene, row.rays, row.kernel));

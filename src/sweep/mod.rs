@@ -46,6 +46,8 @@ pub struct Config {
     pub repeat: usize,
     /// Vulkan device index or name substring ("" = default device).
     pub device: String,
+    /// Seconds one dispatch may run before its kernel is declared hung.
+    pub kernel_timeout: f64,
     /// Float-control modes of the kernels: auto (on where the device has them, else off where
     /// the layout has such a build), on, or off.
     pub float_controls: FcChoice,
@@ -113,6 +115,7 @@ impl Default for Config {
             warmup: 2,
             repeat: 10,
             device: String::new(),
+            kernel_timeout: crate::gpu::context::DEFAULT_KERNEL_TIMEOUT_S,
             float_controls: FcChoice::Auto,
             kernel: Vec::new(),
         }
@@ -150,6 +153,7 @@ impl Config {
             m.parse::<Math>().map_err(anyhow::Error::msg).context("maths")?;
         }
         anyhow::ensure!(self.repeat >= 1, "repeat must be at least 1");
+        anyhow::ensure!(self.kernel_timeout > 0.0, "kernel_timeout must be positive (seconds)");
         anyhow::ensure!(self.width > 0 && self.height > 0, "width and height must be positive");
         crate::rays::check_image_size(self.width, self.height).map_err(anyhow::Error::msg)?;
         for (i, k) in self.kernel.iter().enumerate() {
