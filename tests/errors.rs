@@ -179,15 +179,22 @@ fn ray_file_round_trip_and_hits_file() {
 }
 
 /// Rays the program makes itself are checked like rays from a file, and sizes are computed
-/// without overflow: an eye 1e20 from its target (fp32 cannot normalise the distance), a
-/// scene spanning ±2e38 (its default camera overflows), an image of 10^10 or 2^32 pixels, a
-/// `.npy` header claiming more rays than memory can address.
+/// without overflow: an eye 1e20 from its target (normalised in f64), a camera that cannot
+/// give rays, a scene spanning ±2e38 (its default camera is beyond fp32), an image of 10^10
+/// or 2^32 pixels, a `.npy` header claiming more rays than memory can address.
 #[test]
 fn generated_rays_and_sizes_are_checked() {
     let t = teapot();
     let t = t.to_str().unwrap();
-    let e = fails(&["trace", "--scene", t, "--width", "8", "--height", "8", "--camera", "0.1,0.1,1e20,0.1,0.1,0,45"]);
-    assert!(e.contains("camera") && e.contains("not finite"), "{e}");
+    // An eye 1e20 from its target: the direction is normalised without overflow now, so the
+    // rays are finite (and, the teapot being 1e-20 of the view, all miss).
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["trace", "--scene", t, "--width", "8", "--height", "8", "--backend", "cpu", "--camera", "0.1,0.1,1e20,0.1,0.1,0,45", "--save-rays", tmp("far_rays.npy").to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(npy::read_rays(&tmp("far_rays.npy")).unwrap().iter().all(|r| r.dir.iter().all(|x| x.is_finite()) && r.dir[2] < 0.0));
+    for cam in ["1,1,1,1,1,1,45", "inf,0,0,0,0,0,45", "0,0,5,0,0,0,180"] {
+        let e = fails(&["trace", "--scene", t, "--width", "8", "--height", "8", "--camera", cam]);
+        assert!(e.contains("camera"), "{cam}: {e}");
+    }
     let p = obj("huge.obj", "v -2e38 -2e38 -2e38\nv 2e38 -2e38 -2e38\nv 0 2e38 2e38\nf 1 2 3\n");
     let e = trace_scene(&p);
     assert!(e.contains("camera") || e.contains("huge.obj"), "{e}");
