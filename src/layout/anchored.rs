@@ -98,6 +98,63 @@ pub fn child_entry(v: &Visit, (tn, tn_lb): (f32, f32), r16: &Ray16) -> f32 {
 /// The stack entry fields of these layouts.
 pub const STACK_ENTRY: &[(&str, &str)] = &[("t", "float")];
 
+/// What a node of an anchored layout provides; [`anchored_hooks!`] builds the layout's hooks
+/// from it (the GLSL side: `node_frame`, `local_box`, `world_box` before `anchored.glsl`).
+pub trait AnchoredNode<Root> {
+    /// The frame the node's fp16 boxes are stored in.
+    fn frame(&self, root: &Root) -> Frame;
+    /// Slot `s`'s box in that frame, as fp16 (exact or rounded outward).
+    fn local_box(&self, s: usize) -> ([f16; 3], [f16; 3]);
+    /// Slot `s`'s box decoded to world fp32 ([`decode_plane`]); `f` is the node's frame.
+    fn world_box(&self, s: usize, f: &Frame) -> ([f32; 3], [f32; 3]);
+}
+
+/// The `Layout` hooks every anchored layout shares, inside its `impl Layout` block, for node
+/// type `$node` (implementing [`AnchoredNode`]) and root type `$root`.
+macro_rules! anchored_hooks {
+    ($node:ident, $root:ty) => {
+        fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
+            anchored::STACK_ENTRY
+        }
+
+        fn glsl_constants() -> String {
+            <super::f16h::F16h as Layout>::glsl_constants()
+        }
+
+        fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
+            Ray16::new(r, math, fc)
+        }
+
+        fn root_entry(_: &$root, _: &RayPre, _: &Ray16, near: f32) -> f32 {
+            near
+        }
+
+        fn entry_t(t: &f32) -> f32 {
+            *t
+        }
+
+        fn visit<const B: usize>(n: &$node<B>, root: &$root, t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> anchored::Visit {
+            anchored::visit(&anchored::AnchoredNode::frame(n, root), *t, r, lr, best_t)
+        }
+
+        #[inline]
+        fn test_child<const B: usize>(n: &$node<B>, s: usize, _: &f32, v: &anchored::Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
+            if lr.math == Math::F32 {
+                let (lo, hi) = anchored::AnchoredNode::world_box(n, s, &v.frame);
+                anchored::test_world(lo, hi, v, r)
+            } else {
+                let (lo, hi) = anchored::AnchoredNode::local_box(n, s);
+                anchored::test_local(lo, hi, v, lr)
+            }
+        }
+
+        fn child_entry<const B: usize>(_: &$node<B>, _: usize, _: &f32, v: &anchored::Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
+            anchored::child_entry(v, *h, lr)
+        }
+    };
+}
+pub(crate) use anchored_hooks;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,7 +13,7 @@
 //! child plus 16 per node. B=2: 48 bytes, B=4: 80, B=8: 144, B=16: 272. GLSL hooks:
 //! `glsl/layout/f16a.glsl`.
 
-use super::anchored::{self, decode_plane, inv_pow2, Visit};
+use super::anchored::{self, decode_plane, inv_pow2, AnchoredNode};
 use super::f16h::hooks::Ray16;
 use super::f16h::{root_frame, to_local, Frame, COORD_LIMIT};
 use super::{encode_child, EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY};
@@ -52,10 +52,6 @@ impl<const B: usize> F16aNode<B> {
         ([self.lo[0][s], self.lo[1][s], self.lo[2][s]], [self.hi[0][s], self.hi[1][s], self.hi[2][s]])
     }
 
-    fn frame(&self) -> Frame {
-        Frame { w: self.w, k: self.k }
-    }
-
     /// The stored box of slot `s` decoded to world fp32 (still containing the true box).
     #[inline]
     pub fn world_box(&self, s: usize) -> ([f32; 3], [f32; 3]) {
@@ -68,6 +64,18 @@ impl<const B: usize> F16aNode<B> {
             u[a] = decode_plane(self.w[a], hi[a].to_f32() * ik);
         }
         (l, u)
+    }
+}
+
+impl<const B: usize> AnchoredNode<()> for F16aNode<B> {
+    fn frame(&self, _: &()) -> Frame {
+        Frame { w: self.w, k: self.k }
+    }
+    fn local_box(&self, s: usize) -> ([f16; 3], [f16; 3]) {
+        self.slot(s)
+    }
+    fn world_box(&self, s: usize, _: &Frame) -> ([f32; 3], [f32; 3]) {
+        F16aNode::world_box(self, s)
     }
 }
 
@@ -104,7 +112,7 @@ impl Layout for F16a {
     type Ray = Ray16;
     /// The node's entry bound (world parameter).
     type Entry = f32;
-    type Visit = Visit;
+    type Visit = anchored::Visit;
     /// (entry parameter, its lower bound).
     type ChildHit = (f32, f32);
 
@@ -140,42 +148,5 @@ impl Layout for F16a {
         [0.0; 4]
     }
 
-    fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
-        anchored::STACK_ENTRY
-    }
-
-    fn glsl_constants() -> String {
-        <super::f16h::F16h as Layout>::glsl_constants()
-    }
-
-    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
-        Ray16::new(r, math, fc)
-    }
-
-    fn root_entry(_: &(), _: &RayPre, _: &Ray16, near: f32) -> f32 {
-        near
-    }
-
-    fn entry_t(t: &f32) -> f32 {
-        *t
-    }
-
-    fn visit<const B: usize>(n: &F16aNode<B>, _: &(), t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> Visit {
-        anchored::visit(&n.frame(), *t, r, lr, best_t)
-    }
-
-    #[inline]
-    fn test_child<const B: usize>(n: &F16aNode<B>, s: usize, _: &f32, v: &Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
-        if lr.math == Math::F32 {
-            let (lo, hi) = n.world_box(s);
-            anchored::test_world(lo, hi, v, r)
-        } else {
-            let (lo, hi) = n.slot(s);
-            anchored::test_local(lo, hi, v, lr)
-        }
-    }
-
-    fn child_entry<const B: usize>(_: &F16aNode<B>, _: usize, _: &f32, v: &Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
-        anchored::child_entry(v, *h, lr)
-    }
+    anchored::anchored_hooks!(F16aNode, ());
 }

@@ -14,7 +14,7 @@
 //! child. The global frame (w.xyz, k) travels in the push constants' `root`. GLSL hooks:
 //! `glsl/layout/f16w.glsl`.
 
-use super::anchored::{self, decode_plane, inv_pow2, Visit};
+use super::anchored::{self, decode_plane, inv_pow2, AnchoredNode};
 use super::f16h::hooks::{slot_box, Ray16};
 use super::f16h::{root_frame, to_local, F16hNode, Frame, COORD_LIMIT};
 use super::{encode_child, EncodeError, Layout, Math, Needs, CHILD_EMPTY};
@@ -25,6 +25,19 @@ use half::f16;
 
 /// The `f16w` layout.
 pub struct F16w;
+
+impl<const B: usize> AnchoredNode<Frame> for F16hNode<B> {
+    /// Every node's frame is the global one (the root).
+    fn frame(&self, root: &Frame) -> Frame {
+        *root
+    }
+    fn local_box(&self, s: usize) -> ([f16; 3], [f16; 3]) {
+        slot_box(self, s)
+    }
+    fn world_box(&self, s: usize, f: &Frame) -> ([f32; 3], [f32; 3]) {
+        world_box(self, s, f)
+    }
+}
 
 /// The stored box of slot `s` decoded to world fp32 (still containing the true box).
 #[inline]
@@ -56,7 +69,7 @@ impl Layout for F16w {
     type Ray = Ray16;
     /// The node's entry bound (world parameter).
     type Entry = f32;
-    type Visit = Visit;
+    type Visit = anchored::Visit;
     /// (entry parameter, its lower bound).
     type ChildHit = (f32, f32);
 
@@ -87,42 +100,5 @@ impl Layout for F16w {
         [root.w[0], root.w[1], root.w[2], root.k]
     }
 
-    fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
-        anchored::STACK_ENTRY
-    }
-
-    fn glsl_constants() -> String {
-        <super::f16h::F16h as Layout>::glsl_constants()
-    }
-
-    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
-        Ray16::new(r, math, fc)
-    }
-
-    fn root_entry(_: &Frame, _: &RayPre, _: &Ray16, near: f32) -> f32 {
-        near
-    }
-
-    fn entry_t(t: &f32) -> f32 {
-        *t
-    }
-
-    fn visit<const B: usize>(_: &F16hNode<B>, root: &Frame, t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> Visit {
-        anchored::visit(root, *t, r, lr, best_t)
-    }
-
-    #[inline]
-    fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, _: &f32, v: &Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
-        if lr.math == Math::F32 {
-            let (lo, hi) = world_box(n, s, &v.frame);
-            anchored::test_world(lo, hi, v, r)
-        } else {
-            let (lo, hi) = slot_box(n, s);
-            anchored::test_local(lo, hi, v, lr)
-        }
-    }
-
-    fn child_entry<const B: usize>(_: &F16hNode<B>, _: usize, _: &f32, v: &Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
-        anchored::child_entry(v, *h, lr)
-    }
+    anchored::anchored_hooks!(F16hNode, Frame);
 }

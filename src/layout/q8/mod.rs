@@ -22,7 +22,7 @@
 //! B=2: 40 bytes, B=4: 56, B=8: 88 (CWBVH: 80), B=16: 152. The kernels read it as 32-bit words,
 //! so it needs no 8- or 16-bit storage. GLSL hooks: `glsl/layout/q8.glsl`.
 
-use super::anchored::{self, decode_plane, Visit};
+use super::anchored::{self, decode_plane, AnchoredNode};
 use super::f16h::hooks::Ray16;
 use super::f16h::Frame;
 use super::{EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY, LEAF_BIT, LEAF_FIRST_BITS};
@@ -112,6 +112,18 @@ impl<const B: usize> Q8Node<B> {
             hi[a] = decode_plane(self.p[a], u[a] * f);
         }
         (lo, hi)
+    }
+}
+
+impl<const B: usize> AnchoredNode<()> for Q8Node<B> {
+    fn frame(&self, _: &()) -> Frame {
+        Q8Node::frame(self)
+    }
+    fn local_box(&self, s: usize) -> ([f16; 3], [f16; 3]) {
+        Q8Node::local_box(self, s)
+    }
+    fn world_box(&self, s: usize, _: &Frame) -> ([f32; 3], [f32; 3]) {
+        Q8Node::world_box(self, s)
     }
 }
 
@@ -217,7 +229,7 @@ impl Layout for Q8 {
     type Ray = Ray16;
     /// The node's entry bound (world parameter).
     type Entry = f32;
-    type Visit = Visit;
+    type Visit = anchored::Visit;
     /// (entry parameter, its lower bound).
     type ChildHit = (f32, f32);
 
@@ -271,44 +283,7 @@ impl Layout for Q8 {
         [0.0; 4]
     }
 
-    fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
-        anchored::STACK_ENTRY
-    }
-
-    fn glsl_constants() -> String {
-        <super::f16h::F16h as Layout>::glsl_constants()
-    }
-
-    fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
-        Ray16::new(r, math, fc)
-    }
-
-    fn root_entry(_: &(), _: &RayPre, _: &Ray16, near: f32) -> f32 {
-        near
-    }
-
-    fn entry_t(t: &f32) -> f32 {
-        *t
-    }
-
-    fn visit<const B: usize>(n: &Q8Node<B>, _: &(), t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> Visit {
-        anchored::visit(&n.frame(), *t, r, lr, best_t)
-    }
-
-    #[inline]
-    fn test_child<const B: usize>(n: &Q8Node<B>, s: usize, _: &f32, v: &Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
-        if lr.math == Math::F32 {
-            let (lo, hi) = n.world_box(s);
-            anchored::test_world(lo, hi, v, r)
-        } else {
-            let (lo, hi) = n.local_box(s);
-            anchored::test_local(lo, hi, v, lr)
-        }
-    }
-
-    fn child_entry<const B: usize>(_: &Q8Node<B>, _: usize, _: &f32, v: &Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
-        anchored::child_entry(v, *h, lr)
-    }
+    anchored::anchored_hooks!(Q8Node, ());
 }
 
 #[cfg(test)]
