@@ -95,6 +95,29 @@ pub fn child_entry(v: &Visit, (tn, tn_lb): (f32, f32), r16: &Ray16) -> f32 {
     }
 }
 
+/// A wide node's children as fp16 boxes in frame `f`, rounded outward, with their child words
+/// (the fp16 part of the f16w and f16a nodes): `(lo[axis][slot], hi[axis][slot], child[slot])`.
+#[allow(clippy::type_complexity)]
+pub fn children16<const B: usize>(layout: &'static str, i: usize, n: &crate::bvh::WideNode, f: &Frame) -> Result<([[f16; B]; 3], [[f16; B]; 3], [u32; B]), super::EncodeError> {
+    let mut lo16 = [[f16::ZERO; B]; 3];
+    let mut hi16 = [[f16::ZERO; B]; 3];
+    let mut child = [super::CHILD_EMPTY; B];
+    for (slot, (b, c)) in n.children.iter().enumerate() {
+        let (lo, hi, exact) = super::f16h::to_local(f, b);
+        for (k, v) in lo.iter().chain(&hi).enumerate() {
+            if !(v.to_f32().abs() <= super::f16h::COORD_LIMIT) {
+                return Err(super::EncodeError::OutOfRange { layout, node: i, child: slot, value: exact[k] });
+            }
+        }
+        for a in 0..3 {
+            lo16[a][slot] = lo[a];
+            hi16[a][slot] = hi[a];
+        }
+        child[slot] = super::encode_child(c);
+    }
+    Ok((lo16, hi16, child))
+}
+
 /// The stack entry fields of these layouts.
 pub const STACK_ENTRY: &[(&str, &str)] = &[("t", "float")];
 

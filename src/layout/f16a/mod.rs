@@ -15,8 +15,8 @@
 
 use super::anchored::{self, decode_plane, inv_pow2, AnchoredNode};
 use super::f16h::hooks::Ray16;
-use super::f16h::{root_frame, to_local, Frame, COORD_LIMIT};
-use super::{encode_child, EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY};
+use super::f16h::{root_frame, Frame};
+use super::{EncodeError, Layout, Math, Needs, Node};
 use crate::bvh::WideBvh;
 use crate::scene::Scene;
 use crate::trace::{Counters, RayPre};
@@ -125,21 +125,8 @@ impl Layout for F16a {
                 bounds.grow(b.max);
             }
             let f = root_frame(&bounds);
-            let mut node = F16aNode { w: f.w, k: f.k, lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
-            for (slot, (b, c)) in n.children.iter().enumerate() {
-                let (lo, hi, exact) = to_local(&f, b);
-                for (k, v) in lo.iter().chain(&hi).enumerate() {
-                    if !(v.to_f32().abs() <= COORD_LIMIT) {
-                        return Err(EncodeError::OutOfRange { layout: Self::NAME, node: i, child: slot, value: exact[k] });
-                    }
-                }
-                for a in 0..3 {
-                    node.lo[a][slot] = lo[a];
-                    node.hi[a][slot] = hi[a];
-                }
-                node.child[slot] = encode_child(c);
-            }
-            out.push(node);
+            let (lo, hi, child) = anchored::children16::<B>(Self::NAME, i, n, &f)?;
+            out.push(F16aNode { w: f.w, k: f.k, lo, hi, child });
         }
         Ok((out, ()))
     }

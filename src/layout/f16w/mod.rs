@@ -16,8 +16,8 @@
 
 use super::anchored::{self, decode_plane, inv_pow2, AnchoredNode};
 use super::f16h::hooks::{slot_box, Ray16};
-use super::f16h::{root_frame, to_local, F16hNode, Frame, COORD_LIMIT};
-use super::{encode_child, EncodeError, Layout, Math, Needs, CHILD_EMPTY};
+use super::f16h::{root_frame, F16hNode, Frame};
+use super::{EncodeError, Layout, Math, Needs};
 use crate::bvh::WideBvh;
 use crate::scene::Scene;
 use crate::trace::{Counters, RayPre};
@@ -77,21 +77,8 @@ impl Layout for F16w {
         let frame = root_frame(&w.nodes[0].bounds);
         let mut out = Vec::with_capacity(w.nodes.len());
         for (i, n) in w.nodes.iter().enumerate() {
-            let mut node = F16hNode { lo: [[f16::ZERO; B]; 3], hi: [[f16::ZERO; B]; 3], child: [CHILD_EMPTY; B] };
-            for (slot, (b, c)) in n.children.iter().enumerate() {
-                let (lo, hi, exact) = to_local(&frame, b);
-                for (k, v) in lo.iter().chain(&hi).enumerate() {
-                    if !(v.to_f32().abs() <= COORD_LIMIT) {
-                        return Err(EncodeError::OutOfRange { layout: Self::NAME, node: i, child: slot, value: exact[k] });
-                    }
-                }
-                for a in 0..3 {
-                    node.lo[a][slot] = lo[a];
-                    node.hi[a][slot] = hi[a];
-                }
-                node.child[slot] = encode_child(c);
-            }
-            out.push(node);
+            let (lo, hi, child) = anchored::children16::<B>(Self::NAME, i, n, &frame)?;
+            out.push(F16hNode { lo, hi, child });
         }
         Ok((out, frame))
     }
