@@ -526,10 +526,10 @@ fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Resu
         outln!("no Vulkan devices");
     }
     if let Some(want) = &device {
-        // The same choice --device makes everywhere: an index, or a name substring.
+        // The same choice --device makes everywhere (gpu::pick).
         let all: Vec<String> = list.iter().map(|d| format!("{}: {}", d.index, d.name)).collect();
-        list.retain(|d| d.index.to_string() == *want || d.name.contains(want.as_str()));
-        anyhow::ensure!(!list.is_empty(), "--device {want}: no such device (found: {})", all.join("; "));
+        let i = gpu::pick(&list, Some(want)).map_err(|_| anyhow::anyhow!("--device {want}: no such device (found: {})", all.join("; ")))?;
+        list = vec![list.swap_remove(i)];
     }
     for d in &mut list {
         for m in mask {

@@ -233,7 +233,9 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>, GpuError> {
     out
 }
 
-fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError> {
+/// The device `--device` chooses: an index, or a case-insensitive name substring; without
+/// one, the first discrete GPU, else integrated, else virtual, else CPU.
+pub fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError> {
     if infos.is_empty() {
         return Err(GpuError::NoDevice);
     }

@@ -14,7 +14,7 @@ pub mod shader;
 pub mod support;
 pub mod timer;
 
-pub use context::{list_devices, ContextOptions, DeviceInfo, Gpu};
+pub use context::{list_devices, pick, ContextOptions, DeviceInfo, Gpu};
 use thiserror::Error;
 
 #[derive(Debug, Error)]
