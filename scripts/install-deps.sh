@@ -2,13 +2,14 @@
 # Installs the system packages halftrace needs on Debian bookworm (or Ubuntu),
 # idempotently: Mesa's lavapipe from bookworm-backports (shaderFloat16, 16-bit
 # storage, VK_KHR_ray_query), the Vulkan loader, shaderc/glslang/SPIRV-Tools for
-# static linking, and the Khronos validation layer for the test suite.
+# static linking, Embree 3 (the host-CPU baseline) and the Khronos validation layer for
+# the test suite.
 # Backports reuse the mirror already configured for the system (no host names here).
 set -euo pipefail
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 
-pkgs=(libvulkan-dev vulkan-tools libshaderc-dev glslang-dev spirv-tools vulkan-validationlayers pkg-config fonts-dejavu-core git)
+pkgs=(libvulkan-dev vulkan-tools libshaderc-dev glslang-dev spirv-tools vulkan-validationlayers libembree-dev pkg-config fonts-dejavu-core git)
 
 missing=()
 for p in "${pkgs[@]}" mesa-vulkan-drivers; do

@@ -7,7 +7,9 @@
 //! shared [`interface`]) → [`measure`] (validate, then time) → [`sweep`] (jobs) → [`report`].
 //! `docs/architecture.md` has the picture and how to add a layout.
 
+pub mod bench;
 pub mod bvh;
+pub mod embree;
 pub mod conformance;
 pub mod fp16;
 pub mod fsx;

@@ -49,6 +49,10 @@ enum Cmd {
     },
     /// Sweep scenes × ray kinds × layouts × B × P: validate, time, count, report.
     Sweep(SweepArgs),
+    /// The speed ratios a kernel change is judged by (f16h ÷ f32, best reduced layout ÷ f32,
+    /// best ÷ embree, packets ÷ P = 1, f32 ÷ rq), validated, then timed in interleaved rounds:
+    /// medians with min/max.
+    Bench(BenchArgs),
     /// Re-render report.md and the plots from one or more sweep folders (merging them).
     Report {
         /// Sweep folders holding results.csv.
@@ -162,6 +166,37 @@ struct ConformanceArgs {
     /// Treat a device feature as missing (testing the fallbacks).
     #[arg(long, hide = true)]
     mask_feature: Vec<String>,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Scenes (OBJ or .obj.gz); repeat the flag. Default: the bundled teapot, and the shared
+    /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) when
+    /// `../shared/scenes` has them.
+    #[arg(long)]
+    scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated: primary, ao, diffuse, grazing.
+    #[arg(long, default_value = "primary,ao,diffuse", value_delimiter = ',')]
+    rays: Vec<String>,
+    #[arg(long, default_value_t = 256)]
+    width: u32,
+    #[arg(long, default_value_t = 256)]
+    height: u32,
+    /// Interleaved rounds (every target once per round).
+    #[arg(long, default_value_t = 5)]
+    rounds: usize,
+    /// Timed dispatches per target and round (after one warm-up).
+    #[arg(long, default_value_t = 5)]
+    repeat: usize,
+    /// Vulkan device (index or name substring).
+    #[arg(long)]
+    device: Option<String>,
+    /// Enable the Khronos validation layer.
+    #[arg(long)]
+    validation: bool,
+    /// Also write the report (Markdown) to this file.
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -370,6 +405,37 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.image {
         anyhow::ensure!(p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")), "--image {}: name a .png file (the image is written as PNG)", p.display());
         anyhow::ensure!(a.rays == "primary", "--image needs --rays primary (got --rays {})", a.rays);
+    }
+    Ok(())
+}
+
+fn bench(a: BenchArgs) -> anyhow::Result<()> {
+    let mut scenes = a.scene.clone();
+    if scenes.is_empty() {
+        scenes.push(PathBuf::from("scenes/teapot.obj"));
+        for s in ["../shared/scenes/sponza_dabrovic.obj", "../shared/scenes/igea.obj.gz"] {
+            if std::path::Path::new(s).is_file() {
+                scenes.push(PathBuf::from(s));
+            }
+        }
+    }
+    let mut kinds = Vec::new();
+    for r in &a.rays {
+        let k: RayKind = r.parse().with_context(|| format!("--rays {r}"))?;
+        anyhow::ensure!(!matches!(k, RayKind::File(_)), "--rays {r}: bench uses the generated kinds (primary, ao, diffuse, grazing)");
+        kinds.push(k);
+    }
+    halftrace::rays::check_image_size(a.width, a.height).map_err(anyhow::Error::msg)?;
+    if let Some(o) = &a.out {
+        anyhow::ensure!(!o.is_dir(), "--out {} is a folder; name a file", o.display());
+    }
+    let cfg = halftrace::bench::BenchConfig { scenes, kinds, width: a.width, height: a.height, rounds: a.rounds, repeat: a.repeat, device: a.device.clone(), validation: a.validation };
+    let r = halftrace::bench::run(&cfg)?;
+    let md = halftrace::bench::markdown(&cfg, &r);
+    outln!("{md}");
+    if let Some(o) = &a.out {
+        halftrace::fsx::write_atomic(o, md.as_bytes())?;
+        outln!("report written to {}", o.display());
     }
     Ok(())
 }
@@ -739,6 +805,7 @@ fn main() {
         Cmd::Conformance(a) => conformance(a),
         Cmd::Shaders { emit } => shaders(&emit),
         Cmd::Sweep(a) => sweep(a),
+        Cmd::Bench(a) => bench(a),
         Cmd::Report { dirs, out } => report(&dirs, out.as_ref()),
     };
     if let Err(e) = r {

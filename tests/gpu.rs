@@ -567,3 +567,26 @@ fn a_kernel_that_never_ends_is_reported_hung() {
     assert!(ok, "{err}");
     assert_eq!(halftrace::report::read_rows(&out_dir).unwrap().len(), 2);
 }
+
+/// `halftrace bench` validates every target, then prints every ratio the speed issue names
+/// (median, min, max over its rounds, with the target) and every target's speed; `--out`
+/// writes the same report.
+#[test]
+fn bench_prints_every_ratio_with_medians_and_ranges() {
+    let md = tmp("bench.md");
+    let scene = repo("scenes/teapot.obj");
+    let (ok, out, err) = cli(&["bench", "--scene", scene.to_str().unwrap(), "--width", "16", "--height", "16", "--rounds", "2", "--repeat", "1", "--out", md.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(err.contains("targets validated"), "{err}");
+    let text = std::fs::read_to_string(&md).unwrap();
+    assert!(out.contains(&text), "--out differs from what was printed");
+    for what in ["f16h fp32-math ÷ f32, B = 8, P = 1", "f16h fp16-math ÷ f32, B = 8, P = 1", "best reduced-precision ÷ f32 (same B), largest scene", "best halftrace variant ÷ embree (host CPU)", "P = 8 ÷ P = 1, f32, B = 4", "P = 64 ÷ P = 1, f32, B = 4", "f32 ÷ rq (driver ray queries)"] {
+        let line = text.lines().find(|l| l.starts_with(&format!("| {what} |"))).unwrap_or_else(|| panic!("no ratio '{what}' in\n{text}"));
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        let (med, lo, hi): (f64, f64, f64) = (cells[5].parse().unwrap(), cells[6].parse().unwrap(), cells[7].parse().unwrap());
+        assert!(lo > 0.0 && lo <= med && med <= hi, "{line}");
+    }
+    for t in ["trav_f32_b8_p1", "trav_f16h_m16_b8_p1", "trav_q8_m32_b4_p1", "rq", "embree"] {
+        assert!(text.contains(&format!("| teapot | primary | {t} |")), "no speed of {t}");
+    }
+}

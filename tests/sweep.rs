@@ -26,7 +26,7 @@ fn sweep(out: &Path, extra: &[&str]) -> std::process::Output {
 #[test]
 fn small_sweep_writes_consistent_outputs() {
     let out = tmp("small");
-    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h,rq", "--maths", "f16,f32,mixed", "--branchings", "2,8", "--packets", "1,4,16"]);
+    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h,rq,embree", "--maths", "f16,f32,mixed", "--branchings", "2,8", "--packets", "1,4,16"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for f in ["results.csv", "results.json", "device_bench.json", "report.md", "ratio_vs_b.png", "ratio_vs_b.svg", "ratio_vs_p.png", "ratio_vs_p.svg", "mrays.png", "mrays.svg", "memory.png", "memory.svg", "render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"] {
         let p = out.join(f);
@@ -36,9 +36,9 @@ fn small_sweep_writes_consistent_outputs() {
         }
     }
     // variants: ({2, 8} at P=1 ∪ {1, 4, 16} at B=4) = 5, for f32 and for f16h in 3 math
-    // modes, plus rq: 21, × 2 ray kinds
+    // modes, plus rq and embree: 22, × 2 ray kinds
     let rows = read_rows(&out).unwrap();
-    assert_eq!(rows.len(), 42);
+    assert_eq!(rows.len(), 44);
     let bench: halftrace::gpu::bench::DeviceBench = serde_json::from_str(&std::fs::read_to_string(out.join("device_bench.json")).unwrap()).unwrap();
     assert_eq!(bench.ops.len(), 5);
     assert!(bench.fp16_ratio > 0.0 && rows.iter().all(|r| r.device_fp16_ratio == bench.fp16_ratio));
@@ -63,10 +63,11 @@ fn small_sweep_writes_consistent_outputs() {
         assert!(r.mrays_min <= r.mrays_median && r.mrays_median <= r.mrays_max, "{}", r.kernel);
         assert_eq!(r.timed_dispatches, 3);
         assert!(r.build_ms > 0.0 && r.bvh_bytes > 0);
-        assert_eq!(r.float_controls, if r.layout == "rq" { "n/a" } else { "on" }, "{}: float controls on where lavapipe has them", r.kernel);
-        if r.layout == "rq" {
-            assert_eq!((r.branching, r.packet), (0, 0), "B and P do not apply to rq");
-            assert!(r.differs_from_f32 == 0 && r.false_misses == 0, "rq disagrees with f32 on the teapot");
+        let baseline = r.layout == "rq" || r.layout == "embree";
+        assert_eq!(r.float_controls, if baseline { "n/a" } else { "on" }, "{}: float controls on where lavapipe has them", r.kernel);
+        if baseline {
+            assert_eq!((r.branching, r.packet), (0, 0), "B and P do not apply to {}", r.layout);
+            assert!(r.differs_from_f32 == 0 && r.false_misses == 0, "{} disagrees with f32 on the teapot", r.layout);
             continue;
         }
         assert!(r.nodes_per_ray > 0.0 && r.box_tests_per_ray >= r.nodes_per_ray);

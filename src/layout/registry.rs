@@ -21,6 +21,7 @@ pub static REGISTRY: &[Entry] = &[
     Entry::Layout(&Plug::<super::q8::Q8>::NEW),
     Entry::Layout(&Plug::<super::f16h_seed::F16hSeed>::NEW),
     Entry::Baseline(&crate::gpu::rq::Rq),
+    Entry::Baseline(&crate::embree::Embree),
 ];
 
 /// A registered layout (our BVH in one precision layout, traced by our kernels) or baseline
