@@ -1,9 +1,12 @@
 // Hooks shared by the layouts whose child boxes are tested in a per-node (or per-BVH) frame
 // against the origin re-derived from the fp32 world ray at every node (f16w, f16a, q8;
 // src/layout/anchored.rs has the argument). Include after half.glsl, and after the layout's
-//   void node_frame(uint ni, out vec3 w, out float k)              frame x_local = (x - w) * k
-//   void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi)    fp16 box in that frame
-//   void world_box(uint ni, uint s, out vec3 lo, out vec3 hi)      fp32 world box (decode_plane)
+//   struct NodeFrame                                  what a node's boxes are decoded with
+//   NodeFrame load_frame(uint ni)                     read once per visit (may be declared only)
+//   void node_frame(NodeFrame f, out vec3 w, out float k)             x_local = (x - w) * k
+//   void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi)   fp16 box in it
+//   void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi)     fp32 world box
+//                                                     (decode_plane; may be declared only)
 // MATH_F32: the stored box decoded to world fp32 (still containing the true box), then the
 // robust fp32 slab test.
 // Otherwise: the origin anchored in the node frame at the node's entry bound (fp32, rounded to
@@ -30,6 +33,7 @@ float entry_t(Entry e) { return e.t; }
 struct Visit {
     float tmax;
     float t;
+    NodeFrame f;
 #ifndef MATH_F32
     OVEC o;
     HVisit h;
@@ -40,10 +44,11 @@ Visit visit_node(uint ni, Entry en, RayPre r, float best) {
     Visit v;
     v.tmax = best;
     v.t = en.t;
+    v.f = load_frame(ni);
 #ifndef MATH_F32
     vec3 w;
     float k;
-    node_frame(ni, w, k);
+    node_frame(v.f, w, k);
     float e = anchor(r, w, k, en.t, v.o);
     v.h = half_visit(k, e, en.t, en.t, best);
 #endif
@@ -56,14 +61,14 @@ struct ChildHit { float tn; float tn_lb; };
 bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
 #ifdef MATH_F32
     vec3 lo, hi;
-    world_box(ni, s, lo, hi);
+    world_box(v.f, ni, s, lo, hi);
     vec2 q = slab32(r, lo, hi, r.tmin, v.tmax);
     key = q.x;
     h = ChildHit(q.x, q.x);
     return q.x <= q.y;
 #else
     HVEC3 lo, hi;
-    local_box(ni, s, lo, hi);
+    local_box(v.f, ni, s, lo, hi);
     bool hit = half_test(v.o, v.h, lo, hi, h.tn, h.tn_lb);
     key = h.tn;
     return hit;

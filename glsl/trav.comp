@@ -1,4 +1,5 @@
 #version 460
+#extension GL_EXT_control_flow_attributes : require
 // The traversal skeleton of every layout and kernel family: single rays (P = 1), packets in
 // a subgroup (PACKET_SUBGROUP) and packets in shared memory; STATS adds the counters. It
 // mirrors src/trace/traverse.rs step for step.
@@ -37,32 +38,32 @@ void main() {
     closest_init(r.tmax);
     vec2 root = slab32(r, pc.box_lo.xyz, pc.box_hi.xyz, r.tmin, r.tmax);
     bool root_hit = valid && root.x <= root.y;
+    // The stack holds the nodes still to visit; the node being visited (ni, en) is kept out of
+    // it: a visit goes on with its nearest inner child directly and pushes only the others, so
+    // the nodes are visited in exactly the order of pushing all and popping the top.
     uint st_node[STACK_SIZE];
     Entry st[STACK_SIZE];
     int sp = 0;
     bool overflow = false;
-    if (packet_any(root_hit)) {
-        st_node[0] = 0u;
-        st[0] = root_hit ? root_entry(r, root.x) : no_entry();
-        sp = 1;
-    }
-    while (sp > 0) {
-        sp--;
-        uint ni = st_node[sp];
-        Entry en = st[sp];
+    bool more = packet_any(root_hit);
+    uint ni = 0u;
+    Entry en = root_hit ? root_entry(r, root.x) : no_entry();
+    while (more) {
         bool act = has_entry(en) && entry_t(en) <= best_t;
-        uint nact = packet_add(act ? 1u : 0u);
-        if (nact == 0u) continue;
-        pnodes++;
-        asum += nact;
-        if (act) cnt.x++;
+        bool descend = false;
+#if P == 1
+        if (act) {
+#endif
         Visit v = visit_node(ni, en, r, best_t);
+        // The child words are read once per visit; slots past the first empty one are never read.
         uint mask = 0u;
+        uint cw[B];
         float key[B];
         ChildHit ch[B];
-        for (uint s = 0u; s < uint(B); s++) {
-            key[s] = INF;
-            if (child_word(ni, s) == CHILD_EMPTY) break;
+        [[unroll]] for (uint s = 0u; s < uint(B); s++) key[s] = INF;
+        [[unroll]] for (uint s = 0u; s < uint(B); s++) {
+            cw[s] = child_word(ni, s);
+            if (cw[s] == CHILD_EMPTY) break;
             if (!act) continue;
             cnt.y++;
             float k;
@@ -73,34 +74,73 @@ void main() {
                 ch[s] = h;
             }
         }
-        uint any_mask = packet_or(mask);
-        for (uint s = 0u; s < uint(B); s++) {
-            if ((any_mask & (1u << s)) != 0u) key[s] = packet_min(key[s]);
-        }
-        uint order[B];
-        int n = order_children(any_mask, key, order);
-        uint p_node[B];
-        Entry p_e[B];
-        int np = 0;
-        for (int k = 0; k < n; k++) {
-            uint s = order[k];
-            uint c = child_word(ni, s);
-            bool mine = (mask & (1u << s)) != 0u;
-            if (is_leaf(c)) {
-                if (mine) test_leaf(r, c, cnt.z);
-                continue;
+        // One reduction over the packet: active rays, the union of hit children, each hit
+        // child's smallest key. A node no ray is active for is skipped (nothing was tested).
+        uint nact;
+        uint any_mask = packet_reduce(act, mask, key, nact);
+        if (nact != 0u) {
+            pnodes++;
+            asum += nact;
+            if (act) cnt.x++;
+            // Leaves first, in slot order, by the rays that hit them: any order gives the same
+            // closest hit (ties go to the lower prim) and the same counters. Inner children go
+            // nearest first: each one's place is its rank by (key, slot), so nothing is sorted
+            // or copied through arrays indexed at run time (traverse.rs, order_children); rank
+            // 0 is visited next, the others are pushed with the nearer ones on top.
+            uint inner = 0u;
+            [[unroll]] for (uint s = 0u; s < uint(B); s++) {
+                if ((any_mask & (1u << s)) == 0u) continue;
+                uint c = cw[s];
+                if (!is_leaf(c)) inner |= 1u << s;
+                else if ((mask & (1u << s)) != 0u) test_leaf(r, c, cnt.z);
             }
-            p_node[np] = c;
-            p_e[np] = mine ? child_entry(ni, s, en, v, ch[s], r, cnt.w) : no_entry();
-            np++;
+            int n = bitCount(inner);
+            uint next_node = 0u;
+            Entry next_entry = no_entry();
+            [[unroll]] for (uint s = 0u; s < uint(B); s++) {
+                if ((inner & (1u << s)) == 0u) continue;
+                int rank = 0;
+                [[unroll]] for (uint t = 0u; t < uint(B); t++) {
+                    bool before = key[t] < key[s] || (key[t] == key[s] && t < s);
+                    if ((inner & (1u << t)) != 0u && before) rank++;
+                }
+                Entry e = (mask & (1u << s)) != 0u ? child_entry(ni, s, en, v, ch[s], r, cnt.w) : no_entry();
+                if (rank == 0) {
+                    next_node = cw[s];
+                    next_entry = e;
+                } else {
+                    int pos = sp + n - 1 - rank;
+                    if (pos < STACK_SIZE) {
+                        st_node[pos] = cw[s];
+                        st[pos] = e;
+                    }
+                }
+            }
+            // The same bound as pushing all n (traverse.rs): the encoder checks that a BVH
+            // never needs more (GpuBvh::upload).
+            if (sp + n > STACK_SIZE) {
+                overflow = true;
+                break;
+            }
+            if (n > 0) {
+                sp += n - 1;
+                ni = next_node;
+                en = next_entry;
+                descend = true;
+            }
         }
-        for (int k = np - 1; k >= 0; k--) {
-            if (sp >= STACK_SIZE) { overflow = true; break; }
-            st_node[sp] = p_node[k];
-            st[sp] = p_e[k];
-            sp++;
+#if P == 1
         }
-        if (overflow) break;
+#endif
+        if (!descend) {
+            if (sp == 0) {
+                more = false;
+            } else {
+                sp--;
+                ni = st_node[sp];
+                en = st[sp];
+            }
+        }
     }
     if (!valid) return;
     if (overflow) hits[i] = Hit(0.0, PRIM_OVERFLOW, 0.0, 0.0);

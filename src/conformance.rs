@@ -93,13 +93,20 @@ impl Outcome {
 /// has one.
 pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     let mut out: Vec<(Variant, PacketImpl)> = Vec::new();
+    // Every implementation the device can run at P; in the quick set, packets a subgroup
+    // holds check shared memory and subgroups, larger ones the device's default (hybrid
+    // where it has subgroup arithmetic), so each implementation is covered once per layout.
     let imps = |p: usize| -> Vec<PacketImpl> {
-        if p == 1 {
-            vec![PacketImpl::Single]
-        } else if support::packet_plan(info, p).0 == PacketImpl::Subgroup {
-            vec![PacketImpl::Shared, PacketImpl::Subgroup]
-        } else {
-            vec![PacketImpl::Shared]
+        let plan = support::packet_plan(info, p).0;
+        let hybrid = support::has_subgroup_arithmetic(info);
+        match plan {
+            PacketImpl::Single => vec![PacketImpl::Single],
+            PacketImpl::Subgroup if quick => vec![PacketImpl::Shared, PacketImpl::Subgroup],
+            PacketImpl::Subgroup if hybrid => vec![PacketImpl::Shared, PacketImpl::Subgroup, PacketImpl::Hybrid],
+            PacketImpl::Subgroup => vec![PacketImpl::Shared, PacketImpl::Subgroup],
+            PacketImpl::Hybrid if quick => vec![PacketImpl::Hybrid],
+            PacketImpl::Hybrid => vec![PacketImpl::Shared, PacketImpl::Hybrid],
+            PacketImpl::Shared => vec![PacketImpl::Shared],
         }
     };
     for layout in LayoutId::layouts() {

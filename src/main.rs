@@ -218,8 +218,9 @@ struct TraceArgs {
     /// nodes with fp32 tests, mixed); default: the layout's first mode.
     #[arg(long)]
     math: Option<String>,
-    /// Packet implementation: subgroup or shared (default: subgroup when P fits the device's
-    /// subgroup, else shared memory).
+    /// Packet implementation: subgroup, hybrid or shared (default: subgroup when P fits the
+    /// device's subgroup, else hybrid where the device has subgroup arithmetic, else shared
+    /// memory).
     #[arg(long)]
     packet_impl: Option<String>,
     /// primary, ao, diffuse, grazing, or a FILE.npy (float32, N x 8).
@@ -468,7 +469,8 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         None => None,
         Some("subgroup") => Some(PacketImpl::Subgroup),
         Some("shared") => Some(PacketImpl::Shared),
-        Some(o) => anyhow::bail!("--packet-impl '{o}': use subgroup or shared"),
+        Some("hybrid") => Some(PacketImpl::Hybrid),
+        Some(o) => anyhow::bail!("--packet-impl '{o}': use subgroup, hybrid or shared"),
     }
     .filter(|_| a.packet > 1);
     let backend = match a.backend.as_deref() {
@@ -653,6 +655,7 @@ fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
         .map(|&p| match gpu::support::packet_plan(d, p) {
             (PacketImpl::Subgroup, Some(n)) => format!("P={p} subgroup (pinned to {n})"),
             (PacketImpl::Subgroup, None) => format!("P={p} subgroup ({})", d.subgroup_size),
+            (PacketImpl::Hybrid, _) => format!("P={p} hybrid (subgroups of {}, then shared memory)", d.subgroup_size),
             (imp, _) => format!("P={p} {}", if imp == PacketImpl::Shared { "shared memory" } else { "single" }),
         })
         .collect();

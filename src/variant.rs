@@ -80,6 +80,10 @@ pub enum PacketImpl {
     Subgroup,
     /// One packet per workgroup of P invocations, reductions through shared memory.
     Shared,
+    /// One packet per workgroup of P invocations (P above the subgroup size), each subgroup
+    /// reducing its rays with subgroup arithmetic before one shared-memory exchange: the
+    /// default for such P on devices with subgroup arithmetic.
+    Hybrid,
 }
 
 /// GPU stack entries per ray for a branching factor: room for (B−1)·depth + 1 entries with
@@ -126,7 +130,11 @@ impl Variant {
             self.branching,
             self.packet,
             if self.fc == FloatControls::Off { "_fcoff" } else { "" },
-            if imp == PacketImpl::Subgroup { "_subgroup" } else { "" },
+            match imp {
+                PacketImpl::Subgroup => "_subgroup",
+                PacketImpl::Hybrid => "_hybrid",
+                _ => "",
+            },
             if stats { "_stats" } else { "" }
         )
     }
@@ -148,7 +156,7 @@ impl Variant {
     /// Workgroup size of a kernel.
     pub fn workgroup(&self, imp: PacketImpl) -> u32 {
         match imp {
-            PacketImpl::Shared => self.packet as u32,
+            PacketImpl::Shared | PacketImpl::Hybrid => self.packet as u32,
             _ => 64,
         }
     }
@@ -186,8 +194,10 @@ impl Variant {
             ("STACK_SIZE".to_string(), stack_entries(self.branching).to_string()),
             (self.math.define().to_string(), "1".to_string()),
         ];
-        if imp == PacketImpl::Subgroup {
-            d.push(("PACKET_SUBGROUP".into(), "1".into()));
+        match imp {
+            PacketImpl::Subgroup => d.push(("PACKET_SUBGROUP".into(), "1".into())),
+            PacketImpl::Hybrid => d.push(("PACKET_HYBRID".into(), "1".into())),
+            _ => {}
         }
         if stats {
             d.push(("STATS".into(), "1".into()));
@@ -226,13 +236,14 @@ impl std::fmt::Display for Variant {
 }
 
 /// The kernels kept in `spirv/`: every variant of the default matrix in its portable
-/// implementation, plus the subgroup implementation of every packet variant.
+/// implementation, plus the subgroup and hybrid implementations of every packet variant.
 pub fn spirv_matrix() -> Vec<(Variant, PacketImpl)> {
     let mut out = Vec::new();
     for v in Variant::matrix() {
         out.push((v, v.portable_impl()));
         if v.packet > 1 {
             out.push((v, PacketImpl::Subgroup));
+            out.push((v, PacketImpl::Hybrid));
         }
     }
     out
@@ -258,6 +269,7 @@ mod tests {
         let f16h = LayoutId::parse("f16h").unwrap();
         assert_eq!(Variant::new(LayoutId::f32(), 8, 1).name(false), "trav_f32_b8_p1");
         assert_eq!(Variant::new(f16h, 4, 16).with_math(Math::F32).kernel_name(PacketImpl::Subgroup, true), "trav_f16h_m32_b4_p16_subgroup_stats");
+        assert_eq!(Variant::new(LayoutId::f32(), 4, 64).kernel_name(PacketImpl::Hybrid, false), "trav_f32_b4_p64_hybrid");
         assert_eq!(Variant::new(LayoutId::f32(), 4, 1).with_math(Math::F16).math, Math::F32, "f32 has one math mode");
     }
 }

@@ -7,24 +7,27 @@
 #define NODE16_HEAD float w[3]; float k;
 #include "node16.glsl"
 
-void node_frame(uint ni, out vec3 w, out float k) {
-    w = vec3(nodes[ni].w[0], nodes[ni].w[1], nodes[ni].w[2]);
-    k = nodes[ni].k;
+// The node's frame, read once per visit.
+struct NodeFrame { vec3 w; float k; };
+NodeFrame load_frame(uint ni) { return NodeFrame(vec3(nodes[ni].w[0], nodes[ni].w[1], nodes[ni].w[2]), nodes[ni].k); }
+void node_frame(NodeFrame f, out vec3 w, out float k) {
+    w = f.w;
+    k = f.k;
 }
-void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
+void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     lo = slot_lo(ni, s);
     hi = slot_hi(ni, s);
 }
-void world_box(uint ni, uint s, out vec3 lo, out vec3 hi);
+void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 
 #include "anchored.glsl"
 
-void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
-    float ik = inv_pow2(nodes[ni].k);
+void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
+    float ik = inv_pow2(f.k);
     vec3 l = vec3(slot_lo(ni, s));
     vec3 u = vec3(slot_hi(ni, s));
     for (int a = 0; a < 3; a++) {
-        float w = nodes[ni].w[a];
+        float w = f.w[a];
         lo[a] = decode_plane(w, l[a] * ik);
         hi[a] = decode_plane(w, u[a] * ik);
     }

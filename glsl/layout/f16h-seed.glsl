@@ -27,7 +27,8 @@ Visit visit_node(uint ni, Entry en, RayPre r, float best) {
     return Visit(mk, float16_t(lim));
 }
 
-struct ChildHit { float16_t tn; };
+// The child's entry parameter, and its box (read once: child_entry derives the frame from it).
+struct ChildHit { float16_t tn; f16vec3 lo; f16vec3 hi; };
 
 bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
     f16vec3 lo = slot_lo(ni, s);
@@ -52,7 +53,7 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
         tf = min(tf, t1);
     }
     key = float(tn);
-    h = ChildHit(tn);
+    h = ChildHit(tn, lo, hi);
     return tn <= tf && tf >= H0 && tn <= v.s_lim;
 }
 
@@ -60,7 +61,7 @@ float16_t finite16(float16_t x) { return isnan(x) ? H0 : clamp(x, float16_t(-655
 
 Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
     HVEC3 cc; float cr; vec3 cw; float ck;
-    derive_child(en.wk.xyz, en.wk.w, slot_lo(ni, s), slot_hi(ni, s), cc, cr, cw, ck);
+    derive_child(en.wk.xyz, en.wk.w, h.lo, h.hi, cc, cr, cw, ck);
     float16_t se = max(h.tn, H0);
     float16_t r16 = float16_t(cr);
     f16vec3 o2;

@@ -27,11 +27,14 @@ float entry_t(Entry en) { return en.tlo; }
 #define Visit HVisit
 Visit visit_node(uint ni, Entry en, RayPre r, float best) { return half_visit(en.wk.w, en.e, en.tp, en.tlo, best); }
 
-// The child's entry parameter and its lower bound in the node's frame.
-struct ChildHit { float tn; float tn_lb; };
+// The child's entry parameter and its lower bound in the node's frame, and its box (read
+// once: child_entry derives the child's frame from it).
+struct ChildHit { float tn; float tn_lb; HVEC3 lo; HVEC3 hi; };
 
 bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
-    bool hit = half_test(en.o, v, slot_lo(ni, s), slot_hi(ni, s), h.tn, h.tn_lb);
+    h.lo = slot_lo(ni, s);
+    h.hi = slot_hi(ni, s);
+    bool hit = half_test(en.o, v, h.lo, h.hi, h.tn, h.tn_lb);
     key = h.tn;
     return hit;
 }
@@ -40,8 +43,8 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
 // moved into it in fp16, or re-anchored from the fp32 world ray when the bound grows too large
 // (counted in `reanchors`).
 Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
-    HVEC3 lo = slot_lo(ni, s);
-    HVEC3 hi = slot_hi(ni, s);
+    HVEC3 lo = h.lo;
+    HVEC3 hi = h.hi;
     vec3 fw = en.wk.xyz;
     float fk = en.wk.w;
     HVEC3 cc; float cr; vec3 cw; float ck;

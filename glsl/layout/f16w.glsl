@@ -4,20 +4,25 @@
 #include "half.glsl"
 #include "node16.glsl"
 
-void node_frame(uint ni, out vec3 w, out float k) {
+// The one frame; 1/k once per visit.
+struct NodeFrame { float ik; };
+NodeFrame load_frame(uint ni);
+void node_frame(NodeFrame f, out vec3 w, out float k) {
     w = pc.root.xyz;
     k = pc.root.w;
 }
-void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
+void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     lo = slot_lo(ni, s);
     hi = slot_hi(ni, s);
 }
-void world_box(uint ni, uint s, out vec3 lo, out vec3 hi);
+void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 
 #include "anchored.glsl"
 
-void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
-    float ik = inv_pow2(pc.root.w);
+NodeFrame load_frame(uint ni) { return NodeFrame(inv_pow2(pc.root.w)); }
+
+void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
+    float ik = f.ik;
     vec3 l = vec3(slot_lo(ni, s));
     vec3 u = vec3(slot_hi(ni, s));
     for (int a = 0; a < 3; a++) {

@@ -26,8 +26,6 @@ uint child_word(uint ni, uint s) {
 }
 
 uint qbyte(uint ni, uint i) { return (nodes[ni].q[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu; }
-int qexp(uint ni, int a) { return int((nodes[ni].exps >> (8u * uint(a))) & 0xffu) - 128; }
-int qexp_max(uint ni) { return max(max(qexp(ni, 0), qexp(ni, 1)), qexp(ni, 2)); }
 
 // The quantized box in grid units.
 void grid_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
@@ -39,32 +37,40 @@ void grid_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
 
 void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) { grid_box(ni, s, lo, hi); }
 
-void node_frame(uint ni, out vec3 w, out float k) {
-    w = vec3(nodes[ni].p[0], nodes[ni].p[1], nodes[ni].p[2]);
-    k = pow2(6 - qexp_max(ni));
+// The node's origin and step exponents, read once per visit.
+struct NodeFrame { vec3 p; ivec3 e; };
+NodeFrame load_frame(uint ni) {
+    uint x = nodes[ni].exps;
+    ivec3 e = ivec3(int(x & 0xffu), int((x >> 8u) & 0xffu), int((x >> 16u) & 0xffu)) - 128;
+    return NodeFrame(vec3(nodes[ni].p[0], nodes[ni].p[1], nodes[ni].p[2]), e);
 }
-void local_box(uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
+int frame_emax(NodeFrame f) { return max(max(f.e.x, f.e.y), f.e.z); }
+void node_frame(NodeFrame f, out vec3 w, out float k) {
+    w = f.p;
+    k = pow2(6 - frame_emax(f));
+}
+void local_box(NodeFrame fr, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     vec3 l, u;
     grid_box(ni, s, l, u);
-    int em = qexp_max(ni);
+    int em = frame_emax(fr);
     for (int a = 0; a < 3; a++) {
-        float f = pow2(qexp(ni, a) + 6 - em);
+        float f = pow2(fr.e[a] + 6 - em);
         // q < 2^8 times 2^j, j >= -24: exact in fp32 and in fp16.
         lo[a] = HALF(l[a] * f);
         hi[a] = HALF(u[a] * f);
     }
 }
-void world_box(uint ni, uint s, out vec3 lo, out vec3 hi);
+void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 
 #include "anchored.glsl"
 
-void world_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
+void world_box(NodeFrame fr, uint ni, uint s, out vec3 lo, out vec3 hi) {
     vec3 l, u;
     grid_box(ni, s, l, u);
     for (int a = 0; a < 3; a++) {
-        float f = pow2(qexp(ni, a));
+        float f = pow2(fr.e[a]);
         // q 2^e is exact in fp32; one rounding in the sum (decode_plane).
-        lo[a] = decode_plane(nodes[ni].p[a], l[a] * f);
-        hi[a] = decode_plane(nodes[ni].p[a], u[a] * f);
+        lo[a] = decode_plane(fr.p[a], l[a] * f);
+        hi[a] = decode_plane(fr.p[a], u[a] * f);
     }
 }

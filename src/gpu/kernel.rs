@@ -199,6 +199,9 @@ pub struct RunOutput {
 /// the size planned for its P where the device allows pinning; otherwise none, and then the
 /// reported size must hold the packet.
 fn subgroup_pin(gpu: &Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Result<Option<u32>, GpuError> {
+    if imp == PacketImpl::Hybrid && !super::support::has_subgroup_arithmetic(&gpu.info) {
+        return Err(GpuError::Unsupported(format!("{}: hybrid packets need subgroup arithmetic in compute shaders (device: {})", v.kernel_name(imp, stats), gpu.info.name)));
+    }
     if imp != PacketImpl::Subgroup {
         return Ok(None);
     }

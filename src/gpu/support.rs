@@ -96,14 +96,23 @@ pub fn packet_subgroup(p: usize, subgroup: u32, control: Option<(u32, u32)>) -> 
 }
 
 /// The packet implementation for `p` rays and the subgroup size to pin (`None`: leave the
-/// driver's choice, which is the reported size).
+/// driver's choice, which is the reported size): a subgroup when one holds the packet, else
+/// the hybrid (subgroup arithmetic, then shared memory) where the device has subgroup
+/// arithmetic in compute, else shared memory.
 pub fn packet_plan(info: &DeviceInfo, p: usize) -> (PacketImpl, Option<u32>) {
     let control = info.subgroup_size_control.then_some((info.min_subgroup_size, info.max_subgroup_size));
     match packet_subgroup(p, info.subgroup_size, control) {
         _ if p == 1 => (PacketImpl::Single, None),
         Some(size) => (PacketImpl::Subgroup, control.map(|_| size)),
+        None if has_subgroup_arithmetic(info) => (PacketImpl::Hybrid, None),
         None => (PacketImpl::Shared, None),
     }
+}
+
+/// Subgroup basic and arithmetic operations in compute shaders (the hybrid packets need them).
+pub fn has_subgroup_arithmetic(info: &DeviceInfo) -> bool {
+    let (basic, arithmetic) = (1u32, 1u32 << 2);
+    info.subgroup_ops & basic != 0 && info.subgroup_ops & arithmetic != 0
 }
 
 #[cfg(test)]

@@ -122,7 +122,8 @@ pub fn children16<const B: usize>(layout: &'static str, i: usize, n: &crate::bvh
 pub const STACK_ENTRY: &[(&str, &str)] = &[("t", "float")];
 
 /// What a node of an anchored layout provides; [`anchored_hooks!`] builds the layout's hooks
-/// from it (the GLSL side: `node_frame`, `local_box`, `world_box` before `anchored.glsl`).
+/// from it (the GLSL side: `NodeFrame` and `load_frame`, read once per visit, then
+/// `node_frame`, `local_box`, `world_box` before `anchored.glsl`).
 pub trait AnchoredNode<Root> {
     /// The frame the node's fp16 boxes are stored in.
     fn frame(&self, root: &Root) -> Frame;

@@ -9,8 +9,9 @@
 //!   tests.
 //! - A child is visited when any active ray hits it. Children are ordered once per packet by
 //!   the smallest key (entry distance) among the rays that hit them, ties by slot
-//!   ([`order_children`]). Leaves are tested, in that order, by the rays that hit them; inner
-//!   children are pushed farthest first.
+//!   ([`order_children`]). Leaves are tested, in that order, by the rays that hit them (the
+//!   kernels test them in slot order: the closest hit and the counters do not depend on the
+//!   order, ties going to the lower prim); inner children are pushed farthest first.
 //! - Each ray keeps its own closest hit and its own stack entry per level (inactive rays carry
 //!   none).
 //!
@@ -25,7 +26,8 @@ use crate::rays::Ray;
 use rayon::prelude::*;
 
 /// Orders hit children by (key, slot) ascending: an insertion sort over slots given in
-/// increasing order, exactly as the kernels' `order_children`. Keys are never NaN; −0 and +0
+/// increasing order. The kernels reach the same order without sorting (trav.comp places each
+/// inner child on the stack at its rank by (key, slot)). Keys are never NaN; −0 and +0
 /// compare equal.
 #[inline]
 pub fn order_children(v: &mut [(f32, usize)]) {
