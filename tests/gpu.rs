@@ -449,26 +449,7 @@ fn ray_query_baseline_agrees_with_f32_on_every_scene() {
     let rq = layout("rq").baseline().expect("rq is a baseline");
     assert!(rq.unavailable(&g.info).is_none(), "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)", g.info.name);
     let dev = rq.prepare(&g).unwrap();
-    let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
-    for path in all_scenes() {
-        let p = prepare(&path);
-        let rs = dev.scene(&p.scene).unwrap();
-        assert!(rs.bytes() > 0 && rs.build_ms() > 0.0);
-        let f = encode(&p, LayoutId::f32(), 4);
-        for (kind, rays) in ray_sets(&p, 48, 1500) {
-            let out = rs.run(&rays, 0, 1).unwrap();
-            let a = halftrace::trace::agreement(&out.hits, &f.trace_default(&rays).0);
-            eprintln!("{} {kind}: rq agrees with f32 on {:.4}% of {} rays ({} false misses)", p.scene.name, 100.0 * a.rate(), a.total, a.false_misses);
-            if kind == "grazing" {
-                grazing.0 += a.agree;
-                grazing.1 += a.total;
-            } else {
-                worst = worst.min(a.rate());
-                assert!(a.rate() >= 0.9999, "{} {kind}: rq agreement {:.4}% < 99.99%", p.scene.name, 100.0 * a.rate());
-            }
-        }
-    }
-    eprintln!("rq vs f32: worst primary/ao/diffuse agreement {:.4}%, grazing set {:.3}% ({} of {})", 100.0 * worst, 100.0 * grazing.0 as f64 / grazing.1 as f64, grazing.0, grazing.1);
+    baseline_agrees_with_f32("rq", dev.as_ref(), 0);
     drop(dev);
     clean(&g);
 }

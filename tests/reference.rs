@@ -189,31 +189,9 @@ fn huge_coordinates_keep_every_hit() {
     }
 }
 
-/// The host baseline (Embree 3 on the CPU) against the f32 reference on every shared scene:
-/// same prim, or t within 1e-5 relative, on at least 99.99% of primary, ao and diffuse rays.
-/// Its triangle test is Embree's, not ours, so the grazing set is reported, not held to it.
+/// The host baseline (Embree 3 on the CPU) against the f32 reference on every shared scene
+/// (the bar of common::baseline_agrees_with_f32; Embree's triangle test is not ours).
 #[test]
 fn embree_baseline_agrees_with_f32_on_every_scene() {
-    let dev = halftrace::embree::host();
-    let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
-    for path in all_scenes() {
-        let p = prepare(&path);
-        let es = dev.scene(&p.scene).unwrap();
-        assert!(es.bytes() > 0 && es.build_ms() >= 0.0);
-        let f = encode(&p, LayoutId::f32(), 4);
-        for (kind, rays) in ray_sets(&p, 48, 1500) {
-            let out = es.run(&rays, 1, 2).unwrap();
-            assert_eq!((out.hits.len(), out.times_ms.len()), (rays.len(), 2), "one hit per ray, one time per timed run");
-            let a = halftrace::trace::agreement(&out.hits, &f.trace_default(&rays).0);
-            eprintln!("{} {kind}: embree agrees with f32 on {:.4}% of {} rays ({} false misses)", p.scene.name, 100.0 * a.rate(), a.total, a.false_misses);
-            if kind == "grazing" {
-                grazing.0 += a.agree;
-                grazing.1 += a.total;
-            } else {
-                worst = worst.min(a.rate());
-                assert!(a.rate() >= 0.9999, "{} {kind}: embree agreement {:.4}% < 99.99%", p.scene.name, 100.0 * a.rate());
-            }
-        }
-    }
-    eprintln!("embree vs f32: worst primary/ao/diffuse agreement {:.4}%, grazing set {:.3}% ({} of {})", 100.0 * worst, 100.0 * grazing.0 as f64 / grazing.1 as f64, grazing.0, grazing.1);
+    baseline_agrees_with_f32("embree", halftrace::embree::host().as_ref(), 1);
 }

@@ -78,3 +78,32 @@ pub fn layout(name: &str) -> LayoutId {
 pub fn encode(p: &Prepared, layout: LayoutId, b: usize) -> Encoded {
     Encoded::new(&p.scene, &p.bin, layout, b).unwrap()
 }
+
+/// A baseline (someone else's traversal) against the f32 reference on every shared scene:
+/// same prim, or t within 1e-5 relative where triangles tie or share edges, on at least
+/// 99.99% of primary, ao and diffuse rays. The grazing set (rays through shared vertices and
+/// along edges) is reported, not held to the bar: it measures whether the baseline's triangle
+/// test is watertight like ours. Each run is timed once after `warmup` untimed ones.
+pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::layout::BaselineDevice, warmup: usize) {
+    let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
+    for path in all_scenes() {
+        let p = prepare(&path);
+        let bs = dev.scene(&p.scene).unwrap();
+        assert!(bs.bytes() > 0 && bs.build_ms() > 0.0, "{name}: no size or build time");
+        let f = encode(&p, LayoutId::f32(), 4);
+        for (kind, rays) in ray_sets(&p, 48, 1500) {
+            let out = bs.run(&rays, warmup, 1).unwrap();
+            assert_eq!((out.hits.len(), out.times_ms.len()), (rays.len(), 1), "{name}: one hit per ray, one time per timed run");
+            let a = halftrace::trace::agreement(&out.hits, &f.trace_default(&rays).0);
+            eprintln!("{} {kind}: {name} agrees with f32 on {:.4}% of {} rays ({} false misses)", p.scene.name, 100.0 * a.rate(), a.total, a.false_misses);
+            if kind == "grazing" {
+                grazing.0 += a.agree;
+                grazing.1 += a.total;
+            } else {
+                worst = worst.min(a.rate());
+                assert!(a.rate() >= 0.9999, "{} {kind}: {name} agreement {:.4}% < 99.99%", p.scene.name, 100.0 * a.rate());
+            }
+        }
+    }
+    eprintln!("{name} vs f32: worst primary/ao/diffuse agreement {:.4}%, grazing set {:.3}% ({} of {})", 100.0 * worst, 100.0 * grazing.0 as f64 / grazing.1 as f64, grazing.0, grazing.1);
+}
