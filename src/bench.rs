@@ -126,7 +126,7 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
     let mut speeds = Vec::new();
     let mut largest = (0usize, String::new());
     // Per scene: (scene name, per (kind, key) the per-round medians in ms).
-    let mut per_scene: Vec<(String, Vec<RaySet>, BTreeMap<(usize, Key), Vec<f64>>)> = Vec::new();
+    let mut per_scene: Vec<(String, Vec<RaySet>, Times)> = Vec::new();
     for path in &cfg.scenes {
         let scene = scene::load(path).with_context(|| format!("bench: {}", path.display()))?;
         let bin = bvh::build_binary(&scene);
@@ -234,10 +234,10 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
     }
     let mut encs: BTreeMap<(LayoutId, usize), (Encoded, GpuBvh)> = BTreeMap::new();
     for (_, v) in &wanted {
-        if !encs.contains_key(&(v.layout, v.branching)) {
+        if let std::collections::btree_map::Entry::Vacant(slot) = encs.entry((v.layout, v.branching)) {
             let e = Encoded::new(scene, bin, v.layout, v.branching)?;
             let gb = GpuBvh::upload(g, &e).with_context(|| format!("{}, B={}", v.layout, v.branching))?;
-            encs.insert((v.layout, v.branching), (e, gb));
+            slot.insert((e, gb));
         }
         if !kernels.contains_key(v) {
             let k = Kernel::build(g, v, choose_impl(g, v, None), false, &Source::Builtin).with_context(|| v.name(false))?;

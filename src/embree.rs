@@ -82,7 +82,7 @@ impl BaselineDevice for EmbreeDevice {
         let mut es = EScene::new(&self.device);
         es.attach_geometry(geom);
         let t0 = Instant::now();
-        drop(es.commit());
+        let _ = es.commit();
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         // Embree does not report its BVH's size; this is the triangle data handed to it
         // (16-byte vertices, 12-byte index triples), a lower bound.

@@ -9,8 +9,9 @@
 
 pub mod bench;
 pub mod bvh;
-pub mod embree;
 pub mod conformance;
+pub mod embree;
+pub mod formats;
 pub mod fp16;
 pub mod fsx;
 pub mod geom;

@@ -29,9 +29,25 @@ struct Cli {
 enum Cmd {
     /// Trace a ray set through one layout and branching factor.
     Trace(TraceArgs),
+    /// Write a glTF binary (.glb) that instances a scene N times (rotated, scaled, on a grid):
+    /// big test scenes without shipping them.
+    Instance {
+        /// Scene to instance (OBJ, glTF or PLY).
+        #[arg(long)]
+        scene: PathBuf,
+        /// Number of instances.
+        #[arg(long)]
+        count: usize,
+        /// Seed of the rotations and scales.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The .glb file to write (an existing file is refused).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Print per-B, per-layout BVH statistics.
     BvhStats {
-        /// OBJ or .obj.gz scene.
+        /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
         #[arg(long)]
         scene: PathBuf,
     },
@@ -58,7 +74,8 @@ enum Cmd {
         /// Sweep folders holding results.csv.
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
-        /// Where to write the report (default: the first folder).
+        /// Where to write the report (default: the first folder); a folder that is not one of
+        /// the inputs also gets the merged results.csv and results.json.
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -121,6 +138,11 @@ struct SweepArgs {
     /// refused unless --resume or --force.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Run share K of N of the job list (1 <= K <= N; deterministic, balanced by expected
+    /// cost) into --out/shard-K-of-N; merge the shards with `halftrace report`. Inside a Slurm
+    /// job array it defaults to the array task (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT).
+    #[arg(long)]
+    shard: Option<String>,
     /// Continue the sweep in --out: keep its rows, run only the jobs they do not record.
     #[arg(long)]
     resume: bool,
@@ -170,7 +192,7 @@ struct ConformanceArgs {
 
 #[derive(clap::Args)]
 struct BenchArgs {
-    /// Scenes (OBJ or .obj.gz); repeat the flag. Default: the bundled teapot, and the shared
+    /// Scenes (OBJ, glTF or PLY); repeat the flag. Default: the bundled teapot, and the shared
     /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) when
     /// `../shared/scenes` has them.
     #[arg(long)]
@@ -201,7 +223,7 @@ struct BenchArgs {
 
 #[derive(clap::Args)]
 struct TraceArgs {
-    /// OBJ or .obj.gz scene.
+    /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
     #[arg(long)]
     scene: PathBuf,
     /// Layout (f32, f16h) or baseline (rq: the driver's acceleration structure and ray
@@ -407,6 +429,19 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
         anyhow::ensure!(p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")), "--image {}: name a .png file (the image is written as PNG)", p.display());
         anyhow::ensure!(a.rays == "primary", "--image needs --rays primary (got --rays {})", a.rays);
     }
+    Ok(())
+}
+
+fn instance(scene: &std::path::Path, count: usize, seed: u64, out: &std::path::Path) -> anyhow::Result<()> {
+    anyhow::ensure!(count >= 1, "--count must be at least 1");
+    anyhow::ensure!(out.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb")), "--out {}: name a .glb file", out.display());
+    anyhow::ensure!(!out.exists(), "--out {} exists; it is not overwritten", out.display());
+    let s = halftrace::scene::load(scene)?;
+    let total = s.len().checked_mul(count).filter(|&t| t <= halftrace::scene::MAX_TRIANGLES);
+    anyhow::ensure!(total.is_some(), "{} instances of {} triangles exceed the {} triangles a scene may have", count, s.len(), halftrace::scene::MAX_TRIANGLES);
+    let bytes = halftrace::formats::instanced_glb(&s, count, seed);
+    halftrace::fsx::write_atomic(out, &bytes)?;
+    outln!("{}: {} instances of {} ({} triangles each): {} triangles, {} bytes", out.display(), count, s.name, s.len(), total.unwrap_or(0), bytes.len());
     Ok(())
 }
 
@@ -741,7 +776,14 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
         c.float_controls = f.parse().map_err(anyhow::Error::msg).context("--float-controls")?;
     }
     c.check()?;
-    let out = a.out.clone().unwrap_or_else(sweep::default_out);
+    c.shard = match &a.shard {
+        Some(s) => Some(s.parse().map_err(anyhow::Error::msg)?),
+        None => sweep::Shard::from_slurm(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?,
+    };
+    let mut out = a.out.clone().unwrap_or_else(sweep::default_out);
+    if let Some(s) = c.shard {
+        out = out.join(s.folder());
+    }
     anyhow::ensure!(!(a.resume && a.force), "--resume and --force exclude each other");
     let mode = if a.resume { sweep::OutMode::Resume } else if a.force { sweep::OutMode::Force } else { sweep::OutMode::New };
     let kept = sweep::prepare_out(&out, mode)?;
@@ -781,8 +823,25 @@ fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
         }
     }
     let out = out.cloned().unwrap_or_else(|| dirs[0].clone());
+    // Into a folder of its own, the merged rows too (never into a folder it read from).
+    let own = !canon.iter().any(|c| out.canonicalize().is_ok_and(|o| o == *c));
+    if own {
+        anyhow::ensure!(!out.join("results.csv").exists(), "--out {} already holds results.csv; name a new folder for the merged report", out.display());
+        halftrace::report::write_rows(&out, &halftrace::report::sorted(&rows))?;
+        // The images a sweep renders (render, heat maps, diff masks) come along from the
+        // folder that has them, so the merged report shows what the unsplit one does.
+        for d in dirs {
+            for e in std::fs::read_dir(d).with_context(|| d.display().to_string())?.flatten() {
+                let name = e.file_name().to_string_lossy().to_string();
+                let image = name.ends_with(".png") && halftrace::report::is_output(&name) && (name == "render.png" || name.starts_with("heat_") || name.starts_with("diff_"));
+                if image && !out.join(&name).exists() {
+                    halftrace::fsx::write_atomic(&out.join(&name), &std::fs::read(e.path())?)?;
+                }
+            }
+        }
+    }
     halftrace::report::render(&rows, &out, dirs)?;
-    outln!("{} rows from {} folder(s); report: {}", rows.len(), dirs.len(), out.join("report.md").display());
+    outln!("{} rows from {} folder(s); report: {}{}", rows.len(), dirs.len(), out.join("report.md").display(), if own { format!(", merged rows: {}", out.join("results.csv").display()) } else { String::new() });
     Ok(())
 }
 
@@ -804,6 +863,7 @@ fn main() {
     let r = match cli.cmd {
         Cmd::Trace(a) => trace(a),
         Cmd::BvhStats { scene } => bvh_stats(&scene),
+        Cmd::Instance { scene, count, seed, out } => instance(&scene, count, seed, &out),
         Cmd::Devices { bench, device, mask_feature } => devices(bench, device, &mask_feature),
         Cmd::Conformance(a) => conformance(a),
         Cmd::Shaders { emit } => shaders(&emit),

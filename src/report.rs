@@ -79,13 +79,7 @@ impl Writer {
 
     pub fn push(&mut self, row: Row) -> anyhow::Result<()> {
         self.rows.push(row);
-        let mut csv = csv::Writer::from_writer(Vec::new());
-        for r in &self.rows {
-            csv.serialize(r)?;
-        }
-        let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
-        crate::fsx::write_atomic(&self.dir.join("results.csv"), &bytes)?;
-        crate::fsx::write_atomic(&self.dir.join("results.json"), serde_json::to_string_pretty(&self.rows)?.as_bytes())
+        write_rows(&self.dir, &self.rows)
     }
 
     pub fn rows(&self) -> &[Row] {
@@ -114,6 +108,31 @@ pub fn is_output(name: &str) -> bool {
         || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg"))
         || (name.starts_with("heat_") && name.ends_with(".png"))
         || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
+}
+
+/// Rows in the report's order, whatever order they were run or merged in: by device, scene,
+/// rays, layout (registry order), math, B, P, float controls and kernel. A sweep split into
+/// shards and merged reports exactly as the unsplit sweep.
+pub fn sorted(rows: &[Row]) -> Vec<Row> {
+    let mut v = rows.to_vec();
+    let layout = |r: &Row| LayoutId::all().position(|l| l.name() == r.layout).unwrap_or(usize::MAX);
+    v.sort_by(|a, b| {
+        (&a.device, &a.driver, &a.scene, &a.rays, layout(a), &a.layout, &a.math, a.branching, a.packet, &a.float_controls, &a.kernel)
+            .cmp(&(&b.device, &b.driver, &b.scene, &b.rays, layout(b), &b.layout, &b.math, b.branching, b.packet, &b.float_controls, &b.kernel))
+    });
+    v
+}
+
+/// Writes `results.csv` and `results.json` of `rows` into `dir` (atomically each).
+pub fn write_rows(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut csv = csv::Writer::from_writer(Vec::new());
+    for r in rows {
+        csv.serialize(r)?;
+    }
+    let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
+    crate::fsx::write_atomic(&dir.join("results.csv"), &bytes)?;
+    crate::fsx::write_atomic(&dir.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())
 }
 
 /// Reads the rows of `DIR/results.csv`.
@@ -286,6 +305,7 @@ fn fmt(x: f64) -> String {
 /// Renders `report.md` and the plots into `out` from `rows` (from one or more folders).
 pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<()> {
     std::fs::create_dir_all(out)?;
+    let rows = &sorted(rows);
     let r = ratios(rows);
     let by_b = series(&r, true);
     let by_p = series(&r, false);

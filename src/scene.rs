@@ -1,5 +1,6 @@
-//! Wavefront OBJ scenes (plain or gzip-compressed), triangulated, all models concatenated in
-//! file order. A triangle's index in that order is its public `prim` id.
+//! Scenes: Wavefront OBJ (triangulated, all models concatenated in file order), glTF 2.0
+//! (`.gltf`, `.glb`) and PLY ([`crate::formats`]), each plain or gzip-compressed (`.gz`). A
+//! triangle's index in the loader's order is its public `prim` id.
 
 use crate::geom::Aabb;
 use glam::Vec3;
@@ -21,6 +22,10 @@ pub enum SceneError {
     NonFinite { path: PathBuf, line: usize, text: String },
     #[error("{path}: OBJ parse error: {msg}")]
     Parse { path: PathBuf, msg: String },
+    /// A glTF or PLY file that does not describe triangles we can read (the message names the
+    /// element).
+    #[error("{path}: {msg}")]
+    Invalid { path: PathBuf, msg: String },
     #[error("{path}: scene has no triangles")]
     NoTriangles { path: PathBuf },
     #[error("{path}: scene has {count} triangles; at most {max} are supported")]
@@ -87,13 +92,41 @@ impl Scene {
     }
 }
 
-/// The short name a scene file gets (file name without `.obj`/`.obj.gz`).
+/// The short name a scene file gets (file name without `.gz` and its format's extension).
 pub fn scene_name(path: &Path) -> String {
     let f = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-    f.trim_end_matches(".gz").trim_end_matches(".obj").to_string()
+    let f = f.strip_suffix(".gz").unwrap_or(&f);
+    let (stem, ext) = f.rsplit_once('.').unwrap_or((f, ""));
+    if Format::of_ext(ext).is_some() { stem.to_string() } else { f.to_string() }
 }
 
-/// Loads an OBJ or `.obj.gz` file.
+/// A scene file's format, from its extension (after any `.gz`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Obj,
+    Gltf,
+    Ply,
+}
+
+impl Format {
+    fn of_ext(ext: &str) -> Option<Format> {
+        match ext.to_ascii_lowercase().as_str() {
+            "obj" => Some(Format::Obj),
+            "gltf" | "glb" => Some(Format::Gltf),
+            "ply" => Some(Format::Ply),
+            _ => None,
+        }
+    }
+
+    /// The format of `path` (OBJ for an unknown extension, as before other formats existed).
+    pub fn of(path: &Path) -> Format {
+        let f = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let f = f.strip_suffix(".gz").unwrap_or(&f);
+        f.rsplit_once('.').and_then(|(_, e)| Format::of_ext(e)).unwrap_or(Format::Obj)
+    }
+}
+
+/// Loads an OBJ, glTF (`.gltf`, `.glb`) or PLY file, plain or gzip-compressed (`.gz`).
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     // Only regular files: a FIFO would block and a device such as /dev/zero never ends.
     let meta = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
@@ -112,6 +145,16 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     };
     if bytes.iter().all(|b| b.is_ascii_whitespace()) {
         return Err(SceneError::EmptyFile { path: path.into() });
+    }
+    let format = Format::of(path);
+    if format != Format::Obj {
+        let mut warnings = Vec::new();
+        let tris = match format {
+            Format::Gltf => crate::formats::load_gltf(path, &bytes, &mut warnings)?,
+            _ => crate::formats::load_ply(path, &bytes)?,
+        };
+        drop(bytes);
+        return finish(path, tris, warnings);
     }
     prescan(path, &bytes)?;
 
@@ -150,9 +193,15 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
             tris.push([vert(f[0])?, vert(f[1])?, vert(f[2])?]);
         }
     }
+    finish(path, tris, warnings)
+}
+
+/// The scene of a loaded triangle list, with the file's name on every error and warning.
+fn finish(path: &Path, tris: Vec<[Vec3; 3]>, warnings: Vec<String>) -> Result<Scene, SceneError> {
     let mut scene = Scene::from_triangles(&scene_name(path), tris).map_err(|e| match e {
         SceneError::NoTriangles { .. } => SceneError::NoTriangles { path: path.into() },
         SceneError::TooLarge { count, max, .. } => SceneError::TooLarge { path: path.into(), count, max },
+        SceneError::NonFinite { line, text, .. } => SceneError::NonFinite { path: path.into(), line, text },
         other => other,
     })?;
     scene.path = path.into();

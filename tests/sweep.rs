@@ -339,3 +339,57 @@ fn progress_lines_when_not_a_terminal() {
     assert_eq!(lines.len(), 3, "{err}");
     assert!(lines[0].starts_with("[1/3] teapot primary trav_") && lines[2].contains("ETA 0 s"), "{err}");
 }
+
+/// `--shard 1/2` and `--shard 2/2` (the second through Slurm's array variables) each run
+/// their share into `OUT/shard-K-of-2`; `report` merges them into the rows of the unsplit
+/// sweep (timings aside) and the same report, numbers aside (images included).
+#[test]
+fn shards_merge_into_the_unsplit_sweep() {
+    let only = ["--rays", "primary,ao", "--layouts", "f32,f16h,q8,rq", "--maths", "f32", "--branchings", "4,8", "--packets", "1,4", "--scheme-branchings", "4"];
+    let whole = tmp("shard-whole");
+    assert!(sweep(&whole, &only).status.success());
+    let split = tmp("shard-split");
+    let first = sweep(&split, &[&only[..], &["--shard", "1/2"]].concat());
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    let scene = teapot();
+    let mut args = vec!["sweep", "--quiet", "--scene", &scene, "--width", "24", "--height", "24", "--repeat", "3", "--warmup", "1", "--out", split.to_str().unwrap()];
+    args.extend_from_slice(&only);
+    let second = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(&args).env("SLURM_ARRAY_TASK_COUNT", "2").env("SLURM_ARRAY_TASK_ID", "1").env("SLURM_ARRAY_TASK_MIN", "0").output().unwrap();
+    assert!(second.status.success(), "{}", String::from_utf8_lossy(&second.stderr));
+    let (s1, s2) = (split.join("shard-1-of-2"), split.join("shard-2-of-2"));
+    let (r1, r2) = (read_rows(&s1).unwrap(), read_rows(&s2).unwrap());
+    assert!(!r1.is_empty() && !r2.is_empty(), "an empty shard");
+    let merged = tmp("shard-merged");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", s1.to_str().unwrap(), s2.to_str().unwrap(), "--out", merged.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Rows: the same set, every field but the timings (and what is derived from them) equal.
+    let untimed = |mut r: Row| {
+        (r.mrays_median, r.mrays_min, r.mrays_max, r.ms_median, r.ms_min, r.ms_max, r.build_ms, r.device_fp16_ratio) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        format!("{r:?}")
+    };
+    let mut want: Vec<String> = read_rows(&whole).unwrap().into_iter().map(untimed).collect();
+    let mut got: Vec<String> = read_rows(&merged).unwrap().into_iter().map(untimed).collect();
+    assert_eq!(got.len(), r1.len() + r2.len());
+    want.sort();
+    got.sort();
+    assert_eq!(got, want, "merged shards differ from the unsplit sweep");
+    // The report: the same lines, once every number is masked (the timings differ).
+    let mask = |p: &Path| -> Vec<String> {
+        let md = std::fs::read_to_string(p.join("report.md")).unwrap();
+        let one = |l: &str| {
+            let mut o = String::new();
+            for c in l.chars().map(|c| if c.is_ascii_digit() { '#' } else { c }) {
+                if !(c == '#' && o.ends_with('#')) {
+                    o.push(c);
+                }
+            }
+            o
+        };
+        md.lines().filter(|l| !l.starts_with("Rendered from")).map(one).collect()
+    };
+    assert_eq!(mask(&whole), mask(&merged), "the merged report differs from the unsplit one beyond its numbers");
+    assert!(merged.join("render.png").is_file() && merged.join("heat_q8.png").is_file(), "the images came along");
+    // A bad shard is refused before anything runs.
+    let bad = sweep(&tmp("shard-bad"), &[&only[..], &["--shard", "3/2"]].concat());
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("K/N"));
+}

@@ -111,7 +111,15 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     cfg.check()?;
     let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), kernel_timeout_s: Some(cfg.kernel_timeout), ..Default::default() };
     let g = Gpu::new(&opts)?;
-    let jobs = jobs::list(cfg);
+    let mut jobs = jobs::list(cfg);
+    if let Some(s) = cfg.shard {
+        let bytes: Vec<u64> = cfg.scenes.iter().map(|p| std::fs::metadata(p).map(|m| m.len()).unwrap_or(1)).collect();
+        let all = jobs.len();
+        jobs = jobs::shard(cfg, &jobs, s, &bytes);
+        if !quiet {
+            eprintln!("shard {}/{}: {} of {} jobs", s.k, s.n, jobs.len(), all);
+        }
+    }
     // Baselines need per-device state (pipelines); a device that cannot run one gets a line.
     let mut baselines: HashMap<LayoutId, Result<Box<dyn BaselineDevice + '_>, String>> = HashMap::new();
     for l in cfg.entries() {

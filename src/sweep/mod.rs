@@ -7,7 +7,7 @@ pub mod executor;
 pub mod jobs;
 
 pub use executor::{prepare_out, run, OutMode, Summary};
-pub use jobs::{Job, Target};
+pub use jobs::{Job, Shard, Target};
 
 use crate::bvh;
 use crate::layout::{LayoutId, Math};
@@ -53,6 +53,10 @@ pub struct Config {
     pub float_controls: FcChoice,
     /// User kernels (`[[kernel]]` tables), each run as its own rows.
     pub kernel: Vec<KernelSpec>,
+    /// Run only this share of the job list (`--shard K/N` or a Slurm array task; not a file
+    /// key: the same config serves every shard).
+    #[serde(skip)]
+    pub shard: Option<Shard>,
 }
 
 /// A user kernel in a sweep: a GLSL compute file or SPIR-V module standing in for the built-in
@@ -118,6 +122,7 @@ impl Default for Config {
             kernel_timeout: crate::gpu::context::DEFAULT_KERNEL_TIMEOUT_S,
             float_controls: FcChoice::Auto,
             kernel: Vec::new(),
+            shard: None,
         }
     }
 }
