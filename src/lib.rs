@@ -21,6 +21,7 @@ pub mod interface;
 pub mod layout;
 pub mod measure;
 pub mod npy;
+pub mod progress;
 pub mod rays;
 pub mod report;
 pub mod scene;

@@ -126,8 +126,13 @@ impl Format {
     }
 }
 
-/// Loads an OBJ, glTF (`.gltf`, `.glb`) or PLY file, plain or gzip-compressed (`.gz`).
+/// Loads an OBJ, glTF (`.gltf`, `.glb`) or PLY file, plain or gzip-compressed (`.gz`) (a
+/// progress line when it takes over a second).
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    crate::progress::step(&format!("loading {}", path.display()), || load_quiet(path))
+}
+
+fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
     // Only regular files: a FIFO would block and a device such as /dev/zero never ends.
     let meta = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
     if !meta.is_file() {

@@ -82,8 +82,12 @@ const PAR_SUBTREE: usize = 4096;
 /// Nodes above this many triangles are binned in parallel.
 const PAR_BINNING: usize = 65536;
 
-/// Builds the binary BVH of a scene.
+/// Builds the binary BVH of a scene (a progress line when it takes over a second).
 pub fn build_binary(scene: &Scene) -> BinaryBvh {
+    crate::progress::step(&format!("building the BVH of {} ({} triangles)", scene.name, scene.tris.len()), || build_binary_quiet(scene))
+}
+
+fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
     let n = scene.tris.len();
     let (bounds, centroids): (Vec<Bx>, Vec<Vec3A>) = scene
         .tris

@@ -319,8 +319,10 @@ impl Encoded {
     pub fn new(scene: &Scene, bin: &BinaryBvh, layout: LayoutId, b: usize) -> anyhow::Result<Encoded> {
         crate::bvh::check_branching(b)?;
         let l = layout.bvh().ok_or_else(|| anyhow::anyhow!("{layout} is a baseline, not a BVH layout"))?;
-        let w = crate::bvh::collapse(bin, b);
-        l.encode(scene, &w).map_err(|e| anyhow::anyhow!("encoding {} as {layout}, B={b}: {e}", scene.name))
+        crate::progress::step(&format!("encoding {} as {layout}, B={b}", scene.name), || {
+            let w = crate::bvh::collapse(bin, b);
+            l.encode(scene, &w).map_err(|e| anyhow::anyhow!("encoding {} as {layout}, B={b}: {e}", scene.name))
+        })
     }
 
     /// The typed nodes and root of layout `L` at `B` (`None` for another layout or B).

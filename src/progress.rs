@@ -1,0 +1,39 @@
+//! A line on stderr for each step of a big job that takes over a second (loading a scene,
+//! building its BVH, encoding a layout): "step…" once it has run for a second, then "step:
+//! done in N s". Quick steps print nothing.
+
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// Runs `f`, announcing `label` if it takes over a second, and its time when it ends.
+pub fn step<T>(label: &str, f: impl FnOnce() -> T) -> T {
+    let (tx, rx) = mpsc::channel::<()>();
+    let t0 = Instant::now();
+    std::thread::scope(|s| {
+        let watcher = s.spawn(move || {
+            let slow = matches!(rx.recv_timeout(Duration::from_secs(1)), Err(mpsc::RecvTimeoutError::Timeout));
+            if slow {
+                eprintln!("{label}…");
+            }
+            slow
+        });
+        let r = f();
+        let _ = tx.send(());
+        if watcher.join().unwrap_or(false) {
+            eprintln!("{label}: done in {:.1} s", t0.elapsed().as_secs_f64());
+        }
+        r
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_step_returns_its_value_quick_or_slow() {
+        assert_eq!(super::step("quick", || 7), 7);
+        assert_eq!(super::step("slow (a test of the progress line)", || {
+            std::thread::sleep(std::time::Duration::from_millis(1200));
+            "done"
+        }), "done");
+    }
+}
