@@ -787,6 +787,7 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
     anyhow::ensure!(!(a.resume && a.force), "--resume and --force exclude each other");
     let mode = if a.resume { sweep::OutMode::Resume } else if a.force { sweep::OutMode::Force } else { sweep::OutMode::New };
     let kept = sweep::prepare_out(&out, mode)?;
+    halftrace::progress::set_quiet(a.quiet);
     let t0 = Instant::now();
     let s = sweep::run(&c, &out, a.quiet, &a.mask_feature, kept)?;
     outln!("{} variants in {:.0} s; report: {}", s.rows, t0.elapsed().as_secs_f64(), s.out.join("report.md").display());

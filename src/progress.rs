@@ -2,11 +2,22 @@
 //! building its BVH, encoding a layout): "step…" once it has run for a second, then "step:
 //! done in N s". Quick steps print nothing.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+static QUIET: AtomicBool = AtomicBool::new(false);
+
+/// Silences the progress lines (`sweep --quiet`).
+pub fn set_quiet(quiet: bool) {
+    QUIET.store(quiet, Ordering::Relaxed);
+}
+
 /// Runs `f`, announcing `label` if it takes over a second, and its time when it ends.
 pub fn step<T>(label: &str, f: impl FnOnce() -> T) -> T {
+    if QUIET.load(Ordering::Relaxed) {
+        return f();
+    }
     let (tx, rx) = mpsc::channel::<()>();
     let t0 = Instant::now();
     std::thread::scope(|s| {
