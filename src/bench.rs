@@ -34,6 +34,8 @@ pub struct BenchConfig {
     pub repeat: usize,
     pub device: Option<String>,
     pub validation: bool,
+    /// Reduced-precision layouts to time beside f32 (empty: every conservative one).
+    pub layouts: Vec<LayoutId>,
 }
 
 /// The packet sizes of the packet ratios (against P = 1), f32 at B = 4 on primary rays.
@@ -77,13 +79,14 @@ pub struct BenchResult {
 }
 
 /// The variants timed on every scene and ray kind: the f32 baseline at B = 4 and 8, every
-/// conservative reduced-precision layout in every math at B = 4 and 8 (P = 1); on primary
-/// rays also f32 at B = 4 with every packet size.
-fn variants(kind: &RayKind) -> Vec<Variant> {
+/// conservative reduced-precision layout (or those of `only`) in every math at B = 4 and 8
+/// (P = 1); on primary rays also f32 at B = 4 with every packet size.
+fn variants(kind: &RayKind, only: &[LayoutId]) -> Vec<Variant> {
     let mut v = Vec::new();
     for layout in LayoutId::layouts() {
         let l = layout.bvh().expect("a BVH layout");
-        if !l.conservative() {
+        let chosen = layout == LayoutId::f32() || if only.is_empty() { l.conservative() } else { only.contains(&layout) };
+        if !chosen {
             continue;
         }
         for &math in l.maths() {
@@ -225,7 +228,7 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
     // Encodings, kernels and baseline structures for everything timed on this scene.
     let mut wanted: Vec<(usize, Variant)> = Vec::new();
     for (ki, s) in sets.iter().enumerate() {
-        for v in variants(&s.kind) {
+        for v in variants(&s.kind, &cfg.layouts) {
             match gpu::support::resolve(&g.info, v, FcChoice::Auto) {
                 Ok(v) => wanted.push((ki, v)),
                 Err(why) => eprintln!("bench: {} skipped: {why}", v.name(false)),

@@ -200,6 +200,10 @@ struct BenchArgs {
     /// Ray kinds, comma-separated: primary, ao, diffuse, grazing.
     #[arg(long, default_value = "primary,ao,diffuse", value_delimiter = ',')]
     rays: Vec<String>,
+    /// Reduced-precision layouts to time beside f32, comma-separated (default: every
+    /// conservative one) — for a quicker check of one layout's change.
+    #[arg(long, value_delimiter = ',')]
+    layouts: Vec<String>,
     #[arg(long, default_value_t = 256)]
     width: u32,
     #[arg(long, default_value_t = 256)]
@@ -465,7 +469,13 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(o) = &a.out {
         anyhow::ensure!(!o.is_dir(), "--out {} is a folder; name a file", o.display());
     }
-    let cfg = halftrace::bench::BenchConfig { scenes, kinds, width: a.width, height: a.height, rounds: a.rounds, repeat: a.repeat, device: a.device.clone(), validation: a.validation };
+    let mut layouts = Vec::new();
+    for l in &a.layouts {
+        let id: LayoutId = l.parse().with_context(|| format!("--layouts {l}"))?;
+        anyhow::ensure!(id.bvh().is_some(), "--layouts {l}: a baseline; rq and embree are always timed when the device has them");
+        layouts.push(id);
+    }
+    let cfg = halftrace::bench::BenchConfig { scenes, kinds, width: a.width, height: a.height, rounds: a.rounds, repeat: a.repeat, device: a.device.clone(), validation: a.validation, layouts };
     let r = halftrace::bench::run(&cfg)?;
     let md = halftrace::bench::markdown(&cfg, &r);
     outln!("{md}");

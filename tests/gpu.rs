@@ -571,4 +571,10 @@ fn bench_prints_every_ratio_with_medians_and_ranges() {
     for t in ["trav_f32_b8_p1", "trav_f16h_m16_b8_p1", "trav_q8_m32_b4_p1", "rq", "embree"] {
         assert!(text.contains(&format!("| teapot | primary | {t} |")), "no speed of {t}");
     }
+    // --layouts narrows the reduced-precision set (f32 stays); a baseline or unknown name is
+    // refused before anything runs.
+    for (bad, want) in [("rq", "a baseline"), ("f9", "unknown layout 'f9'")] {
+        let (ok, _, err) = cli(&["bench", "--scene", scene.to_str().unwrap(), "--layouts", bad]);
+        assert!(!ok && err.contains(want), "{bad}: {err}");
+    }
 }
