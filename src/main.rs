@@ -844,8 +844,7 @@ fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
         for d in dirs {
             for e in std::fs::read_dir(d).with_context(|| d.display().to_string())?.flatten() {
                 let name = e.file_name().to_string_lossy().to_string();
-                let image = name.ends_with(".png") && halftrace::report::is_output(&name) && (name == "render.png" || name.starts_with("heat_") || name.starts_with("diff_"));
-                if image && !out.join(&name).exists() {
+                if halftrace::report::is_image(&name) && !out.join(&name).exists() {
                     halftrace::fsx::write_atomic(&out.join(&name), &std::fs::read(e.path())?)?;
                 }
             }

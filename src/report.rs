@@ -104,10 +104,13 @@ const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "schemes
 
 /// Whether a file name is one a sweep writes (so `--force` may replace it).
 pub fn is_output(name: &str) -> bool {
-    OUTPUTS.contains(&name)
-        || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg"))
-        || (name.starts_with("heat_") && name.ends_with(".png"))
-        || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
+    OUTPUTS.contains(&name) || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg")) || is_image(name)
+}
+
+/// Whether a file name is one of the images a sweep renders from its traces (the shaded
+/// render, per-layout heat maps and diff masks), not from its rows.
+pub fn is_image(name: &str) -> bool {
+    name == "render.png" || (name.starts_with("heat_") && name.ends_with(".png")) || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
 }
 
 /// Rows in the report's order, whatever order they were run or merged in: by device, scene,
@@ -398,18 +401,13 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
 fn scheme_plot(points: &BTreeMap<(String, usize, String, usize), SchemePoint>, out: &Path) -> anyhow::Result<()> {
     let devices: std::collections::BTreeSet<&String> = points.keys().map(|k| &k.0).collect();
     let mut lines: Vec<(String, Vec<(usize, f64)>)> = Vec::new();
-    for ((d, o, label, b), p) in points {
+    for ((d, _, label, b), p) in points {
         let name = if devices.len() > 1 { format!("{label} ({d})") } else { label.clone() };
         match lines.iter_mut().find(|l| l.0 == name) {
             Some(l) => l.1.push((*b, p.ratio[0] / p.n as f64)),
             None => lines.push((name, vec![(*b, p.ratio[0] / p.n as f64)])),
         }
-        let _ = o;
     }
-    let mut xs: Vec<usize> = points.keys().map(|k| k.3).collect();
-    xs.sort();
-    xs.dedup();
-    let _ = xs;
     line_chart(out, "schemes", "Mrays/s of each scheme / f32 by branching factor (P = 1)", "branching factor B", "Mrays/s / f32", &lines)
 }
 
@@ -465,15 +463,12 @@ fn look(label: &str, labels: &[String]) -> (RGBColor, usize) {
 /// gets a finite axis (an infinite one makes the mesh drawing loop forever).
 fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) -> anyhow::Result<()> {
     font()?;
-    let mut labels: Vec<String> = panels.iter().flat_map(|p| p.lines.iter().map(|l| l.label.clone())).collect();
-    labels.dedup();
-    let mut uniq = Vec::new();
-    for l in labels {
-        if !uniq.contains(&l) {
-            uniq.push(l);
+    let mut labels: Vec<String> = Vec::new();
+    for l in panels.iter().flat_map(|p| p.lines.iter()) {
+        if !labels.contains(&l.label) {
+            labels.push(l.label.clone());
         }
     }
-    let labels = uniq;
     let width = 520 * panels.len().max(1) as u32 + 80;
     macro_rules! draw {
         ($root:expr) => {{
@@ -561,10 +556,7 @@ fn line_chart(out: &Path, name: &str, title: &str, xlabel: &str, ylabel: &str, l
     chart(out, name, title, ylabel, &[panel])
 }
 
-fn ratio_lines(s: &Series) -> (Vec<usize>, Vec<(String, Vec<(usize, f64)>)>) {
-    let mut xs: Vec<usize> = s.keys().map(|k| k.1).collect();
-    xs.sort();
-    xs.dedup();
+fn ratio_lines(s: &Series) -> Vec<(String, Vec<(usize, f64)>)> {
     let mut devices: Vec<String> = s.keys().map(|k| k.0.clone()).collect();
     devices.dedup();
     let mut lines = Vec::new();
@@ -575,14 +567,12 @@ fn ratio_lines(s: &Series) -> (Vec<usize>, Vec<(String, Vec<(usize, f64)>)>) {
             lines.push((label, pts));
         }
     }
-    (xs, lines)
+    lines
 }
 
 fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Result<()> {
-    let (_, lines) = ratio_lines(by_b);
-    line_chart(out, "ratio_vs_b", "f16h / f32 by branching factor (P = 1)", "branching factor B", "f16h / f32", &lines)?;
-    let (_, lines) = ratio_lines(by_p);
-    line_chart(out, "ratio_vs_p", "f16h / f32 by packet size (B = 4)", "packet size P", "f16h / f32", &lines)?;
+    line_chart(out, "ratio_vs_b", "f16h / f32 by branching factor (P = 1)", "branching factor B", "f16h / f32", &ratio_lines(by_b))?;
+    line_chart(out, "ratio_vs_p", "f16h / f32 by packet size (B = 4)", "packet size P", "f16h / f32", &ratio_lines(by_p))?;
     // Mrays/s per variant: one panel per series (by B at P = 1, by P at the packet B), one
     // line per layout/math (mean over scenes and ray kinds), min–max bars over the timed
     // dispatches (means of the per-row minima and maxima).
