@@ -144,8 +144,7 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
         for (ki, set) in sets.iter().enumerate() {
             let n = set.rays.len();
             let t = |k: &Key| times.get(&(ki, *k));
-            for ((kk, k), ms) in times.iter().filter(|((kk, _), _)| *kk == ki) {
-                let _ = kk;
+            for ((_, k), ms) in times.iter().filter(|((kk, _), _)| *kk == ki) {
                 let s = Timing::of(&ms.iter().map(|m| n as f64 / m / 1e3).collect::<Vec<_>>());
                 speeds.push((name.clone(), set.kind.to_string(), k.label(), s.median, s.min, s.max));
             }
@@ -163,8 +162,7 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
             let hv = |m: Math| Key::Variant(Variant::new(f16h, 8, 1).with_math(m));
             push("f16h fp32-math ÷ f32, B = 8, P = 1", &hv(Math::F32), &f32_(8, 1), Some(0.9));
             push("f16h fp16-math ÷ f32, B = 8, P = 1", &hv(Math::F16), &f32_(8, 1), Some(0.35));
-            // The best reduced-precision variant against f32 at the same B (and against
-            // the best f32), by median ratio.
+            // The best reduced-precision variant against f32 at the same B, by median ratio.
             let mut best: Option<(Key, Key, f64)> = None;
             for (kk, k) in times.keys() {
                 if let (true, Key::Variant(v)) = (*kk == ki, k) {

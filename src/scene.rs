@@ -94,10 +94,18 @@ impl Scene {
 
 /// The short name a scene file gets (file name without `.gz` and its format's extension).
 pub fn scene_name(path: &Path) -> String {
+    name_and_format(path).0
+}
+
+/// A scene file's name without `.gz` and its format's extension, and the format that
+/// extension names (`None`: no known one).
+fn name_and_format(path: &Path) -> (String, Option<Format>) {
     let f = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
     let f = f.strip_suffix(".gz").unwrap_or(&f);
-    let (stem, ext) = f.rsplit_once('.').unwrap_or((f, ""));
-    if Format::of_ext(ext).is_some() { stem.to_string() } else { f.to_string() }
+    match f.rsplit_once('.').and_then(|(stem, ext)| Some((stem, Format::of_ext(ext)?))) {
+        Some((stem, format)) => (stem.to_string(), Some(format)),
+        None => (f.to_string(), None),
+    }
 }
 
 /// A scene file's format, from its extension (after any `.gz`).
@@ -120,9 +128,7 @@ impl Format {
 
     /// The format of `path` (OBJ for an unknown extension, as before other formats existed).
     pub fn of(path: &Path) -> Format {
-        let f = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-        let f = f.strip_suffix(".gz").unwrap_or(&f);
-        f.rsplit_once('.').and_then(|(_, e)| Format::of_ext(e)).unwrap_or(Format::Obj)
+        name_and_format(path).1.unwrap_or(Format::Obj)
     }
 }
 

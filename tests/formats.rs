@@ -180,19 +180,10 @@ fn bad_files_name_the_file_and_element() {
     for (name, bytes, want) in cases {
         let p = d.join(name);
         std::fs::write(&p, bytes).unwrap();
-        let e = scene::load(&p).map(|s| format!("loaded {} triangles", s.len())).unwrap_err_or_else();
-        assert!(e.contains(&p.display().to_string()) && e.contains(want), "{name}: {e}");
-    }
-}
-
-trait ErrText {
-    fn unwrap_err_or_else(self) -> String;
-}
-impl ErrText for Result<String, halftrace::scene::SceneError> {
-    fn unwrap_err_or_else(self) -> String {
-        match self {
-            Ok(s) => panic!("expected an error, {s}"),
+        let e = match scene::load(&p) {
+            Ok(s) => panic!("{name}: loaded {} triangles, expected an error", s.len()),
             Err(e) => e.to_string(),
-        }
+        };
+        assert!(e.contains(&p.display().to_string()) && e.contains(want), "{name}: {e}");
     }
 }
