@@ -10,8 +10,24 @@
 #endif
 layout(local_size_x = WG, local_size_y = 1, local_size_z = 1) in;
 
+#ifdef ADDRESSED
+// The scene's buffers through their device addresses (scenes beyond maxStorageBufferRange):
+// a table of three addresses is bound in the nodes' place; `nodes`, `tri_v` and `tri_id`
+// read the same bytes as the bound buffers below. A layout declares its node buffer with
+// NODE_BUFFER(Node) in either case.
+layout(buffer_reference) buffer NodesRef;
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer TriVertsRef { float v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer TriIdsRef { uint v[]; };
+layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Addresses { NodesRef nodes_ref; TriVertsRef tri_v_ref; TriIdsRef tri_id_ref; };
+#define NODE_BUFFER(T) layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer NodesRef { T v[]; };
+#define nodes nodes_ref.v
+#define tri_v tri_v_ref.v
+#define tri_id tri_id_ref.v
+#else
+#define NODE_BUFFER(T) layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { T nodes[]; };
 layout(std430, set = 0, binding = BINDING_TRI_VERTS) readonly buffer TriVerts { float tri_v[]; };   // 9 floats per triangle, leaf order
 layout(std430, set = 0, binding = BINDING_TRI_IDS) readonly buffer TriIds { uint tri_id[]; };       // public prim id per triangle
+#endif
 layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { float ray_f[]; };            // ox oy oz tmin dx dy dz tmax
 layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
 #ifdef STATS

@@ -1,14 +1,17 @@
 #version 460
 #extension GL_EXT_control_flow_attributes : require
+#ifdef ADDRESSED
+#extension GL_EXT_buffer_reference : require
+#endif
 // The traversal skeleton of every layout and kernel family: single rays (P = 1), packets in
 // a subgroup (PACKET_SUBGROUP) and packets in shared memory; STATS adds the counters. It
 // mirrors src/trace/traverse.rs step for step.
 //
 // Defines: B, P, WG, STACK_SIZE, MATH_F16 | MATH_F32 | MATH_MIXED, PACKET_SUBGROUP, STATS,
-// HAS_F64. "interface.glsl" is generated from the Rust definitions for this variant (child
-// word fields, push constants, Hit, Counters, the layout's stack Entry); "layout.glsl" is the
+// HAS_F64, FC_OFF, ADDRESSED. "interface.glsl" is generated from the Rust definitions for this
+// variant (child word fields, push constants, Hit, Counters, the layout's stack Entry); "layout.glsl" is the
 // variant's layout hooks (glsl/layout/<name>.glsl), which provide:
-//   Node buffer `nodes[]` at BINDING_NODES
+//   Node buffer `nodes[]`, declared with NODE_BUFFER(Node) (bound, or by address: ray.glsl)
 //   uint  child_word(uint ni, uint s)
 //   void  child_box(uint ni, uint s, out vec3 lo, out vec3 hi)     (stored box, widened)
 //   void  layout_ray(RayPre r)                  per-ray constants (private globals)

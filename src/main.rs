@@ -7,7 +7,7 @@ use halftrace::gpu::kernel::{self, GpuBvh, Kernel, Source};
 use halftrace::layout::{Encoded, LayoutId, Math};
 use halftrace::measure::{self, BaselineTarget, KernelTarget, Plan, Reference};
 use halftrace::rays::{make_rays, Camera, RayKind, RayParams};
-use halftrace::variant::{FcChoice, FloatControls, PacketImpl, Variant};
+use halftrace::variant::{Buffers, FcChoice, FloatControls, PacketImpl, Variant};
 use halftrace::{gpu, npy, scene};
 use std::io::Write;
 use std::path::PathBuf;
@@ -555,6 +555,10 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let imp = kernel::choose_impl(&g, &variant, force_impl);
         let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
         let gb = GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
+        if gb.buffers == Buffers::Addressed {
+            outln!("scene buffers read by address: {} bytes of nodes and triangles, more than one storage buffer may span on this device (maxStorageBufferRange {} bytes)", gb.bytes, g.info.max_storage_buffer);
+        }
+        let variant = variant.with_buffers(gb.buffers);
         let timed = Kernel::build(&g, &variant, imp, false, &source).with_context(|| variant.to_string())?;
         let counting = match (&source, a.stats) {
             (_, false) => None,

@@ -25,6 +25,20 @@ pub struct Variant {
     pub math: Math,
     /// Whether the kernel declares the float-control execution modes it relies on.
     pub fc: FloatControls,
+    /// How the kernel reaches the scene's buffers (set from the uploaded BVH).
+    pub buffers: Buffers,
+}
+
+/// How a kernel reaches the scene's node, triangle and id buffers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
+pub enum Buffers {
+    /// Storage-buffer bindings, each within the device's `maxStorageBufferRange`.
+    #[default]
+    Bound,
+    /// Through 64-bit buffer device addresses, read from a table bound in the nodes' place:
+    /// for scenes whose nodes or triangles exceed `maxStorageBufferRange` (needs
+    /// `bufferDeviceAddress`). Reads the same bytes, so the hits are the same.
+    Addressed,
 }
 
 /// The float-control execution modes of a kernel (SPIR-V 1.4 / `VK_KHR_shader_float_controls`).
@@ -100,12 +114,18 @@ pub fn stack_entries(b: usize) -> usize {
 impl Variant {
     /// A variant in its layout's default math. `layout` must be a BVH layout.
     pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
-        Variant { layout, branching, packet, math: layout.caps().maths[0], fc: FloatControls::On }
+        Variant { layout, branching, packet, math: layout.caps().maths[0], fc: FloatControls::On, buffers: Buffers::Bound }
     }
 
     /// The same variant with float controls `fc`.
     pub fn with_fc(mut self, fc: FloatControls) -> Variant {
         self.fc = fc;
+        self
+    }
+
+    /// The same variant reaching the scene's buffers as `buffers` says.
+    pub fn with_buffers(mut self, buffers: Buffers) -> Variant {
+        self.buffers = buffers;
         self
     }
 
@@ -120,16 +140,17 @@ impl Variant {
     /// The kernel's name: `trav_{layout}[_{math}]_b{B}_p{P}` (the math tag m16, m32 or mix
     /// for layouts with more than one mode), then `_subgroup` for the subgroup packet
     /// implementation and `_stats` for the counting kernel, after `_fcoff` for a kernel built
-    /// without float controls. Packets of P > 1 without a suffix use shared memory (portable
+    /// without float controls and `_addr` for one that reads the scene by address. Packets of P > 1 without a suffix use shared memory (portable
     /// to any subgroup size).
     pub fn kernel_name(&self, imp: PacketImpl, stats: bool) -> String {
         format!(
-            "trav_{}{}_b{}_p{}{}{}{}",
+            "trav_{}{}_b{}_p{}{}{}{}{}",
             self.layout.name(),
             if self.layout.caps().maths.len() > 1 { format!("_{}", self.math.tag()) } else { String::new() },
             self.branching,
             self.packet,
             if self.fc == FloatControls::Off { "_fcoff" } else { "" },
+            if self.buffers == Buffers::Addressed { "_addr" } else { "" },
             match imp {
                 PacketImpl::Subgroup => "_subgroup",
                 PacketImpl::Hybrid => "_hybrid",
@@ -207,6 +228,9 @@ impl Variant {
         }
         if self.fc == FloatControls::Off {
             d.push(("FC_OFF".into(), "1".into()));
+        }
+        if self.buffers == Buffers::Addressed {
+            d.push(("ADDRESSED".into(), "1".into()));
         }
         d
     }

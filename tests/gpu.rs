@@ -236,14 +236,52 @@ fn missing_features_fall_back_to_what_stays_exact() {
     assert!(err.contains("needs shaderFloat16") && err.contains("lacks") && !err.contains("panicked"), "{err}");
 }
 
+/// A scene whose buffers exceed `maxStorageBufferRange` (here a pretended 16 KiB limit) is read
+/// through buffer device addresses: every layout and math mode, single rays and packets, equals
+/// its CPU reference (hits bitwise, counters exactly), under the validation layer.
+#[test]
+fn scenes_beyond_one_storage_buffer_are_read_by_address() {
+    use halftrace::variant::Buffers;
+    let g = Gpu::new(&ContextOptions { validation: true, max_buffer: Some(16384), ..Default::default() }).unwrap();
+    assert!(g.info.buffer_device_address, "lavapipe has bufferDeviceAddress");
+    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let sets = ray_sets(&p, 16, 100);
+    for layout in LayoutId::layouts() {
+        let enc = encode(&p, layout, 8);
+        let gb = GpuBvh::upload(&g, &enc).unwrap();
+        assert_eq!(gb.buffers, Buffers::Addressed, "{layout}: {} bytes do not fit 16 KiB bindings", gb.bytes);
+        // A kernel built for bound buffers is refused, not run over the wrong bindings.
+        let bound = builtin(&g, &Variant::new(layout, 8, 1), PacketImpl::Single, false);
+        let e = bound.run(&g, &gb, &sets[0].1, 0, 1).err().expect("a bound kernel on an addressed BVH is refused").to_string();
+        assert!(e.contains("Addressed") && e.contains("Bound"), "{e}");
+        for &math in layout.caps().maths {
+            for (pk, imp) in [(1, PacketImpl::Single), (8, PacketImpl::Subgroup)] {
+                let v = Variant::new(layout, 8, pk).with_math(math).with_buffers(Buffers::Addressed);
+                let k = builtin(&g, &v, imp, true);
+                for (kind, rays) in &sets {
+                    let what = format!("{} {kind}", v.kernel_name(imp, true));
+                    let (hits, counters) = enc.trace_fc(rays, pk, math, v.fc);
+                    let out = k.run(&g, &gb, rays, 0, 1).unwrap_or_else(|e| panic!("{what}: {e}"));
+                    assert_same_hits(&what, rays, &hits, &out.hits);
+                    assert!(out.counters.as_ref() == Some(&counters), "{what}: counters differ from the CPU reference");
+                }
+            }
+        }
+    }
+    clean(&g);
+}
+
+/// Where the device cannot address buffers, a scene beyond one storage buffer is refused with
+/// the limit, the buffer, the variant's layout and B, and the size named.
 #[test]
 fn scene_too_big_for_the_device_is_a_clear_error() {
-    let g = Gpu::new(&ContextOptions { max_buffer: Some(4096), ..Default::default() }).unwrap();
+    let g = Gpu::new(&ContextOptions { max_buffer: Some(4096), mask_features: vec!["bufferDeviceAddress".into()], ..Default::default() }).unwrap();
     let p = prepare(&scenes_dir().join("teapot.obj"));
     let enc = encode(&p, layout("f16h"), 4);
     let e = GpuBvh::upload(&g, &enc).err().expect("upload must fail");
     let msg = e.to_string();
-    assert!(msg.contains("nodes (f16h, B=4)") && msg.contains("limit of 4096 bytes"), "{msg}");
+    let bytes = enc.node_bytes().to_string();
+    assert!(msg.contains("nodes (f16h, B=4)") && msg.contains(&bytes) && msg.contains("maxStorageBufferRange of 4096 bytes") && msg.contains("bufferDeviceAddress"), "{msg}");
 }
 
 fn tmp(name: &str) -> PathBuf {

@@ -5,7 +5,7 @@ struct Node {
     float hi[3 * B];
     uint child[B];
 };
-layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { Node nodes[]; };
+NODE_BUFFER(Node)
 
 uint child_word(uint ni, uint s) { return nodes[ni].child[s]; }
 

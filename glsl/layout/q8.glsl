@@ -16,7 +16,7 @@ struct Node {
     uint q[3 * B / 2];  // bytes: lo[axis * B + slot], then hi[axis * B + slot]
     uint meta[B / 2];   // 16 bits per slot: 0xffff empty, 0x8000 | rank inner, (count-1) << 8 | offset leaf
 };
-layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { Node nodes[]; };
+NODE_BUFFER(Node)
 
 uint child_word(uint ni, uint s) {
     uint m = (nodes[ni].meta[s >> 1u] >> ((s & 1u) * 16u)) & 0xffffu;

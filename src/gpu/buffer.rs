@@ -5,6 +5,9 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
+/// The most bytes an upload stages at once (bounds the host memory an upload adds).
+pub const STAGING_CHUNK: u64 = 64 << 20;
+
 pub struct Buffer<'g> {
     gpu: &'g Gpu,
     pub raw: vk::Buffer,
@@ -14,11 +17,16 @@ pub struct Buffer<'g> {
 }
 
 impl<'g> Buffer<'g> {
-    /// Creates a buffer of `size` bytes (at least 16) in `location`.
+    /// Creates a buffer of `size` bytes (at least 16) in `location`. A storage buffer larger
+    /// than `maxStorageBufferRange`, or any buffer larger than `maxMemoryAllocationSize`, is
+    /// refused with the limit named (rather than left to the driver).
     pub fn new(gpu: &'g Gpu, name: &str, size: u64, usage: vk::BufferUsageFlags, location: MemoryLocation) -> Result<Buffer<'g>, GpuError> {
         let size = size.max(16);
         if usage.contains(vk::BufferUsageFlags::STORAGE_BUFFER) && size > gpu.info.max_storage_buffer {
-            return Err(GpuError::TooBig { what: name.into(), bytes: size, limit: gpu.info.max_storage_buffer });
+            return Err(GpuError::TooBig { what: name.into(), bytes: size, limit: gpu.info.max_storage_buffer, limit_name: "maxStorageBufferRange", hint: String::new() });
+        }
+        if size > gpu.info.max_allocation {
+            return Err(GpuError::TooBig { what: name.into(), bytes: size, limit: gpu.info.max_allocation, limit_name: "maxMemoryAllocationSize", hint: String::new() });
         }
         let d = &gpu.device;
         let raw = unsafe { d.create_buffer(&vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE), None) }.vk("vkCreateBuffer")?;
@@ -51,14 +59,30 @@ impl<'g> Buffer<'g> {
 
     /// A device-local buffer with `usage` (plus transfer destination) filled through a staging copy.
     pub fn upload_with(gpu: &'g Gpu, name: &str, data: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer<'g>, GpuError> {
-        let dst = Buffer::new(gpu, name, data.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
-        if data.is_empty() {
+        Buffer::upload_from(gpu, name, data.len() as u64, 1, usage, |off, dst| dst.copy_from_slice(&data[off as usize..off as usize + dst.len()]))
+    }
+
+    /// A device-local buffer of `len` bytes with `usage` (plus transfer destination), filled
+    /// through a staging buffer of at most [`STAGING_CHUNK`] bytes: `fill(offset, dst)` writes
+    /// the bytes at `offset`, `dst.len()` of them, a multiple of `granule` (e.g. a node's size)
+    /// unless it is the end. The host never holds a second full copy of the data.
+    pub fn upload_from(gpu: &'g Gpu, name: &str, len: u64, granule: u64, usage: vk::BufferUsageFlags, mut fill: impl FnMut(u64, &mut [u8])) -> Result<Buffer<'g>, GpuError> {
+        let dst = Buffer::new(gpu, name, len, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
+        if len == 0 {
             return Ok(dst);
         }
-        let mut staging = Buffer::new(gpu, &format!("{name} (staging)"), data.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
-        staging.write(data)?;
-        let n = data.len() as u64;
-        gpu.submit_and_wait(|cmd| unsafe { gpu.device.cmd_copy_buffer(cmd, staging.raw, dst.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n }]) })?;
+        let granule = granule.max(1);
+        let chunk = (STAGING_CHUNK / granule).max(1) * granule;
+        let mut staging = Buffer::new(gpu, &format!("{name} (staging)"), chunk.min(len), vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        let mut off = 0u64;
+        while off < len {
+            let n = chunk.min(len - off);
+            let sname = staging.name.clone();
+            let m = staging.alloc.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(|| GpuError::Other(format!("buffer {sname} is not host-visible")))?;
+            fill(off, &mut m[..n as usize]);
+            gpu.submit_and_wait(|cmd| unsafe { gpu.device.cmd_copy_buffer(cmd, staging.raw, dst.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: off, size: n }]) })?;
+            off += n;
+        }
         Ok(dst)
     }
 

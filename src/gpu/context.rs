@@ -26,7 +26,13 @@ pub struct DeviceInfo {
     /// shuffle relative, clustered, quad: bits 0..7).
     pub subgroup_ops: u32,
     pub ray_query: bool,
+    /// `bufferDeviceAddress`: kernels may read buffers through 64-bit addresses, which is how
+    /// a scene whose buffers exceed `maxStorageBufferRange` is still traced.
+    pub buffer_device_address: bool,
+    /// `maxStorageBufferRange`: the most bytes one storage-buffer binding may span.
     pub max_storage_buffer: u64,
+    /// `maxMemoryAllocationSize`: the largest single allocation, so the largest buffer.
+    pub max_allocation: u64,
     pub timestamp_period_ns: f32,
     pub timestamps: bool,
     /// Float controls the kernels declare: fp16 round-to-nearest-even and fp16/fp32
@@ -50,6 +56,10 @@ impl DeviceInfo {
             "storageBuffer16BitAccess" => self.storage_16bit = false,
             "shaderFloat64" => self.shader_float64 = false,
             "rayQuery" => self.ray_query = false,
+            "bufferDeviceAddress" => {
+                self.buffer_device_address = false;
+                self.ray_query = false;
+            }
             "subgroupSizeControl" => {
                 self.subgroup_size_control = false;
                 (self.min_subgroup_size, self.max_subgroup_size) = (self.subgroup_size, self.subgroup_size);
@@ -71,6 +81,7 @@ pub const MASKABLE: &[&str] = &[
     "storageBuffer16BitAccess",
     "shaderFloat64",
     "rayQuery",
+    "bufferDeviceAddress",
     "subgroupSizeControl",
     "shaderRoundingModeRTEFloat16",
     "shaderRoundingModeRTEFloat32",
@@ -90,7 +101,8 @@ pub struct ContextOptions {
     pub mask_features: Vec<String>,
     /// Enable VK_LAYER_KHRONOS_validation if installed (also `HALFTRACE_VALIDATION=1`).
     pub validation: bool,
-    /// Pretend the device's storage-buffer limit is this many bytes (testing).
+    /// Pretend the device's storage-buffer limit is this many bytes (testing; also
+    /// `HALFTRACE_MAX_STORAGE_BUFFER=BYTES`, so any command can exercise the addressed path).
     pub max_buffer: Option<u64>,
     /// How long one submission may run before it is declared hung (default
     /// [`DEFAULT_KERNEL_TIMEOUT_S`]).
@@ -176,10 +188,11 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
         let rq_ok = rq_exts && asf.acceleration_structure == vk::TRUE && rqf.ray_query == vk::TRUE && v12.buffer_device_address == vk::TRUE;
         let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
         let mut drv = vk::PhysicalDeviceDriverProperties::default();
+        let mut p11 = vk::PhysicalDeviceMaintenance3Properties::default();
         let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
         let mut ssc = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
         let ssc_ext = has0(ash::ext::subgroup_size_control::NAME);
-        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut sub).push_next(&mut drv).push_next(&mut fc);
+        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut sub).push_next(&mut drv).push_next(&mut fc).push_next(&mut p11);
         if ssc_ext {
             p2 = p2.push_next(&mut ssc);
         }
@@ -209,7 +222,9 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
             subgroup_size: sub.subgroup_size,
             subgroup_ops: sub.supported_operations.as_raw(),
             ray_query: rq_ok,
+            buffer_device_address: v12.buffer_device_address == vk::TRUE,
             max_storage_buffer: props.limits.max_storage_buffer_range as u64,
+            max_allocation: p11.max_memory_allocation_size,
             timestamp_period_ns: props.limits.timestamp_period,
             timestamps,
             fp16_rte: fc.shader_rounding_mode_rte_float16 == vk::TRUE,
@@ -312,7 +327,14 @@ impl Gpu {
         let idx = tryd!(pick(&infos, opts.device.as_deref()));
         let mut info = infos[idx].clone();
         let physical = pds[idx];
-        if let Some(m) = opts.max_buffer {
+        let env_max = match std::env::var("HALFTRACE_MAX_STORAGE_BUFFER") {
+            Ok(v) => match v.trim().parse::<u64>() {
+                Ok(m) => Some(m),
+                Err(_) => return Err((GpuError::Other(format!("HALFTRACE_MAX_STORAGE_BUFFER='{v}': give a number of bytes")), debug)),
+            },
+            Err(_) => None,
+        };
+        if let Some(m) = opts.max_buffer.or(env_max) {
             info.max_storage_buffer = info.max_storage_buffer.min(m);
         }
         for m in &opts.mask_features {
@@ -329,10 +351,10 @@ impl Gpu {
         let qfi = qfs.iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0).unwrap() as u32;
         let prio = [1.0f32];
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
-        let rq = info.ray_query && !opts.mask_features.iter().any(|m| m == "rayQuery");
-        info.ray_query = rq;
+        let rq = info.ray_query;
+        let bda = info.buffer_device_address;
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_float16).buffer_device_address(rq);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_float16).buffer_device_address(bda);
         let mut sscf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true);
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
@@ -366,7 +388,7 @@ impl Gpu {
             device: device.clone(),
             physical_device: physical,
             debug_settings: Default::default(),
-            buffer_device_address: rq,
+            buffer_device_address: bda,
             allocation_sizes: Default::default(),
         }) {
             Ok(a) => a,

@@ -10,41 +10,99 @@ use crate::interface::{binding, PushConstants, PRIM_OVERFLOW};
 use crate::layout::Encoded;
 use crate::rays::Ray;
 use crate::trace::{Counters, Hit};
-use crate::variant::{stack_entries, PacketImpl, Variant};
+use crate::variant::{stack_entries, Buffers, PacketImpl, Variant};
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 use std::path::{Path, PathBuf};
 
 /// A BVH resident on the device: the layout's node bytes, the triangles and the push
-/// constants (ray count filled per dispatch).
+/// constants (ray count filled per dispatch). Bound as three storage buffers, or — when one
+/// exceeds the device's `maxStorageBufferRange` — read by address ([`Buffers::Addressed`]):
+/// then a table of the three buffers' addresses is bound in the nodes' place.
 pub struct GpuBvh<'g> {
     nodes: Buffer<'g>,
     tris: Buffer<'g>,
     ids: Buffer<'g>,
+    /// Addressed: the address table and a placeholder for the two unused bindings.
+    table: Option<(Buffer<'g>, Buffer<'g>)>,
+    /// How kernels must reach these buffers (build them with `Variant::with_buffers`).
+    pub buffers: Buffers,
     pub push: PushConstants,
     /// Bytes uploaded (nodes and triangles).
     pub bytes: u64,
 }
 
 impl<'g> GpuBvh<'g> {
+    /// Uploads an encoded BVH, bound where every buffer fits one storage-buffer binding and
+    /// addressed otherwise (a clear error naming the limit where the device cannot address).
     pub fn upload(gpu: &'g Gpu, enc: &Encoded) -> Result<GpuBvh<'g>, GpuError> {
+        GpuBvh::upload_as(gpu, enc, None)
+    }
+
+    /// [`Self::upload`], with the way kernels reach the buffers forced (`Some`) or chosen by
+    /// size (`None`).
+    pub fn upload_as(gpu: &'g Gpu, enc: &Encoded, force: Option<Buffers>) -> Result<GpuBvh<'g>, GpuError> {
         let (layout, b) = (enc.layout, enc.branching);
         if enc.max_stack > stack_entries(b) {
             return Err(GpuError::Other(format!("BVH needs {} stack entries, more than the {} the B={b} kernels have", enc.max_stack, stack_entries(b))));
         }
-        let nodes = enc.nodes.to_bytes();
         let (lo, hi) = (enc.root_box.min, enc.root_box.max);
         let push = PushConstants { node_count: enc.node_count() as u32, root: enc.push_root, box_lo: [lo.x, lo.y, lo.z, 0.0], box_hi: [hi.x, hi.y, hi.z, 0.0], ..Default::default() };
         let name = |s: &str| format!("{s} ({layout}, B={b})");
         let tv: &[u8] = bytemuck::cast_slice(&enc.tris.verts);
         let ti: &[u8] = bytemuck::cast_slice(&enc.tris.ids);
-        Ok(GpuBvh {
-            nodes: Buffer::upload(gpu, &name("nodes"), &nodes)?,
-            tris: Buffer::upload(gpu, &name("triangles"), tv)?,
-            ids: Buffer::upload(gpu, &name("triangle ids"), ti)?,
-            push,
-            bytes: (nodes.len() + tv.len() + ti.len()) as u64,
-        })
+        let ns = enc.node_size() as u64;
+        let node_bytes = enc.node_count() as u64 * ns;
+        let sizes = [("nodes", node_bytes), ("triangles", tv.len() as u64), ("triangle ids", ti.len() as u64)];
+        let limit = gpu.info.max_storage_buffer;
+        let buffers = match force {
+            Some(f) => f,
+            None => match sizes.iter().find(|(_, n)| *n > limit) {
+                None => Buffers::Bound,
+                Some(_) if gpu.info.buffer_device_address => Buffers::Addressed,
+                Some((what, n)) => {
+                    return Err(GpuError::TooBig {
+                        what: name(what),
+                        bytes: *n,
+                        limit,
+                        limit_name: "maxStorageBufferRange",
+                        hint: format!(" for one storage buffer, and {} has no bufferDeviceAddress to read a larger buffer by address", gpu.info.name),
+                    })
+                }
+            },
+        };
+        if buffers == Buffers::Addressed && !gpu.info.buffer_device_address {
+            return Err(GpuError::Unsupported(format!("{}: reading the scene by address needs bufferDeviceAddress (device: {})", name("BVH"), gpu.info.name)));
+        }
+        let usage = match buffers {
+            Buffers::Bound => vk::BufferUsageFlags::STORAGE_BUFFER,
+            Buffers::Addressed => vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+        };
+        // The node bytes are produced one staging chunk at a time: no second copy of the nodes.
+        let nodes = Buffer::upload_from(gpu, &name("nodes"), node_bytes, ns, usage, |off, dst| {
+            let first = (off / ns) as usize;
+            dst.copy_from_slice(&enc.nodes.bytes_of(first..first + dst.len() / ns as usize));
+        })?;
+        let tris = Buffer::upload_with(gpu, &name("triangles"), tv, usage)?;
+        let ids = Buffer::upload_with(gpu, &name("triangle ids"), ti, usage)?;
+        let table = match buffers {
+            Buffers::Bound => None,
+            Buffers::Addressed => {
+                let addrs: [u64; 3] = [nodes.address(), tris.address(), ids.address()];
+                let t = Buffer::upload(gpu, &name("address table"), bytemuck::cast_slice(&addrs))?;
+                let unused = Buffer::new(gpu, &name("unused binding"), 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly)?;
+                Some((t, unused))
+            }
+        };
+        Ok(GpuBvh { nodes, tris, ids, table, buffers, push, bytes: node_bytes + (tv.len() + ti.len()) as u64 })
+    }
+
+    /// The buffers at the NODES, TRI_VERTS and TRI_IDS bindings.
+    fn bindings(&self) -> [&Buffer<'g>; 3] {
+        match &self.table {
+            None => [&self.nodes, &self.tris, &self.ids],
+            Some((t, unused)) => [t, unused, unused],
+        }
     }
 }
 
@@ -141,6 +199,14 @@ impl<'g> Kernel<'g> {
     /// Dispatches the kernel over `rays`: `warmup` untimed dispatches, then `repeat` timed
     /// ones (at least one dispatch in all). A counting kernel also reads back the counters.
     pub fn run(&self, gpu: &Gpu, bvh: &GpuBvh, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError> {
+        if self.variant.buffers != bvh.buffers {
+            return Err(GpuError::Other(format!(
+                "{}: built for {:?} scene buffers, but this BVH is {:?} (build the kernel with `Variant::with_buffers(bvh.buffers)`)",
+                self.label(),
+                self.variant.buffers,
+                bvh.buffers
+            )));
+        }
         let pipe = &self.pipe;
         let wg = self.variant.workgroup(self.imp);
         let n = rays.len();
@@ -150,7 +216,8 @@ impl<'g> Kernel<'g> {
         let counter_bytes = n * std::mem::size_of::<Counters>();
         let hits = Buffer::new(gpu, "hits", hit_bytes as u64, out_usage, MemoryLocation::GpuOnly)?;
         let counters = Buffer::new(gpu, "counters", if self.stats { counter_bytes as u64 } else { 16 }, out_usage, MemoryLocation::GpuOnly)?;
-        pipe.bind(&[&bvh.nodes, &bvh.tris, &bvh.ids, &ray_buf, &hits, &counters]);
+        let [b0, b1, b2] = bvh.bindings();
+        pipe.bind(&[b0, b1, b2, &ray_buf, &hits, &counters]);
         let mut push = bvh.push;
         push.ray_count = n as u32;
         let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(wg), warmup, repeat)?;

@@ -31,8 +31,8 @@ pub enum GpuError {
     Vk { call: &'static str, result: ash::vk::Result },
     #[error("allocating {what} ({bytes} bytes): {source}")]
     Alloc { what: String, bytes: u64, source: gpu_allocator::AllocationError },
-    #[error("{what} needs {bytes} bytes, more than the device's limit of {limit} bytes for one storage buffer")]
-    TooBig { what: String, bytes: u64, limit: u64 },
+    #[error("{what} needs {bytes} bytes, more than the device's {limit_name} of {limit} bytes{hint}")]
+    TooBig { what: String, bytes: u64, limit: u64, limit_name: &'static str, hint: String },
     #[error("shader {variant} failed to compile:\n{log}")]
     Compile { variant: String, log: String },
     #[error("{path}: {msg}")]

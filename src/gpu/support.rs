@@ -51,6 +51,9 @@ pub fn check(info: &DeviceInfo, v: &Variant) -> Result<(), String> {
     if n.float16 && !info.shader_float16 {
         missing.push("shaderFloat16");
     }
+    if v.buffers == crate::variant::Buffers::Addressed && !info.buffer_device_address {
+        missing.push("bufferDeviceAddress");
+    }
     match v.fc {
         FloatControls::On => missing.extend(float_modes(v).into_iter().map(|m| mode_feature(info, m)).filter(|(_, ok)| !ok).map(|(n, _)| n)),
         FloatControls::Off if !l.float_controls_off() => return Err(format!("{} has no kernel build without float controls", v.layout)),

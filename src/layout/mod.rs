@@ -266,7 +266,11 @@ pub trait NodeArray: Send + Sync {
     /// Bytes of one node.
     fn node_size(&self) -> usize;
     /// Every node's bytes, exactly as uploaded.
-    fn to_bytes(&self) -> Vec<u8>;
+    fn to_bytes(&self) -> Vec<u8> {
+        self.bytes_of(0..self.len())
+    }
+    /// The bytes of nodes `range`, exactly as uploaded.
+    fn bytes_of(&self, range: std::ops::Range<usize>) -> Vec<u8>;
     fn child(&self, node: usize, s: usize) -> u32;
     fn child_box(&self, node: usize, s: usize) -> ([f32; 3], [f32; 3]);
     fn as_any(&self) -> &dyn Any;
@@ -279,12 +283,12 @@ impl<N: Node> NodeArray for Vec<N> {
     fn node_size(&self) -> usize {
         std::mem::size_of::<N>()
     }
-    fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.len() * self.node_size());
-        for n in self {
+    fn bytes_of(&self, range: std::ops::Range<usize>) -> Vec<u8> {
+        let mut out = Vec::with_capacity(range.len() * self.node_size());
+        for n in &self[range.clone()] {
             n.write_bytes(&mut out);
         }
-        assert_eq!(out.len(), self.len() * self.node_size(), "a node wrote other than size_of bytes: its struct has padding");
+        assert_eq!(out.len(), range.len() * self.node_size(), "a node wrote other than size_of bytes: its struct has padding");
         out
     }
     fn child(&self, node: usize, s: usize) -> u32 {

@@ -344,12 +344,15 @@ impl<'a, 'g> Executor<'a, 'g> {
 
     fn run_variant(&mut self, job: &Job, v: Variant, user: Option<usize>) -> anyhow::Result<Row> {
         self.prepare(job, Some((v.layout, v.branching)))?;
+        // A scene beyond one storage buffer is read by address; the row keeps the variant's name.
+        let buffers = self.scene.as_ref().expect("prepared").encodings[&(v.layout, v.branching)].1.buffers;
+        let (bound, v) = (v, v.with_buffers(buffers));
         self.build_kernels(&v, user)?;
         let (g, plan) = (self.gpu, Plan { warmup: self.cfg.warmup, repeat: self.cfg.repeat, count: true });
         let (timed, counting) = self.kernels(&v, user);
         let name = match user {
             Some(i) => self.cfg.kernel[i].name.clone(),
-            None => timed.name(),
+            None => bound.kernel_name(timed.imp, false),
         };
         let s = self.scene.as_ref().expect("prepared");
         let set = &s.rays[&job.rays];
