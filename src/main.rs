@@ -531,15 +531,19 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         }
         Some(other) => anyhow::bail!("--backend '{other}': use gpu or cpu"),
     };
-    let t = trace_inputs(&a)?;
-    let enc = Encoded::new(&t.scene, &t.bin, layout, a.branching)?;
-    let rays = &t.rays;
-    outln!("scene {} ({} triangles), variant {variant}, rays {}: {} rays", t.scene.name, t.scene.len(), t.kind, rays.len());
+    let Traced { scene, bin, build_ms, kind, rays } = trace_inputs(&a)?;
+    let rays = &rays;
+    // Memory on big scenes: f32's hits (the GPU run's "against f32" line) are taken and its
+    // encoding dropped before the layout's is made, and the binary BVH goes once encoded.
+    let f32_hits = if backend == "gpu" && layout != LayoutId::f32() { Some(Encoded::new(&scene, &bin, LayoutId::f32(), a.branching)?.trace_default(rays).0) } else { None };
+    let enc = Encoded::new(&scene, &bin, layout, a.branching)?;
+    drop(bin);
+    outln!("scene {} ({} triangles), variant {variant}, rays {}: {} rays", scene.name, scene.len(), kind, rays.len());
     let t1 = Instant::now();
     let (ref_hits, ref_counters) = enc.trace_fc(rays, a.packet, math, variant.fc);
     let cpu_secs = t1.elapsed().as_secs_f64();
     let (hits, counters) = if backend == "cpu" {
-        outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", cpu_secs * 1e3, rays.len() as f64 / cpu_secs / 1e6, t.build_ms);
+        outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", cpu_secs * 1e3, rays.len() as f64 / cpu_secs / 1e6, build_ms);
         (ref_hits, Some(ref_counters))
     } else {
         let g = open_gpu(&a)?;
@@ -554,9 +558,10 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let variant = resolved;
         let imp = kernel::choose_impl(&g, &variant, force_impl);
         let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
-        let gb = GpuBvh::upload(&g, &enc).with_context(|| variant.to_string())?;
+        // The reference hits were taken above: each host array goes once the device holds it.
+        let gb = GpuBvh::upload_owned(&g, enc, None).with_context(|| variant.to_string())?;
         if gb.buffers == Buffers::Addressed {
-            outln!("scene buffers read by address: {} bytes of nodes and triangles, more than one storage buffer may span on this device (maxStorageBufferRange {} bytes)", gb.bytes, g.info.max_storage_buffer);
+            outln!("scene buffers read by address: {} bytes of nodes and triangles, a buffer larger than one storage binding may span on this device (maxStorageBufferRange {} bytes)", gb.bytes, g.info.max_storage_buffer);
         }
         let variant = variant.with_buffers(gb.buffers);
         let timed = Kernel::build(&g, &variant, imp, false, &source).with_context(|| variant.to_string())?;
@@ -571,7 +576,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
                 k
             }
         };
-        let f32_hits = if layout == LayoutId::f32() { ref_hits.clone() } else { Encoded::new(&t.scene, &t.bin, LayoutId::f32(), a.branching)?.trace_default(rays).0 };
+        let f32_hits = f32_hits.unwrap_or_else(|| ref_hits.clone());
         let target = KernelTarget { gpu: &g, bvh: &gb, timed: &timed, counting: counting.as_ref() };
         let plan = Plan { warmup: a.warmup, repeat: a.repeat, count: counting.is_some() };
         // Correctness before speed: the CPU reference of the same layout, packet size and math.
@@ -588,6 +593,9 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     };
     let nhit = hits.iter().filter(|h| h.is_hit()).count();
     outln!("{nhit} hits");
+    if let Some(b) = halftrace::progress::peak_rss_bytes() {
+        outln!("peak memory {} MB ({:.0} bytes per triangle)", b >> 20, b as f64 / scene.len() as f64);
+    }
     if let Some(c) = counters.filter(|_| a.stats || backend == "cpu") {
         print_counters(&c, rays.len(), a.packet)?;
     }
@@ -600,8 +608,8 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         outln!("rays written to {}", p.display());
     }
     if let Some(p) = &a.image {
-        anyhow::ensure!(t.kind == RayKind::Primary, "--image needs --rays primary");
-        halftrace::images::render(p, &t.scene, rays, &hits, a.width, a.height)?;
+        anyhow::ensure!(kind == RayKind::Primary, "--image needs --rays primary");
+        halftrace::images::render(p, &scene, rays, &hits, a.width, a.height)?;
         outln!("image written to {}", p.display());
     }
     Ok(())
