@@ -3,7 +3,7 @@
 use glam::Vec3;
 
 /// An axis-aligned box in fp32 world space. An empty box has `min > max`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Zeroable)]
 pub struct Aabb {
     pub min: Vec3,
     pub max: Vec3,

@@ -44,7 +44,7 @@ pub const C_TRAV: f32 = 1.0;
 
 /// A binary node: `count == 0` means inner with children `first` and `first + 1`;
 /// otherwise a leaf holding `prims[first .. first + count]`.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
 pub struct BinaryNode {
     pub bounds: Aabb,
     pub first: u32,
@@ -64,10 +64,9 @@ pub struct BinaryBvh {
     pub prims: Vec<u32>,
 }
 
-struct Ctx<'a> {
-    bounds: &'a [Bx],
-    centroids: &'a [Vec3A],
-}
+/// A triangle's box, partitioned in place with its id (`ids`) so every pass over a node's
+/// triangles reads memory in order.
+type Ref = Bx;
 
 #[derive(Clone, Copy)]
 struct Bin {
@@ -79,8 +78,10 @@ const EMPTY_BIN: Bin = Bin { bounds: Bx::EMPTY, count: 0 };
 
 /// Subtrees below this many triangles are built sequentially.
 const PAR_SUBTREE: usize = 4096;
-/// Nodes above this many triangles are binned in parallel.
-const PAR_BINNING: usize = 65536;
+/// Nodes above this many triangles are binned, and their bounds gathered, in parallel.
+const PAR_BINNING: usize = 1 << 17;
+/// Chunk of triangles one parallel binning task takes.
+const PAR_CHUNK: usize = 1 << 15;
 
 /// Builds the binary BVH of a scene (a progress line when it takes over a second).
 pub fn build_binary(scene: &Scene) -> BinaryBvh {
@@ -89,57 +90,87 @@ pub fn build_binary(scene: &Scene) -> BinaryBvh {
 
 fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
     let n = scene.tris.len();
-    let (bounds, centroids): (Vec<Bx>, Vec<Vec3A>) = scene
+    let mut refs: Vec<Ref> = scene
         .tris
         .par_iter()
         .map(|t| {
             let (a, b, c) = (Vec3A::from(t[0]), Vec3A::from(t[1]), Vec3A::from(t[2]));
-            let bx = Bx { min: a.min(b).min(c), max: a.max(b).max(c) };
-            (bx, (bx.min + bx.max) * 0.5)
+            Bx { min: a.min(b).min(c), max: a.max(b).max(c) }
         })
-        .unzip();
-    let ctx = Ctx { bounds: &bounds, centroids: &centroids };
+        .collect();
     let mut prims: Vec<u32> = (0..n as u32).collect();
-    let (b, cb) = range_bounds(&ctx, &prims);
-    let nodes = build_rec(&ctx, &mut prims, 0, b, cb);
-    BinaryBvh { nodes, prims }
+    let (b, cb) = range_bounds(&refs);
+    // A subtree over k triangles has at most 2k − 1 nodes: its root, then a region of 2k − 2
+    // slots for the rest, which its two children split — both children first (they are
+    // adjacent, as `BinaryNode` requires), then each one's own region. Subtrees write disjoint
+    // slices, so the parallel build needs no locks and no copies; leaves leave slots unused,
+    // which a final pass in depth-first order squeezes out.
+    // Zeroed slots come from the OS untouched: only the slots a node is written to cost a write.
+    let mut slots: Vec<BinaryNode> = bytemuck::zeroed_vec((2 * n).saturating_sub(1).max(1));
+    let (root, rest) = slots.split_first_mut().expect("at least one slot");
+    build_rec(&mut refs, &mut prims, 0, root, rest, 1, b, cb);
+    drop(refs);
+    BinaryBvh { nodes: compact(&slots), prims }
 }
 
-fn range_bounds(ctx: &Ctx, prims: &[u32]) -> (Bx, Bx) {
-    let f = |(mut b, mut c): (Bx, Bx), &p: &u32| {
-        b = b.union(&ctx.bounds[p as usize]);
-        c.grow(ctx.centroids[p as usize]);
-        (b, c)
-    };
-    if prims.len() >= PAR_BINNING {
-        prims
-            .par_chunks(8192)
-            .map(|ch| ch.iter().fold((Bx::EMPTY, Bx::EMPTY), f))
-            .reduce(|| (Bx::EMPTY, Bx::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
-    } else {
-        prims.iter().fold((Bx::EMPTY, Bx::EMPTY), f)
+/// The nodes reachable from slot 0, renumbered in depth-first order (children stay adjacent).
+fn compact(slots: &[BinaryNode]) -> Vec<BinaryNode> {
+    let mut out = Vec::with_capacity(slots.len() / 2 + 1);
+    out.push(slots[0]);
+    // (old index of an inner node's first child, new index of the node)
+    let mut stack = Vec::new();
+    if !slots[0].is_leaf() {
+        stack.push((slots[0].first as usize, 0usize));
     }
+    while let Some((old, me)) = stack.pop() {
+        let at = out.len();
+        out[me].first = at as u32;
+        out.push(slots[old]);
+        out.push(slots[old + 1]);
+        for k in (0..2).rev() {
+            if !slots[old + k].is_leaf() {
+                stack.push((slots[old + k].first as usize, at + k));
+            }
+        }
+    }
+    out
 }
 
-fn bin_chunk(ctx: &Ctx, prims: &[u32], cb: &Bx, scale: Vec3A) -> [[Bin; BINS]; 3] {
+fn range_bounds(refs: &[Ref]) -> (Bx, Bx) {
+    let f = |(b, mut c): (Bx, Bx), r: &Ref| {
+        c.grow(r.min + r.max);
+        (b.union(r), c)
+    };
+    let (b, c2) = if refs.len() >= PAR_BINNING {
+        refs.par_chunks(PAR_CHUNK).map(|ch| ch.iter().fold((Bx::EMPTY, Bx::EMPTY), f)).reduce(|| (Bx::EMPTY, Bx::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
+    } else {
+        refs.iter().fold((Bx::EMPTY, Bx::EMPTY), f)
+    };
+    (b, half(c2))
+}
+
+/// Centroid bounds are gathered as min + max (twice the centroid); halved once per node.
+fn half(c2: Bx) -> Bx {
+    Bx { min: c2.min * 0.5, max: c2.max * 0.5 }
+}
+
+fn bin_chunk(refs: &[Ref], origin2: Vec3A, scale2: Vec3A) -> [[Bin; BINS]; 3] {
     let mut bins = [[EMPTY_BIN; BINS]; 3];
     let top = glam::UVec3::splat(BINS as u32 - 1);
-    for &p in prims {
-        let c = ctx.centroids[p as usize];
-        let b = &ctx.bounds[p as usize];
-        let idx = ((c - cb.min) * scale).as_uvec3().min(top);
-        for a in 0..3 {
-            let bin = &mut bins[a][idx[a] as usize];
+    for r in refs {
+        let idx = ((r.min + r.max - origin2) * scale2).as_uvec3().min(top);
+        for (a, axis) in bins.iter_mut().enumerate() {
+            let bin = &mut axis[idx[a] as usize];
             bin.count += 1;
-            bin.bounds = bin.bounds.union(b);
+            bin.bounds = bin.bounds.union(r);
         }
     }
     bins
 }
 
-fn bin_prims(ctx: &Ctx, prims: &[u32], cb: &Bx, scale: Vec3A) -> [[Bin; BINS]; 3] {
-    if prims.len() < PAR_BINNING {
-        return bin_chunk(ctx, prims, cb, scale);
+fn bin_refs(refs: &[Ref], origin2: Vec3A, scale2: Vec3A) -> [[Bin; BINS]; 3] {
+    if refs.len() < PAR_BINNING {
+        return bin_chunk(refs, origin2, scale2);
     }
     let merge = |mut x: [[Bin; BINS]; 3], y: [[Bin; BINS]; 3]| {
         for a in 0..3 {
@@ -150,59 +181,36 @@ fn bin_prims(ctx: &Ctx, prims: &[u32], cb: &Bx, scale: Vec3A) -> [[Bin; BINS]; 3
         }
         x
     };
-    prims.par_chunks(8192).map(|ch| bin_chunk(ctx, ch, cb, scale)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge)
+    refs.par_chunks(PAR_CHUNK).map(|ch| bin_chunk(ch, origin2, scale2)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge)
 }
 
-/// Builds the subtree over `prims` (in place partition); returns its nodes with the root first
-/// and child indices local to the returned vector. `base` is the offset of `prims` in the
-/// global primitive array.
-fn build_rec(ctx: &Ctx, prims: &mut [u32], base: u32, bounds: Bx, cb: Bx) -> Vec<BinaryNode> {
-    let mut nodes = Vec::with_capacity(2 * prims.len() / 3 + 1);
-    if prims.len() < PAR_SUBTREE {
-        nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
-        build_seq_at(ctx, prims, base, &mut nodes, 0, bounds, cb);
-        return nodes;
-    }
-    let Some(sp) = split(ctx, prims, &bounds, &cb) else {
-        nodes.push(BinaryNode { bounds: bounds.aabb(), first: base, count: prims.len() as u32 });
-        return nodes;
-    };
-    let mid = sp.mid;
-    let (l, r) = prims.split_at_mut(mid);
-    let (ln, rn) = rayon::join(|| build_rec(ctx, l, base, sp.lb, sp.lcb), || build_rec(ctx, r, base + mid as u32, sp.rb, sp.rcb));
-    nodes.push(BinaryNode { bounds: bounds.aabb(), first: 1, count: 0 });
-    nodes.push(ln[0]);
-    nodes.push(rn[0]);
-    // Children of the root are at 1 and 2; the rest of each subtree follows.
-    let l_off = 3 - 1; // local index i>0 of the left subtree moves to i + 2
-    let r_off = 3 + (ln.len() - 1) - 1; // local index i>0 of the right subtree moves to i + r_off
-    let fix = |n: &BinaryNode, off: usize| {
-        let mut n = *n;
-        if !n.is_leaf() {
-            n.first = (n.first as usize + off) as u32;
-        }
-        n
-    };
-    nodes[1] = fix(&ln[0], l_off);
-    nodes[2] = fix(&rn[0], r_off);
-    nodes.extend(ln[1..].iter().map(|n| fix(n, l_off)));
-    nodes.extend(rn[1..].iter().map(|n| fix(n, r_off)));
-    nodes
-}
-
-/// Builds the subtree over `prims` with its root written to `nodes[slot]`.
-fn build_seq_at(ctx: &Ctx, prims: &mut [u32], base: u32, nodes: &mut Vec<BinaryNode>, slot: usize, bounds: Bx, cb: Bx) {
-    let Some(sp) = split(ctx, prims, &bounds, &cb) else {
-        nodes[slot] = BinaryNode { bounds: bounds.aabb(), first: base, count: prims.len() as u32 };
+/// Builds the subtree over `refs`/`prims` (partitioned in place, at `base` in the global
+/// triangle order): its root goes to `root`, the rest of its nodes into `region`, whose first
+/// slot has the global index `at`.
+#[allow(clippy::too_many_arguments)]
+fn build_rec(refs: &mut [Ref], prims: &mut [u32], base: u32, root: &mut BinaryNode, region: &mut [BinaryNode], at: u32, bounds: Bx, cb: Bx) {
+    let n = refs.len();
+    let Some(sp) = split(refs, prims, &bounds, &cb) else {
+        *root = BinaryNode { bounds: bounds.aabb(), first: base, count: n as u32 };
         return;
     };
-    let first = nodes.len();
-    nodes[slot] = BinaryNode { bounds: bounds.aabb(), first: first as u32, count: 0 };
-    nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
-    nodes.push(BinaryNode { bounds: Aabb::EMPTY, first: 0, count: 0 });
-    let (l, r) = prims.split_at_mut(sp.mid);
-    build_seq_at(ctx, l, base, nodes, first, sp.lb, sp.lcb);
-    build_seq_at(ctx, r, base + sp.mid as u32, nodes, first + 1, sp.rb, sp.rcb);
+    *root = BinaryNode { bounds: bounds.aabb(), first: at, count: 0 };
+    let m = sp.mid;
+    let (kids, rest) = region.split_at_mut(2);
+    let (lk, rk) = kids.split_at_mut(1);
+    let (lregion, rregion) = rest.split_at_mut(2 * m - 2);
+    let (lrefs, rrefs) = refs.split_at_mut(m);
+    let (lprims, rprims) = prims.split_at_mut(m);
+    let (lat, rat) = (at + 2, at + 2 * m as u32);
+    if n < PAR_SUBTREE {
+        build_rec(lrefs, lprims, base, &mut lk[0], lregion, lat, sp.lb, sp.lcb);
+        build_rec(rrefs, rprims, base + m as u32, &mut rk[0], rregion, rat, sp.rb, sp.rcb);
+    } else {
+        rayon::join(
+            || build_rec(lrefs, lprims, base, &mut lk[0], lregion, lat, sp.lb, sp.lcb),
+            || build_rec(rrefs, rprims, base + m as u32, &mut rk[0], rregion, rat, sp.rb, sp.rcb),
+        );
+    }
 }
 
 /// A chosen split: position in the range and both children's bounds and centroid bounds.
@@ -214,10 +222,10 @@ struct Split {
     rcb: Bx,
 }
 
-/// Chooses a SAH split and partitions `prims` (centroid bounds of both sides are gathered
-/// during the partition, box bounds come from the bins); returns `None` for a leaf.
-fn split(ctx: &Ctx, prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Split> {
-    let n = prims.len();
+/// Chooses a SAH split and partitions `refs` and `prims` (centroid bounds of both sides are
+/// gathered during the partition, box bounds come from the bins); returns `None` for a leaf.
+fn split(refs: &mut [Ref], prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Split> {
+    let n = refs.len();
     if n <= 1 {
         return None;
     }
@@ -225,32 +233,44 @@ fn split(ctx: &Ctx, prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Split> {
     // (cost, axis, bin, left box, right box)
     let mut best = (f32::INFINITY, 0usize, 0usize, Bx::EMPTY, Bx::EMPTY);
     if ext.max_element() > 0.0 {
-        let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32 * (1.0 - 1e-6)) / ext, Vec3A::ZERO);
-        let bins = bin_prims(ctx, prims, cb, scale);
-        for a in 0..3 {
+        // Bins over twice the centroid: (min + max − 2·cb.min) · BINS / (2·ext).
+        let scale2 = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32 * (1.0 - 1e-6) * 0.5) / ext, Vec3A::ZERO);
+        let origin2 = cb.min * 2.0;
+        let bins = bin_refs(refs, origin2, scale2);
+        for (a, axis) in bins.iter().enumerate() {
             if ext[a] <= 0.0 {
+                continue;
+            }
+            // Only occupied bins can end a side: an empty bin repeats its neighbour's partition
+            // and cost, so sweeping the occupied ones gives the same split (small nodes, the
+            // most numerous, occupy few of the bins).
+            let mut occ = [0usize; BINS];
+            let mut m = 0;
+            for (i, bin) in axis.iter().enumerate() {
+                if bin.count > 0 {
+                    occ[m] = i;
+                    m += 1;
+                }
+            }
+            if m < 2 {
                 continue;
             }
             let mut right_box = [Bx::EMPTY; BINS];
             let mut right_count = [0u32; BINS];
             let (mut rb, mut rc) = (Bx::EMPTY, 0u32);
-            for i in (1..BINS).rev() {
-                rb = rb.union(&bins[a][i].bounds);
-                rc += bins[a][i].count;
-                right_box[i] = rb;
-                right_count[i] = rc;
+            for j in (1..m).rev() {
+                rb = rb.union(&axis[occ[j]].bounds);
+                rc += axis[occ[j]].count;
+                right_box[j] = rb;
+                right_count[j] = rc;
             }
             let (mut lb, mut lc) = (Bx::EMPTY, 0u32);
-            for i in 0..BINS - 1 {
-                lb = lb.union(&bins[a][i].bounds);
-                lc += bins[a][i].count;
-                let rc = right_count[i + 1];
-                if lc == 0 || rc == 0 {
-                    continue;
-                }
-                let cost = lb.area() * lc as f32 + right_box[i + 1].area() * rc as f32;
+            for j in 0..m - 1 {
+                lb = lb.union(&axis[occ[j]].bounds);
+                lc += axis[occ[j]].count;
+                let cost = lb.area() * lc as f32 + right_box[j + 1].area() * right_count[j + 1] as f32;
                 if cost < best.0 {
-                    best = (cost, a, i, lb, right_box[i + 1]);
+                    best = (cost, a, occ[j], lb, right_box[j + 1]);
                 }
             }
         }
@@ -260,31 +280,35 @@ fn split(ctx: &Ctx, prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Split> {
                 return None;
             }
             let (_, a, i, lb, rb) = best;
+            // The binning's test, so both sides match the bins' counts: bin ≤ i, i.e.
+            // trunc(x) ≤ i for x ≥ 0, is x < i + 1 (i < BINS − 1, so the clamp never applies).
+            let (o, sc, lim) = (origin2[a], scale2[a], (i + 1) as f32);
+            let left = |r: &Ref| ((r.min + r.max)[a] - o) * sc < lim;
             let (mut lcb, mut rcb) = (Bx::EMPTY, Bx::EMPTY);
-            let mut m = 0;
-            for j in 0..n {
-                let p = prims[j];
-                let c = ctx.centroids[p as usize];
-                if (((c[a] - cb.min[a]) * scale[a]) as usize).min(BINS - 1) <= i {
-                    lcb.grow(c);
-                    prims.swap(m, j);
-                    m += 1;
+            let (mut lo, mut hi) = (0usize, n);
+            while lo < hi {
+                if left(&refs[lo]) {
+                    lcb.grow(refs[lo].min + refs[lo].max);
+                    lo += 1;
                 } else {
-                    rcb.grow(c);
+                    hi -= 1;
+                    rcb.grow(refs[lo].min + refs[lo].max);
+                    refs.swap(lo, hi);
+                    prims.swap(lo, hi);
                 }
             }
-            if m > 0 && m < n {
-                return Some(Split { mid: m, lb, lcb, rb, rcb });
+            if lo > 0 && lo < n {
+                return Some(Split { mid: lo, lb, lcb: half(lcb), rb, rcb: half(rcb) });
             }
         }
     }
     if n <= MAX_LEAF {
         return None;
     }
-    // All centroids coincide (or binning failed): split in the middle of the index range.
+    // All centroids coincide (or binning failed): split in the middle of the range.
     let mid = n / 2;
-    let (lb, lcb) = range_bounds(ctx, &prims[..mid]);
-    let (rb, rcb) = range_bounds(ctx, &prims[mid..]);
+    let (lb, lcb) = range_bounds(&refs[..mid]);
+    let (rb, rcb) = range_bounds(&refs[mid..]);
     Some(Split { mid, lb, lcb, rb, rcb })
 }
 
