@@ -11,6 +11,7 @@
 layout(local_size_x = WG, local_size_y = 1, local_size_z = 1) in;
 
 #ifdef ADDRESSED
+#extension GL_EXT_buffer_reference : require
 // The scene's buffers through their device addresses (scenes beyond maxStorageBufferRange):
 // a table of three addresses is bound in the nodes' place; `nodes`, `tri_v` and `tri_id`
 // read the same bytes as the bound buffers below. A layout declares its node buffer with

@@ -1,8 +1,5 @@
 #version 460
 #extension GL_EXT_control_flow_attributes : require
-#ifdef ADDRESSED
-#extension GL_EXT_buffer_reference : require
-#endif
 // The traversal skeleton of every layout and kernel family: single rays (P = 1), packets in
 // a subgroup (PACKET_SUBGROUP) and packets in shared memory; STATS adds the counters. It
 // mirrors src/trace/traverse.rs step for step.

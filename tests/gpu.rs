@@ -295,6 +295,28 @@ fn cli(args: &[&str]) -> (bool, String, String) {
     (o.status.success(), String::from_utf8_lossy(&o.stdout).to_string(), String::from_utf8_lossy(&o.stderr).to_string())
 }
 
+/// `trace` on a scene beyond one storage buffer (a pretended 16 KiB limit, through
+/// HALFTRACE_MAX_STORAGE_BUFFER): the built-in kernel and a user's GLSL kernel read it by
+/// address and are validated; a SPIR-V module that binds the triangles is refused, by name.
+#[test]
+fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
+    let sc = scenes_dir().join("teapot.obj");
+    let run = |extra: &[&str]| {
+        let mut a = vec!["trace", "--scene", sc.to_str().unwrap(), "--layout", "f32", "--width", "16", "--height", "16", "--repeat", "1"];
+        a.extend_from_slice(extra);
+        let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).env("HALFTRACE_MAX_STORAGE_BUFFER", "16384").args(&a).output().unwrap();
+        (o.status.success(), String::from_utf8_lossy(&o.stdout).to_string(), String::from_utf8_lossy(&o.stderr).to_string())
+    };
+    let (ok, out, err) = run(&[]);
+    assert!(ok && out.contains("read by address") && out.contains("trav_f32_b4_p1_addr: validated against the CPU reference"), "{out}{err}");
+    let user = repo("docs/examples/unordered.comp");
+    let (ok, out, err) = run(&["--kernel", user.to_str().unwrap()]);
+    assert!(ok && out.contains("read by address") && out.contains("validated against the CPU reference"), "{out}{err}");
+    let spv = repo("spirv/trav_f32_b4_p1.spv");
+    let (ok, out, err) = run(&["--kernel", spv.to_str().unwrap()]);
+    assert!(!ok && err.contains("reads binding 1") && err.contains("read by address") && !err.contains("panicked"), "{out}{err}");
+}
+
 fn repo(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)
 }

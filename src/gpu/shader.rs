@@ -379,6 +379,7 @@ fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
         66 => ("GroupNonUniformShuffleRelative", sub(5)),
         67 => ("GroupNonUniformClustered", sub(6)),
         68 => ("GroupNonUniformQuad", sub(7)),
+        5347 => ("PhysicalStorageBufferAddresses", i.buffer_device_address),
         _ => return None,
     })
 }
@@ -406,6 +407,14 @@ pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stat
     for (need, what) in [(binding::RAYS, "rays"), (binding::HITS, "hits")] {
         if !itf.bindings.contains(&(0, need)) {
             return Err(err(format!("it does not use binding {need} ({what}), so it cannot be a traversal kernel")));
+        }
+    }
+    if v.buffers == crate::variant::Buffers::Addressed {
+        if let Some(b) = [binding::TRI_VERTS, binding::TRI_IDS].into_iter().find(|&b| itf.bindings.contains(&(0, b))) {
+            return Err(err(format!(
+                "it reads binding {b}, but this scene's buffers exceed the device's maxStorageBufferRange ({} bytes) and are read by address (build it from GLSL with ray.glsl's buffers and NODE_BUFFER, which follow the ADDRESSED define)",
+                gpu.info.max_storage_buffer
+            )));
         }
     }
     let writes_counters = itf.bindings.contains(&(0, binding::COUNTERS));
