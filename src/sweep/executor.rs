@@ -212,8 +212,9 @@ struct SceneState<'a, 'g> {
     scene: Scene,
     bin: BinaryBvh,
     binary_ms: f64,
-    /// The f32 layout at B = 4 on the CPU: the reference every row is compared with.
-    f32_ref: Encoded,
+    /// The f32 layout at B = 4 on the CPU: the reference every row is compared with (dropped
+    /// once every ray kind has its f32 hits: a big scene's memory).
+    f32_ref: Option<Encoded>,
     rays: HashMap<usize, RaySet>,
     /// (layout, B) → encoded BVH, on the device, and its build time (binary + encode, ms).
     encodings: HashMap<(LayoutId, usize), (Encoded, GpuBvh<'g>, f64)>,
@@ -263,7 +264,7 @@ impl<'a, 'g> Executor<'a, 'g> {
             let t = std::time::Instant::now();
             let bin = bvh::build_binary(&scene);
             let binary_ms = t.elapsed().as_secs_f64() * 1e3;
-            let f32_ref = Encoded::new(&scene, &bin, LayoutId::f32(), 4)?;
+            let f32_ref = Some(Encoded::new(&scene, &bin, LayoutId::f32(), 4)?);
             self.scene = Some(SceneState { index, scene, bin, binary_ms, f32_ref, rays: HashMap::new(), encodings: HashMap::new(), baselines: HashMap::new(), images: Vec::new() });
         }
         Ok(self.scene.as_mut().expect("just set"))
@@ -272,13 +273,16 @@ impl<'a, 'g> Executor<'a, 'g> {
     /// Makes the job's scene, ray set and (for BVH targets) encoding resident.
     fn prepare(&mut self, job: &Job, enc: Option<(LayoutId, usize)>) -> anyhow::Result<()> {
         let (gpu, cfg) = (self.gpu, self.cfg);
-        let kind = self.kinds[job.rays].clone();
+        let (kind, kinds) = (self.kinds[job.rays].clone(), self.kinds.len());
         let s = self.scene(job.scene)?;
         if !s.rays.contains_key(&job.rays) {
             let params = RayParams { width: cfg.width, height: cfg.height, camera: None, seed: cfg.seed, ..Default::default() };
             let rays = make_rays(&s.scene, &s.bin, &kind, &params)?;
-            let f32_hits = s.f32_ref.trace_default(&rays).0;
+            let f32_hits = s.f32_ref.as_ref().expect("kept until every ray kind has its hits").trace_default(&rays).0;
             s.rays.insert(job.rays, RaySet { rays, f32_hits });
+            if s.rays.len() == kinds {
+                s.f32_ref = None;
+            }
         }
         if let Some((layout, b)) = enc {
             if !s.encodings.contains_key(&(layout, b)) {
