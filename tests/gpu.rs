@@ -315,6 +315,15 @@ fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
     let spv = repo("spirv/trav_f32_b4_p1.spv");
     let (ok, out, err) = run(&["--kernel", spv.to_str().unwrap()]);
     assert!(!ok && err.contains("reads binding 1") && err.contains("read by address") && !err.contains("panicked"), "{out}{err}");
+    // A buffer over maxMemoryAllocationSize (pretended 64 KiB) is refused, naming the limit,
+    // the variant, the buffer and its size.
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .env("HALFTRACE_MAX_ALLOCATION", "65536")
+        .args(["trace", "--scene", sc.to_str().unwrap(), "--layout", "f32", "--width", "16", "--height", "16"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("trav_f32_b4_p1") && err.contains("(f32, B=4) needs") && err.contains("maxMemoryAllocationSize of 65536 bytes") && !err.contains("panicked"), "{err}");
 }
 
 fn repo(path: &str) -> PathBuf {

@@ -102,7 +102,8 @@ pub struct ContextOptions {
     /// Enable VK_LAYER_KHRONOS_validation if installed (also `HALFTRACE_VALIDATION=1`).
     pub validation: bool,
     /// Pretend the device's storage-buffer limit is this many bytes (testing; also
-    /// `HALFTRACE_MAX_STORAGE_BUFFER=BYTES`, so any command can exercise the addressed path).
+    /// `HALFTRACE_MAX_STORAGE_BUFFER=BYTES`, so any command can exercise the addressed path;
+    /// `HALFTRACE_MAX_ALLOCATION=BYTES` likewise lowers `maxMemoryAllocationSize`).
     pub max_buffer: Option<u64>,
     /// How long one submission may run before it is declared hung (default
     /// [`DEFAULT_KERNEL_TIMEOUT_S`]).
@@ -327,15 +328,16 @@ impl Gpu {
         let idx = tryd!(pick(&infos, opts.device.as_deref()));
         let mut info = infos[idx].clone();
         let physical = pds[idx];
-        let env_max = match std::env::var("HALFTRACE_MAX_STORAGE_BUFFER") {
-            Ok(v) => match v.trim().parse::<u64>() {
-                Ok(m) => Some(m),
-                Err(_) => return Err((GpuError::Other(format!("HALFTRACE_MAX_STORAGE_BUFFER='{v}': give a number of bytes")), debug)),
-            },
-            Err(_) => None,
+        // Pretended lower limits (tests of the addressed path and of the refusals).
+        let env_limit = |var: &str| match std::env::var(var) {
+            Ok(v) => v.trim().parse::<u64>().map(Some).map_err(|_| GpuError::Other(format!("{var}='{v}': give a number of bytes"))),
+            Err(_) => Ok(None),
         };
-        if let Some(m) = opts.max_buffer.or(env_max) {
+        if let Some(m) = opts.max_buffer.or(tryd!(env_limit("HALFTRACE_MAX_STORAGE_BUFFER"))) {
             info.max_storage_buffer = info.max_storage_buffer.min(m);
+        }
+        if let Some(m) = tryd!(env_limit("HALFTRACE_MAX_ALLOCATION")) {
+            info.max_allocation = info.max_allocation.min(m);
         }
         for m in &opts.mask_features {
             if let Err(e) = info.mask(m) {
