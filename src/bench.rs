@@ -241,7 +241,9 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
             slot.insert((e, gb));
         }
         if !kernels.contains_key(v) {
-            let k = Kernel::build(g, v, choose_impl(g, v, None), false, &Source::Builtin).with_context(|| v.name(false))?;
+            // A scene beyond one storage buffer is read by address.
+            let kv = v.with_buffers(encs[&(v.layout, v.branching)].1.buffers);
+            let k = Kernel::build(g, &kv, choose_impl(g, v, None), false, &Source::Builtin).with_context(|| v.name(false))?;
             kernels.insert(*v, k);
         }
     }

@@ -13,7 +13,7 @@ use crate::layout::{Encoded, LayoutId};
 use crate::rays::{make_rays, Ray, RayKind, RayParams};
 use crate::scene::Scene;
 use crate::trace::{Counters, Hit};
-use crate::variant::{FloatControls, PacketImpl, Variant, PACKETS};
+use crate::variant::{Buffers, FloatControls, PacketImpl, Variant, PACKETS};
 use anyhow::Context;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -220,7 +220,27 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                     continue;
                 }
                 let t = Instant::now();
-                let (timed, counting) = &kernels[&i];
+                // A scene beyond one storage buffer is read by address: that build of the kernels.
+                let addressed;
+                let (timed, counting) = match gb.buffers {
+                    Buffers::Bound => {
+                        let (t, k) = &kernels[&i];
+                        (t, k)
+                    }
+                    buffers => {
+                        let v = c.variant.with_buffers(buffers);
+                        match Kernel::build(&g, &v, c.imp, false, &Source::Builtin).and_then(|a| Ok((a, Kernel::build(&g, &v, c.imp, true, &Source::Builtin)?))) {
+                            Ok(k) => {
+                                addressed = k;
+                                (&addressed.0, &addressed.1)
+                            }
+                            Err(e) => {
+                                c.status = Status::Fail(format!("building the kernel that reads the scene by address: {e}"));
+                                continue;
+                            }
+                        }
+                    }
+                };
                 let v = c.variant;
                 for (k, (kind, rays)) in sets.iter().enumerate() {
                     let (hits, counters) = refs.entry((v.packet, v.math, v.fc, k)).or_insert_with(|| enc.trace_fc(rays, v.packet, v.math, v.fc));

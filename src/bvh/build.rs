@@ -105,7 +105,7 @@ fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
     // adjacent, as `BinaryNode` requires), then each one's own region. Subtrees write disjoint
     // slices, so the parallel build needs no locks and no copies; leaves leave slots unused,
     // which a final pass in depth-first order squeezes out.
-    // Zeroed slots come from the OS untouched: only the slots a node is written to cost a write.
+    // Zeroed slots come from the OS as zero pages: no pass writes them before the build.
     let mut slots: Vec<BinaryNode> = bytemuck::zeroed_vec((2 * n).saturating_sub(1).max(1));
     let (root, rest) = slots.split_first_mut().expect("at least one slot");
     build_rec(&mut refs, &mut prims, 0, root, rest, 1, b, cb);
@@ -115,7 +115,8 @@ fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
 
 /// The nodes reachable from slot 0, renumbered in depth-first order (children stay adjacent).
 fn compact(slots: &[BinaryNode]) -> Vec<BinaryNode> {
-    let mut out = Vec::with_capacity(slots.len() / 2 + 1);
+    // Reserved in full (untouched capacity costs no memory): no reallocation while filling.
+    let mut out = Vec::with_capacity(slots.len());
     out.push(slots[0]);
     // (old index of an inner node's first child, new index of the node)
     let mut stack = Vec::new();

@@ -30,7 +30,9 @@ impl<'g> Buffer<'g> {
         }
         let d = &gpu.device;
         let raw = unsafe { d.create_buffer(&vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE), None) }.vk("vkCreateBuffer")?;
-        let req = unsafe { d.get_buffer_memory_requirements(raw) };
+        let mut req = unsafe { d.get_buffer_memory_requirements(raw) };
+        // Kernels that read a buffer by address assume 16-byte alignment (buffer_reference_align).
+        req.alignment = req.alignment.max(16);
         let alloc = gpu.allocator.lock().unwrap().allocate(&AllocationCreateDesc { name, requirements: req, location, linear: true, allocation_scheme: AllocationScheme::GpuAllocatorManaged });
         let alloc = match alloc {
             Ok(a) => a,

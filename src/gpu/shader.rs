@@ -409,6 +409,9 @@ pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stat
             return Err(err(format!("it does not use binding {need} ({what}), so it cannot be a traversal kernel")));
         }
     }
+    if v.buffers == crate::variant::Buffers::Bound && itf.capabilities.contains(&5347) {
+        return Err(err("it reads buffers by address (PhysicalStorageBufferAddresses: built with ADDRESSED?), but this scene's buffers are bound, and binding 0 holds the nodes, not addresses".into()));
+    }
     if v.buffers == crate::variant::Buffers::Addressed {
         if let Some(b) = [binding::TRI_VERTS, binding::TRI_IDS].into_iter().find(|&b| itf.bindings.contains(&(0, b))) {
             return Err(err(format!(
