@@ -237,41 +237,53 @@ fn split(refs: &mut [Ref], prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Sp
         // Bins over twice the centroid: (min + max − 2·cb.min) · BINS / (2·ext).
         let scale2 = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(BINS as f32 * (1.0 - 1e-6) * 0.5) / ext, Vec3A::ZERO);
         let origin2 = cb.min * 2.0;
-        let bins = bin_refs(refs, origin2, scale2);
-        for (a, axis) in bins.iter().enumerate() {
-            if ext[a] <= 0.0 {
-                continue;
+        if n == 2 {
+            // Two triangles (a third of all nodes): on every axis where their centroids differ
+            // they fall in bin 0 and bin BINS − 1, so the sweep's only candidate is one triangle
+            // a side, at the same cost on each such axis, and the first such axis wins.
+            let a = (0..3).find(|&a| ext[a] > 0.0).expect("some axis has extent");
+            let (l, r) = if (refs[0].min + refs[0].max)[a] < (refs[1].min + refs[1].max)[a] { (0, 1) } else { (1, 0) };
+            let cost = refs[l].area() + refs[r].area();
+            if cost < best.0 {
+                best = (cost, a, 0, refs[l], refs[r]);
             }
-            // Only occupied bins can end a side: an empty bin repeats its neighbour's partition
-            // and cost, so sweeping the occupied ones gives the same split (small nodes, the
-            // most numerous, occupy few of the bins).
-            let mut occ = [0usize; BINS];
-            let mut m = 0;
-            for (i, bin) in axis.iter().enumerate() {
-                if bin.count > 0 {
-                    occ[m] = i;
-                    m += 1;
+        } else {
+            let bins = bin_refs(refs, origin2, scale2);
+            for (a, axis) in bins.iter().enumerate() {
+                if ext[a] <= 0.0 {
+                    continue;
                 }
-            }
-            if m < 2 {
-                continue;
-            }
-            let mut right_box = [Bx::EMPTY; BINS];
-            let mut right_count = [0u32; BINS];
-            let (mut rb, mut rc) = (Bx::EMPTY, 0u32);
-            for j in (1..m).rev() {
-                rb = rb.union(&axis[occ[j]].bounds);
-                rc += axis[occ[j]].count;
-                right_box[j] = rb;
-                right_count[j] = rc;
-            }
-            let (mut lb, mut lc) = (Bx::EMPTY, 0u32);
-            for j in 0..m - 1 {
-                lb = lb.union(&axis[occ[j]].bounds);
-                lc += axis[occ[j]].count;
-                let cost = lb.area() * lc as f32 + right_box[j + 1].area() * right_count[j + 1] as f32;
-                if cost < best.0 {
-                    best = (cost, a, occ[j], lb, right_box[j + 1]);
+                // Only occupied bins can end a side: an empty bin repeats its neighbour's partition
+                // and cost, so sweeping the occupied ones gives the same split (small nodes, the
+                // most numerous, occupy few of the bins).
+                let mut occ = [0usize; BINS];
+                let mut m = 0;
+                for (i, bin) in axis.iter().enumerate() {
+                    if bin.count > 0 {
+                        occ[m] = i;
+                        m += 1;
+                    }
+                }
+                if m < 2 {
+                    continue;
+                }
+                let mut right_box = [Bx::EMPTY; BINS];
+                let mut right_count = [0u32; BINS];
+                let (mut rb, mut rc) = (Bx::EMPTY, 0u32);
+                for j in (1..m).rev() {
+                    rb = rb.union(&axis[occ[j]].bounds);
+                    rc += axis[occ[j]].count;
+                    right_box[j] = rb;
+                    right_count[j] = rc;
+                }
+                let (mut lb, mut lc) = (Bx::EMPTY, 0u32);
+                for j in 0..m - 1 {
+                    lb = lb.union(&axis[occ[j]].bounds);
+                    lc += axis[occ[j]].count;
+                    let cost = lb.area() * lc as f32 + right_box[j + 1].area() * right_count[j + 1] as f32;
+                    if cost < best.0 {
+                        best = (cost, a, occ[j], lb, right_box[j + 1]);
+                    }
                 }
             }
         }
