@@ -240,11 +240,10 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
             let gb = GpuBvh::upload(g, &e).with_context(|| format!("{}, B={}", v.layout, v.branching))?;
             slot.insert((e, gb));
         }
-        if !kernels.contains_key(v) {
-            // A scene beyond one storage buffer is read by address.
-            let kv = v.with_buffers(encs[&(v.layout, v.branching)].1.buffers);
-            let k = Kernel::build(g, &kv, choose_impl(g, v, None), false, &Source::Builtin).with_context(|| v.name(false))?;
-            kernels.insert(*v, k);
+        // A scene beyond one storage buffer is read by address: kernels are kept per build.
+        let kv = v.with_buffers(encs[&(v.layout, v.branching)].1.buffers);
+        if let std::collections::hash_map::Entry::Vacant(slot) = kernels.entry(kv) {
+            slot.insert(Kernel::build(g, &kv, choose_impl(g, v, None), false, &Source::Builtin).with_context(|| v.name(false))?);
         }
     }
     let mut base_scenes: Vec<(LayoutId, Box<dyn BaselineScene + '_>)> = Vec::new();
@@ -255,7 +254,8 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
     let mut targets: Vec<(usize, Key, Box<dyn Target + '_>)> = Vec::new();
     for (ki, v) in &wanted {
         let (_, gb) = &encs[&(v.layout, v.branching)];
-        targets.push((*ki, Key::Variant(*v), Box::new(KernelTarget { gpu: g, bvh: gb, timed: &kernels[v], counting: None })));
+        let timed = &kernels[&v.with_buffers(gb.buffers)];
+        targets.push((*ki, Key::Variant(*v), Box::new(KernelTarget { gpu: g, bvh: gb, timed, counting: None })));
     }
     for ki in 0..sets.len() {
         for (b, bs) in &base_scenes {

@@ -177,8 +177,10 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
             Check { variant, imp, status, rays: 0, counter_diffs: 0, secs: 0.0 }
         })
         .collect();
-    // Kernels (timed, counting) of every runnable check, built once.
-    let mut kernels: HashMap<usize, (Kernel, Kernel)> = HashMap::new();
+    // Kernels (timed, counting) of every runnable check, built once per way of reaching the
+    // scene's buffers (bound up front; read by address when a scene needs it).
+    let pair = |v: &Variant, imp: PacketImpl| Kernel::build(&g, v, imp, false, &Source::Builtin).and_then(|a| Ok((a, Kernel::build(&g, v, imp, true, &Source::Builtin)?)));
+    let mut kernels: HashMap<(usize, Buffers), (Kernel, Kernel)> = HashMap::new();
     let total = checks.len();
     progress(&format!("{total} kernels on {}: building pipelines", g.info.name));
     for (i, c) in checks.iter_mut().enumerate() {
@@ -189,10 +191,9 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
             continue;
         }
         let t = Instant::now();
-        let built = Kernel::build(&g, &c.variant, c.imp, false, &Source::Builtin).and_then(|a| Ok((a, Kernel::build(&g, &c.variant, c.imp, true, &Source::Builtin)?)));
-        match built {
+        match pair(&c.variant, c.imp) {
             Ok(k) => {
-                kernels.insert(i, k);
+                kernels.insert((i, Buffers::Bound), k);
             }
             Err(gpu::GpuError::Unsupported(why)) => c.status = Status::Skipped(why),
             Err(e) => c.status = Status::Fail(format!("building the kernel: {e}")),
@@ -221,26 +222,18 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                 }
                 let t = Instant::now();
                 // A scene beyond one storage buffer is read by address: that build of the kernels.
-                let addressed;
-                let (timed, counting) = match gb.buffers {
-                    Buffers::Bound => {
-                        let (t, k) = &kernels[&i];
-                        (t, k)
-                    }
-                    buffers => {
-                        let v = c.variant.with_buffers(buffers);
-                        match Kernel::build(&g, &v, c.imp, false, &Source::Builtin).and_then(|a| Ok((a, Kernel::build(&g, &v, c.imp, true, &Source::Builtin)?))) {
-                            Ok(k) => {
-                                addressed = k;
-                                (&addressed.0, &addressed.1)
-                            }
-                            Err(e) => {
-                                c.status = Status::Fail(format!("building the kernel that reads the scene by address: {e}"));
-                                continue;
-                            }
+                if let std::collections::hash_map::Entry::Vacant(slot) = kernels.entry((i, gb.buffers)) {
+                    match pair(&c.variant.with_buffers(gb.buffers), c.imp) {
+                        Ok(k) => {
+                            slot.insert(k);
+                        }
+                        Err(e) => {
+                            c.status = Status::Fail(format!("building the kernel that reads the scene by address: {e}"));
+                            continue;
                         }
                     }
-                };
+                }
+                let (timed, counting) = &kernels[&(i, gb.buffers)];
                 let v = c.variant;
                 for (k, (kind, rays)) in sets.iter().enumerate() {
                     let (hits, counters) = refs.entry((v.packet, v.math, v.fc, k)).or_insert_with(|| enc.trace_fc(rays, v.packet, v.math, v.fc));

@@ -14,6 +14,7 @@
 
 use crate::scene::SceneError;
 use glam::{Mat4, Vec3};
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 fn bad(path: &Path, msg: String) -> SceneError {
@@ -24,12 +25,13 @@ fn bad(path: &Path, msg: String) -> SceneError {
 pub fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Vec<[Vec3; 3]>, SceneError> {
     let g = gltf::Gltf::from_slice(bytes).map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mut buffers: Vec<Vec<u8>> = Vec::new();
+    // The GLB binary chunk is borrowed, not copied (often the biggest array of a big scene).
+    let mut buffers: Vec<Cow<[u8]>> = Vec::new();
     for b in g.document.buffers() {
         let what = format!("buffer {}", b.index());
         let data = match b.source() {
-            gltf::buffer::Source::Bin => g.blob.clone().ok_or_else(|| bad(path, format!("{what} is the GLB binary chunk, which the file does not have")))?,
-            gltf::buffer::Source::Uri(uri) => read_uri(path, &dir, uri, &what)?,
+            gltf::buffer::Source::Bin => Cow::Borrowed(g.blob.as_deref().ok_or_else(|| bad(path, format!("{what} is the GLB binary chunk, which the file does not have")))?),
+            gltf::buffer::Source::Uri(uri) => Cow::Owned(read_uri(path, &dir, uri, &what)?),
         };
         if data.len() < b.length() {
             return Err(bad(path, format!("{what}: {} bytes, the file declares {}", data.len(), b.length())));
@@ -126,7 +128,7 @@ impl View<'_> {
     }
 }
 
-fn view<'b>(path: &Path, buffers: &'b [Vec<u8>], a: &gltf::Accessor, what: &str) -> Result<View<'b>, SceneError> {
+fn view<'b>(path: &Path, buffers: &'b [Cow<[u8]>], a: &gltf::Accessor, what: &str) -> Result<View<'b>, SceneError> {
     if a.sparse().is_some() {
         return Err(bad(path, format!("{what}: sparse accessors are not supported")));
     }
@@ -147,7 +149,22 @@ fn view<'b>(path: &Path, buffers: &'b [Vec<u8>], a: &gltf::Accessor, what: &str)
     Ok(View { data, start, stride, count, size })
 }
 
-fn mesh_triangles(path: &Path, buffers: &[Vec<u8>], m: &gltf::Mesh, world: Mat4, tris: &mut Vec<[Vec3; 3]>, warnings: &mut Vec<String>) -> Result<(), SceneError> {
+/// Triangle `i` (≥ 2) of a strip, as positions in the strip: every other one swaps its first
+/// two vertices, keeping the winding (glTF and PLY strips alike).
+fn strip_tri(i: usize) -> [usize; 3] {
+    if i.is_multiple_of(2) {
+        [i - 2, i - 1, i]
+    } else {
+        [i - 1, i - 2, i]
+    }
+}
+
+/// Triangle `i` (≥ 2) of a fan (a glTF fan, a PLY polygon), as positions in it.
+fn fan_tri(i: usize) -> [usize; 3] {
+    [0, i - 1, i]
+}
+
+fn mesh_triangles(path: &Path, buffers: &[Cow<[u8]>], m: &gltf::Mesh, world: Mat4, tris: &mut Vec<[Vec3; 3]>, warnings: &mut Vec<String>) -> Result<(), SceneError> {
     use gltf::accessor::{DataType, Dimensions};
     use gltf::mesh::{Mode, Semantic};
     for p in m.primitives() {
@@ -203,9 +220,8 @@ fn mesh_triangles(path: &Path, buffers: &[Vec<u8>], m: &gltf::Mesh, world: Mat4,
                 }
                 tris.extend(idx.chunks_exact(3).map(|t| [v(t[0]), v(t[1]), v(t[2])]));
             }
-            // Every other strip triangle swaps its first two vertices, keeping the winding.
-            Mode::TriangleStrip => tris.extend((2..idx.len()).map(|i| if i % 2 == 0 { [v(idx[i - 2]), v(idx[i - 1]), v(idx[i])] } else { [v(idx[i - 1]), v(idx[i - 2]), v(idx[i])] })),
-            _ => tris.extend((2..idx.len()).map(|i| [v(idx[0]), v(idx[i - 1]), v(idx[i])])),
+            Mode::TriangleStrip => tris.extend((2..idx.len()).map(|i| strip_tri(i).map(|k| v(idx[k])))),
+            _ => tris.extend((2..idx.len()).map(|i| fan_tri(i).map(|k| v(idx[k])))),
         }
     }
     Ok(())
@@ -263,7 +279,8 @@ pub fn load_ply(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError>
                 return Err(bad(path, format!("{what}: {} vertices (at least 3 needed)", ix.len())));
             }
             for k in 2..ix.len() {
-                tris.push([get(&what, ix[0])?, get(&what, ix[k - 1])?, get(&what, ix[k])?]);
+                let [a, b, c] = fan_tri(k);
+                tris.push([get(&what, ix[a])?, get(&what, ix[b])?, get(&what, ix[c])?]);
             }
         }
     } else if let Some(strips) = ply.payload.get("tristrips") {
@@ -271,8 +288,8 @@ pub fn load_ply(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError>
             let what = format!("tristrips {s}");
             for strip in list(e, &what)?.split(|&i| i < 0) {
                 for k in 2..strip.len() {
-                    let (a, b) = if k % 2 == 0 { (strip[k - 2], strip[k - 1]) } else { (strip[k - 1], strip[k - 2]) };
-                    tris.push([get(&what, a)?, get(&what, b)?, get(&what, strip[k])?]);
+                    let [a, b, c] = strip_tri(k);
+                    tris.push([get(&what, strip[a])?, get(&what, strip[b])?, get(&what, strip[c])?]);
                 }
             }
         }

@@ -441,11 +441,12 @@ fn instance(scene: &std::path::Path, count: usize, seed: u64, out: &std::path::P
     anyhow::ensure!(out.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb")), "--out {}: name a .glb file", out.display());
     anyhow::ensure!(!out.exists(), "--out {} exists; it is not overwritten", out.display());
     let s = halftrace::scene::load(scene)?;
-    let total = s.len().checked_mul(count).filter(|&t| t <= halftrace::scene::MAX_TRIANGLES);
-    anyhow::ensure!(total.is_some(), "{} instances of {} triangles exceed the {} triangles a scene may have", count, s.len(), halftrace::scene::MAX_TRIANGLES);
+    let Some(total) = s.len().checked_mul(count).filter(|&t| t <= halftrace::scene::MAX_TRIANGLES) else {
+        anyhow::bail!("{} instances of {} triangles exceed the {} triangles a scene may have", count, s.len(), halftrace::scene::MAX_TRIANGLES);
+    };
     let bytes = halftrace::formats::instanced_glb(&s, count, seed);
     halftrace::fsx::write_atomic(out, &bytes)?;
-    outln!("{}: {} instances of {} ({} triangles each): {} triangles, {} bytes", out.display(), count, s.name, s.len(), total.unwrap_or(0), bytes.len());
+    outln!("{}: {} instances of {} ({} triangles each): {} triangles, {} bytes", out.display(), count, s.name, s.len(), total, bytes.len());
     Ok(())
 }
 
@@ -559,7 +560,7 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let imp = kernel::choose_impl(&g, &variant, force_impl);
         let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
         // The reference hits were taken above: each host array goes once the device holds it.
-        let gb = GpuBvh::upload_owned(&g, enc, None).with_context(|| variant.to_string())?;
+        let gb = GpuBvh::upload_owned(&g, enc).with_context(|| variant.to_string())?;
         if gb.buffers == Buffers::Addressed {
             outln!("scene buffers read by address: {} bytes of nodes and triangles, a buffer larger than one storage binding may span on this device (maxStorageBufferRange {} bytes)", gb.bytes, g.info.max_storage_buffer);
         }

@@ -291,7 +291,12 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn cli(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(args).output().unwrap();
+    cli_env(&[], args)
+}
+
+/// [`cli`] with environment variables set.
+fn cli_env(env: &[(&str, &str)], args: &[&str]) -> (bool, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).envs(env.iter().copied()).args(args).output().unwrap();
     (o.status.success(), String::from_utf8_lossy(&o.stdout).to_string(), String::from_utf8_lossy(&o.stderr).to_string())
 }
 
@@ -301,12 +306,12 @@ fn cli(args: &[&str]) -> (bool, String, String) {
 #[test]
 fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
     let sc = scenes_dir().join("teapot.obj");
-    let run = |extra: &[&str]| {
+    let trace = |env: (&str, &str), extra: &[&str]| {
         let mut a = vec!["trace", "--scene", sc.to_str().unwrap(), "--layout", "f32", "--width", "16", "--height", "16", "--repeat", "1"];
         a.extend_from_slice(extra);
-        let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).env("HALFTRACE_MAX_STORAGE_BUFFER", "16384").args(&a).output().unwrap();
-        (o.status.success(), String::from_utf8_lossy(&o.stdout).to_string(), String::from_utf8_lossy(&o.stderr).to_string())
+        cli_env(&[env], &a)
     };
+    let run = |extra: &[&str]| trace(("HALFTRACE_MAX_STORAGE_BUFFER", "16384"), extra);
     let (ok, out, err) = run(&[]);
     assert!(ok && out.contains("read by address") && out.contains("trav_f32_b4_p1_addr: validated against the CPU reference"), "{out}{err}");
     let user = repo("docs/examples/unordered.comp");
@@ -317,13 +322,8 @@ fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
     assert!(!ok && err.contains("reads binding 1") && err.contains("read by address") && !err.contains("panicked"), "{out}{err}");
     // A buffer over maxMemoryAllocationSize (pretended 64 KiB) is refused, naming the limit,
     // the variant, the buffer and its size.
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .env("HALFTRACE_MAX_ALLOCATION", "65536")
-        .args(["trace", "--scene", sc.to_str().unwrap(), "--layout", "f32", "--width", "16", "--height", "16"])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("trav_f32_b4_p1") && err.contains("(f32, B=4) needs") && err.contains("maxMemoryAllocationSize of 65536 bytes") && !err.contains("panicked"), "{err}");
+    let (ok, _, err) = trace(("HALFTRACE_MAX_ALLOCATION", "65536"), &[]);
+    assert!(!ok && err.contains("trav_f32_b4_p1") && err.contains("(f32, B=4) needs") && err.contains("maxMemoryAllocationSize of 65536 bytes") && !err.contains("panicked"), "{err}");
 }
 
 fn repo(path: &str) -> PathBuf {

@@ -17,10 +17,17 @@ fn teapot() -> String {
 }
 
 fn sweep(out: &Path, extra: &[&str]) -> std::process::Output {
+    sweep_cmd(out, extra).output().unwrap()
+}
+
+/// The small sweep's command, to run with extra environment.
+fn sweep_cmd(out: &Path, extra: &[&str]) -> Command {
     let scene = teapot();
     let mut args = vec!["sweep", "--quiet", "--scene", &scene, "--width", "24", "--height", "24", "--repeat", "3", "--warmup", "1", "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);
-    Command::new(env!("CARGO_BIN_EXE_halftrace")).args(&args).output().unwrap()
+    let mut c = Command::new(env!("CARGO_BIN_EXE_halftrace"));
+    c.args(&args);
+    c
 }
 
 #[test]
@@ -351,10 +358,7 @@ fn shards_merge_into_the_unsplit_sweep() {
     let split = tmp("shard-split");
     let first = sweep(&split, &[&only[..], &["--shard", "1/2"]].concat());
     assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
-    let scene = teapot();
-    let mut args = vec!["sweep", "--quiet", "--scene", &scene, "--width", "24", "--height", "24", "--repeat", "3", "--warmup", "1", "--out", split.to_str().unwrap()];
-    args.extend_from_slice(&only);
-    let second = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(&args).env("SLURM_ARRAY_TASK_COUNT", "2").env("SLURM_ARRAY_TASK_ID", "1").env("SLURM_ARRAY_TASK_MIN", "0").output().unwrap();
+    let second = sweep_cmd(&split, &only).env("SLURM_ARRAY_TASK_COUNT", "2").env("SLURM_ARRAY_TASK_ID", "1").env("SLURM_ARRAY_TASK_MIN", "0").output().unwrap();
     assert!(second.status.success(), "{}", String::from_utf8_lossy(&second.stderr));
     let (s1, s2) = (split.join("shard-1-of-2"), split.join("shard-2-of-2"));
     let (r1, r2) = (read_rows(&s1).unwrap(), read_rows(&s2).unwrap());

@@ -79,21 +79,17 @@ impl<'g> Buffer<'g> {
         let mut off = 0u64;
         while off < len {
             let n = chunk.min(len - off);
-            let sname = staging.name.clone();
-            let m = staging.alloc.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(|| GpuError::Other(format!("buffer {sname} is not host-visible")))?;
-            fill(off, &mut m[..n as usize]);
+            fill(off, &mut staging.mapped_mut()?[..n as usize]);
             gpu.submit_and_wait(|cmd| unsafe { gpu.device.cmd_copy_buffer(cmd, staging.raw, dst.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: off, size: n }]) })?;
             off += n;
         }
         Ok(dst)
     }
 
-    /// Copies bytes into a host-visible buffer.
-    pub fn write(&mut self, data: &[u8]) -> Result<(), GpuError> {
-        let name = self.name.clone();
-        let m = self.alloc.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(|| GpuError::Other(format!("buffer {name} is not host-visible")))?;
-        m[..data.len()].copy_from_slice(data);
-        Ok(())
+    /// The bytes of a host-visible buffer, writable.
+    fn mapped_mut(&mut self) -> Result<&mut [u8], GpuError> {
+        let name = &self.name;
+        self.alloc.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(|| GpuError::Other(format!("buffer {name} is not host-visible")))
     }
 
     /// Reads bytes from a host-visible buffer.

@@ -36,23 +36,17 @@ impl<'g> GpuBvh<'g> {
     /// Uploads an encoded BVH, bound where every buffer fits one storage-buffer binding and
     /// addressed otherwise (a clear error naming the limit where the device cannot address).
     pub fn upload(gpu: &'g Gpu, enc: &Encoded) -> Result<GpuBvh<'g>, GpuError> {
-        GpuBvh::upload_as(gpu, enc, None)
-    }
-
-    /// [`Self::upload`], with the way kernels reach the buffers forced (`Some`) or chosen by
-    /// size (`None`).
-    pub fn upload_as(gpu: &'g Gpu, enc: &Encoded, force: Option<Buffers>) -> Result<GpuBvh<'g>, GpuError> {
-        let plan = UploadPlan::new(gpu, enc, force)?;
+        let plan = UploadPlan::new(gpu, enc)?;
         let nodes = plan.nodes(gpu, &*enc.nodes)?;
         let tris = plan.upload(gpu, "triangles", bytemuck::cast_slice(&enc.tris.verts))?;
         let ids = plan.upload(gpu, "triangle ids", bytemuck::cast_slice(&enc.tris.ids))?;
         plan.finish(gpu, nodes, tris, ids)
     }
 
-    /// [`Self::upload_as`], freeing each host array as soon as the device holds it, so a big
+    /// [`Self::upload`], freeing each host array as soon as the device holds it, so a big
     /// scene's BVH is never held twice (on a CPU device, device memory is host memory too).
-    pub fn upload_owned(gpu: &'g Gpu, enc: Encoded, force: Option<Buffers>) -> Result<GpuBvh<'g>, GpuError> {
-        let plan = UploadPlan::new(gpu, &enc, force)?;
+    pub fn upload_owned(gpu: &'g Gpu, enc: Encoded) -> Result<GpuBvh<'g>, GpuError> {
+        let plan = UploadPlan::new(gpu, &enc)?;
         let Encoded { nodes: host_nodes, tris: host_tris, .. } = enc;
         let nodes = plan.nodes(gpu, &*host_nodes)?;
         drop(host_nodes);
@@ -84,7 +78,7 @@ struct UploadPlan {
 }
 
 impl UploadPlan {
-    fn new(gpu: &Gpu, enc: &Encoded, force: Option<Buffers>) -> Result<UploadPlan, GpuError> {
+    fn new(gpu: &Gpu, enc: &Encoded) -> Result<UploadPlan, GpuError> {
         let (layout, b) = (enc.layout, enc.branching);
         if enc.max_stack > stack_entries(b) {
             return Err(GpuError::Other(format!("BVH needs {} stack entries, more than the {} the B={b} kernels have", enc.max_stack, stack_entries(b))));
@@ -96,25 +90,19 @@ impl UploadPlan {
         let node_bytes = enc.node_count() as u64 * node_size;
         let sizes = [("nodes", node_bytes), ("triangles", std::mem::size_of_val(&enc.tris.verts[..]) as u64), ("triangle ids", std::mem::size_of_val(&enc.tris.ids[..]) as u64)];
         let limit = gpu.info.max_storage_buffer;
-        let buffers = match force {
-            Some(f) => f,
-            None => match sizes.iter().find(|(_, n)| *n > limit) {
-                None => Buffers::Bound,
-                Some(_) if gpu.info.buffer_device_address => Buffers::Addressed,
-                Some((what, n)) => {
-                    return Err(GpuError::TooBig {
-                        what: format!("{what} ({label})"),
-                        bytes: *n,
-                        limit,
-                        limit_name: "maxStorageBufferRange",
-                        hint: format!(" for one storage buffer, and {} has no bufferDeviceAddress to read a larger buffer by address", gpu.info.name),
-                    })
-                }
-            },
+        let buffers = match sizes.iter().find(|(_, n)| *n > limit) {
+            None => Buffers::Bound,
+            Some(_) if gpu.info.buffer_device_address => Buffers::Addressed,
+            Some((what, n)) => {
+                return Err(GpuError::TooBig {
+                    what: format!("{what} ({label})"),
+                    bytes: *n,
+                    limit,
+                    limit_name: "maxStorageBufferRange",
+                    hint: format!(" for one storage buffer, and {} has no bufferDeviceAddress to read a larger buffer by address", gpu.info.name),
+                })
+            }
         };
-        if buffers == Buffers::Addressed && !gpu.info.buffer_device_address {
-            return Err(GpuError::Unsupported(format!("BVH ({label}): reading the scene by address needs bufferDeviceAddress (device: {})", gpu.info.name)));
-        }
         Ok(UploadPlan { label, push, buffers, node_size, bytes: sizes.iter().map(|s| s.1).sum() })
     }
 

@@ -323,9 +323,10 @@ impl Encoded {
     pub fn new(scene: &Scene, bin: &BinaryBvh, layout: LayoutId, b: usize) -> anyhow::Result<Encoded> {
         crate::bvh::check_branching(b)?;
         let l = layout.bvh().ok_or_else(|| anyhow::anyhow!("{layout} is a baseline, not a BVH layout"))?;
-        crate::progress::step(&format!("encoding {} as {layout}, B={b}", scene.name), || {
+        let what = format!("encoding {} as {layout}, B={b}", scene.name);
+        crate::progress::step(&what, || {
             let w = crate::bvh::collapse(bin, b);
-            l.encode(scene, &w).map_err(|e| anyhow::anyhow!("encoding {} as {layout}, B={b}: {e}", scene.name))
+            l.encode(scene, &w).map_err(|e| anyhow::anyhow!("{what}: {e}"))
         })
     }
 

@@ -112,7 +112,7 @@ impl Shard {
             Some(m) => num("SLURM_ARRAY_TASK_MIN", Some(m))?,
             None => 0,
         };
-        if id < min || id - min >= n || n == 0 {
+        if id < min || id - min >= n {
             return Err(format!("SLURM_ARRAY_TASK_ID={id} is not one of the {n} tasks from SLURM_ARRAY_TASK_MIN={min}: submit the array as --array=0-{} (or 1-{n})", n.saturating_sub(1)));
         }
         Ok(Some(Shard { k: id - min + 1, n }))
