@@ -102,61 +102,69 @@ fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
         .collect();
     let mut prims: Vec<u32> = (0..n as u32).into_par_iter().collect();
     let (b, cb) = range_bounds(&refs);
-    let top = build_top(&mut refs, &mut prims, 0, b, cb);
+    // A subtree over k triangles has at most 2k − 1 nodes: it gets that many slots, its children
+    // split them, and a sequential block fills its own slots densely from the front. The slots
+    // come from the OS as zero pages, touched only where a node is written, and go back to it
+    // in one piece once the blocks are copied out (blocks of their own would stay in the heap).
+    let mut slots: Vec<BinaryNode> = bytemuck::zeroed_vec((2 * n).max(2) - 1);
+    let top = build_top(&mut refs, &mut prims, 0, &mut slots, b, cb);
     drop(refs);
     BinaryBvh { nodes: assemble(top), prims }
 }
 
 /// The parallel top of the tree: inner nodes over at least `PAR_SUBTREE` triangles, down to
 /// blocks built sequentially.
-enum Sub {
-    Inner(Bx, Box<(Sub, Sub)>),
+enum Sub<'a> {
+    Inner(Bx, Box<(Sub<'a>, Sub<'a>)>),
     /// A sequentially built subtree: its root first; inner nodes' `first` indexes this block.
-    Block(Vec<BinaryNode>),
+    Block(&'a [BinaryNode]),
 }
 
-fn build_top(refs: &mut [Ref], prims: &mut [u32], base: u32, bounds: Bx, cb: Bx) -> Sub {
+fn build_top<'a>(refs: &mut [Ref], prims: &mut [u32], base: u32, slots: &'a mut [BinaryNode], bounds: Bx, cb: Bx) -> Sub<'a> {
     let n = refs.len();
     if n < PAR_SUBTREE {
-        let mut block = Vec::with_capacity(2 * n - 1);
-        block.push(BinaryNode::zeroed());
-        build_seq(refs, prims, base, &mut block, 0, bounds, cb);
-        return Sub::Block(block);
+        let mut used = 1;
+        build_seq(refs, prims, base, slots, &mut used, 0, bounds, cb);
+        let block: &'a [BinaryNode] = slots;
+        return Sub::Block(&block[..used]);
     }
     let Some(sp) = split(refs, prims, &bounds, &cb) else {
-        return Sub::Block(vec![BinaryNode { bounds: bounds.aabb(), first: base, count: n as u32 }]);
+        slots[0] = BinaryNode { bounds: bounds.aabb(), first: base, count: n as u32 };
+        let block: &'a [BinaryNode] = slots;
+        return Sub::Block(&block[..1]);
     };
     let m = sp.mid;
     let (lrefs, rrefs) = refs.split_at_mut(m);
     let (lprims, rprims) = prims.split_at_mut(m);
-    let kids = rayon::join(|| build_top(lrefs, lprims, base, sp.lb, sp.lcb), || build_top(rrefs, rprims, base + m as u32, sp.rb, sp.rcb));
+    let (lslots, rslots) = slots.split_at_mut(2 * m - 1);
+    let kids = rayon::join(|| build_top(lrefs, lprims, base, lslots, sp.lb, sp.lcb), || build_top(rrefs, rprims, base + m as u32, rslots, sp.rb, sp.rcb));
     Sub::Inner(bounds, Box::new(kids))
 }
 
 /// Builds the subtree over `refs`/`prims` (at `base` in the global triangle order) into
-/// `block`, its root at `block[me]`; children are appended as adjacent pairs.
-fn build_seq(refs: &mut [Ref], prims: &mut [u32], base: u32, block: &mut Vec<BinaryNode>, me: usize, bounds: Bx, cb: Bx) {
+/// `block`, its root at `block[me]`; children go to the next free pair (`used`).
+#[allow(clippy::too_many_arguments)]
+fn build_seq(refs: &mut [Ref], prims: &mut [u32], base: u32, block: &mut [BinaryNode], used: &mut usize, me: usize, bounds: Bx, cb: Bx) {
     let n = refs.len();
     let Some(sp) = split(refs, prims, &bounds, &cb) else {
         block[me] = BinaryNode { bounds: bounds.aabb(), first: base, count: n as u32 };
         return;
     };
-    let kid = block.len();
+    let kid = *used;
+    *used += 2;
     block[me] = BinaryNode { bounds: bounds.aabb(), first: kid as u32, count: 0 };
-    block.push(BinaryNode::zeroed());
-    block.push(BinaryNode::zeroed());
     let m = sp.mid;
     let (lrefs, rrefs) = refs.split_at_mut(m);
     let (lprims, rprims) = prims.split_at_mut(m);
-    build_seq(lrefs, lprims, base, block, kid, sp.lb, sp.lcb);
-    build_seq(rrefs, rprims, base + m as u32, block, kid + 1, sp.rb, sp.rcb);
+    build_seq(lrefs, lprims, base, block, used, kid, sp.lb, sp.lcb);
+    build_seq(rrefs, rprims, base + m as u32, block, used, kid + 1, sp.rb, sp.rcb);
 }
 
 /// One node array from the parallel top and its blocks: the top's nodes and the blocks' roots
 /// first (depth-first), then each block's other nodes, copied in parallel with their child
 /// indices moved to where the block lands.
 fn assemble(top: Sub) -> Vec<BinaryNode> {
-    fn inner_count(s: &Sub) -> usize {
+    fn inner_count(s: &Sub<'_>) -> usize {
         match s {
             Sub::Inner(_, kids) => 1 + inner_count(&kids.0) + inner_count(&kids.1),
             Sub::Block(_) => 0,
