@@ -1,6 +1,6 @@
 //! Binned SAH construction of a binary BVH in fp32 (Wald 2007, "On fast construction of
-//! SAH-based bounding volume hierarchies"), parallel over subtrees with rayon. Nodes of over
-//! 65 536 triangles bin an even sample of them; nodes of at most 16 find the same split as
+//! SAH-based bounding volume hierarchies"), parallel over subtrees with rayon. Nodes of at
+//! least 65 536 triangles bin an even sample of them; nodes of at most 16 find the same split as
 //! their bins would by sorting.
 
 use crate::geom::Aabb;
@@ -37,8 +37,9 @@ impl Bx {
     }
 }
 
-/// Number of SAH bins per axis.
+/// Number of SAH bins per axis (a power of two: `bin_of` masks the bin out of a float's bits).
 pub const BINS: usize = 16;
+const _: () = assert!(BINS.is_power_of_two() && SMALL <= 16);
 /// Largest leaf; also bounded by the 4-bit count in the encoded child references.
 pub const MAX_LEAF: usize = 8;
 /// SAH cost of one node traversal relative to one triangle test.
