@@ -67,11 +67,11 @@ pub struct BinaryBvh {
     pub prims: Vec<u32>,
 }
 
-/// A triangle's box, partitioned in place with its id (`ids`) so every pass over a node's
+/// A triangle's box, partitioned in place beside its id (`prims`) so every pass over a node's
 /// triangles reads memory in order.
 type Ref = Bx;
 
-/// Subtrees below this many triangles are built sequentially, each into its own node block.
+/// Subtrees below this many triangles are built sequentially, each into its own block of slots.
 const PAR_SUBTREE: usize = 4096;
 /// Ranges above this many triangles have their bounds gathered in parallel.
 const PAR_BOUNDS: usize = 1 << 17;
@@ -129,11 +129,7 @@ fn build_top<'a>(refs: &mut [Ref], prims: &mut [u32], base: u32, slots: &'a mut 
         let block: &'a [BinaryNode] = slots;
         return Sub::Block(&block[..used]);
     }
-    let Some(sp) = split(refs, prims, &bounds, &cb) else {
-        slots[0] = BinaryNode { bounds: bounds.aabb(), first: base, count: n as u32 };
-        let block: &'a [BinaryNode] = slots;
-        return Sub::Block(&block[..1]);
-    };
+    let sp = split(refs, prims, &bounds, &cb).expect("a node of more than MAX_LEAF triangles always splits");
     let m = sp.mid;
     let (lrefs, rrefs) = refs.split_at_mut(m);
     let (lprims, rprims) = prims.split_at_mut(m);
@@ -349,7 +345,7 @@ fn sweep_small<const N: usize>(refs: &[Ref], origin2: Vec3A, scale2: Vec3A, ext:
         if ext[a] <= 0.0 {
             continue;
         }
-        // Counting sort by bin (stable): `order` lists triangle indices, `bins` their bins.
+        // Counting sort by bin (stable): `order` lists the triangles' indices by bin.
         let bin: [u8; N] = std::array::from_fn(|j| bin_of(pos[j][a]) as u8);
         let mut start = [0u8; BINS];
         for &b in &bin {
@@ -363,10 +359,10 @@ fn sweep_small<const N: usize>(refs: &[Ref], origin2: Vec3A, scale2: Vec3A, ext:
         }
         let order = &mut sorted[a];
         for (j, &b) in bin.iter().enumerate() {
-            order[(start[b as usize] as usize).min(N - 1)] = j as u8;
+            order[index::<N>(start[b as usize])] = j as u8;
             start[b as usize] += 1;
         }
-        let at = |k: usize| (order[k] as usize).min(N - 1);
+        let at = |k: usize| index::<N>(order[k]);
         let mut right_area = [0f32; N];
         let mut rb = Bx::EMPTY;
         for k in (1..N).rev() {
@@ -388,13 +384,19 @@ fn sweep_small<const N: usize>(refs: &[Ref], origin2: Vec3A, scale2: Vec3A, ext:
         let (mut lb, mut rb) = (Bx::EMPTY, Bx::EMPTY);
         for (k, &j) in order.iter().enumerate() {
             if k <= last {
-                lb = lb.union(&refs[(j as usize).min(N - 1)]);
+                lb = lb.union(&refs[index::<N>(j)]);
             } else {
-                rb = rb.union(&refs[(j as usize).min(N - 1)]);
+                rb = rb.union(&refs[index::<N>(j)]);
             }
         }
-        *best = (cost, axis, bin_of(pos[(order[last] as usize).min(N - 1)][axis]), lb, rb);
+        *best = (cost, axis, bin_of(pos[index::<N>(order[last])][axis]), lb, rb);
     }
+}
+
+/// A position in a node of N triangles, kept below N so indexing needs no bounds check.
+#[inline(always)]
+fn index<const N: usize>(j: u8) -> usize {
+    (j as usize).min(N - 1)
 }
 
 /// `sweep_small` for a node of 3 to `SMALL` triangles.
@@ -447,7 +449,7 @@ fn split(refs: &mut [Ref], prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Sp
     }
     let ext = cb.max - cb.min;
     let mut best: Best = (f32::INFINITY, 0usize, 0usize, Bx::EMPTY, Bx::EMPTY);
-    let mut sampled = false;
+    let sampled = n >= SAMPLE_FROM;
     if ext.max_element() > 0.0 {
         // Bins over twice the centroid: (min + max − 2·cb.min) · (BINS − 1) / (2·ext), rounded
         // to the nearest bin (the end bins are half as wide as the others).
@@ -462,8 +464,7 @@ fn split(refs: &mut [Ref], prims: &mut [u32], bounds: &Bx, cb: &Bx) -> Option<Sp
             best = (refs[l].area() + refs[r].area(), a, 0, refs[l], refs[r]);
         } else if n <= SMALL {
             sweep_small_any(refs, origin2, scale2, ext, &mut best);
-        } else if n >= SAMPLE_FROM {
-            sampled = true;
+        } else if sampled {
             sweep_bins(&bin_chunk(refs.iter().step_by(n / SAMPLES), origin2, scale2), ext, &mut best);
         } else {
             sweep_bins(&bin_chunk(refs.iter(), origin2, scale2), ext, &mut best);
