@@ -123,6 +123,7 @@ impl BaselineScene for EmbreeScene<'_> {
                 times_ms.push(t0.elapsed().as_secs_f64() * 1e3);
             }
         }
+        crate::digest::record("baseline", "embree3_intersect1_host", rays, &hits, None);
         Ok(RunOutput { hits, counters: None, times_ms })
     }
 }

@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod bvh;
 pub mod conformance;
+pub mod digest;
 pub mod embree;
 pub mod formats;
 pub mod fp16;

@@ -267,7 +267,8 @@ impl<'g> Kernel<'g> {
                 ),
             }));
         }
-        let counters = if self.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
+        let counters: Option<Vec<Counters>> = if self.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
+        crate::digest::record("gpu", &self.label(), rays, &hits, counters.as_deref());
         Ok(RunOutput { hits, counters, times_ms: times })
     }
 }

@@ -164,6 +164,7 @@ pub fn run(gpu: &Gpu, scene: &RqScene, pipe: &ComputePipeline, rays: &[Ray], war
     let push = PushConstants { ray_count: n as u32, ..Default::default() };
     let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(64), warmup, repeat)?;
     let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
+    crate::digest::record("baseline", KERNEL, rays, &hits, None);
     Ok(RunOutput { hits, counters: None, times_ms: times })
 }
 

@@ -357,7 +357,9 @@ impl Encoded {
 
     /// The CPU reference of the kernel built with float controls `fc` (their bounds differ).
     pub fn trace_fc(&self, rays: &[Ray], p: usize, math: Math, fc: crate::variant::FloatControls) -> (Vec<Hit>, Vec<Counters>) {
-        self.layout.bvh().expect("Encoded holds a BVH layout").trace(self, rays, p, math, fc)
+        let (hits, counters) = self.layout.bvh().expect("Encoded holds a BVH layout").trace(self, rays, p, math, fc);
+        crate::digest::record("cpu", &format!("{} B{} P{p} {} fc-{}", self.layout, self.branching, math.name(), fc.name()), rays, &hits, Some(&counters));
+        (hits, counters)
     }
 
     /// Single rays in the layout's default math.
