@@ -15,8 +15,11 @@ use halftrace::layout::{Encoded, LayoutId};
 use std::path::PathBuf;
 
 fn bench(c: &mut Criterion) {
-    let path = std::env::var_os("HALFTRACE_BENCH_SCENE").map(PathBuf::from).unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/igea.obj.gz"));
-    let scene = halftrace::scene::load(&path).unwrap_or_else(|e| panic!("the build benchmark needs {}: {e}", path.display()));
+    let path = std::env::var_os("HALFTRACE_BENCH_SCENE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/igea.obj.gz"));
+    let scene =
+        halftrace::scene::load(&path).unwrap_or_else(|e| panic!("the build benchmark needs {}: {e}", path.display()));
     let name = scene.name.clone();
     let n = scene.len() as u64;
     let mut g = c.benchmark_group("build");
@@ -25,7 +28,9 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements(n));
     g.bench_function(format!("binary_sah/{name}"), |b| b.iter(|| bvh::build_binary(&scene)));
     let embree = halftrace::embree::host();
-    g.bench_function(format!("embree_scene/{name}"), |b| b.iter(|| embree.scene(&scene).expect("Embree builds the scene")));
+    g.bench_function(format!("embree_scene/{name}"), |b| {
+        b.iter(|| embree.scene(&scene).expect("Embree builds the scene"))
+    });
     let bin = bvh::build_binary(&scene);
     for b in BRANCHINGS {
         g.bench_function(format!("collapse/b{b}"), |bn| bn.iter(|| bvh::collapse(&bin, b)));
@@ -35,7 +40,9 @@ fn bench(c: &mut Criterion) {
             g.bench_function(format!("encode_{l}/b{b}"), |bn| bn.iter(|| layout.encode(&scene, &w).unwrap()));
         }
         let f16h = LayoutId::parse("f16h").unwrap();
-        g.bench_function(format!("total_f16h/b{b}"), |bn| bn.iter(|| Encoded::new(&scene, &bvh::build_binary(&scene), f16h, b).unwrap()));
+        g.bench_function(format!("total_f16h/b{b}"), |bn| {
+            bn.iter(|| Encoded::new(&scene, &bvh::build_binary(&scene), f16h, b).unwrap())
+        });
     }
     g.finish();
 }

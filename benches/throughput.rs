@@ -14,13 +14,19 @@ use halftrace::variant::{Variant, PACKETS};
 use std::path::PathBuf;
 
 fn main() {
-    let scene_path = std::env::args().skip(1).find(|a| a.ends_with(".obj") || a.ends_with(".obj.gz")).map(PathBuf::from)
+    let scene_path = std::env::args()
+        .skip(1)
+        .find(|a| a.ends_with(".obj") || a.ends_with(".obj.gz"))
+        .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/sponza_dabrovic.obj"));
     let scene = halftrace::scene::load(&scene_path).expect("scene");
     let bin = halftrace::bvh::build_binary(&scene);
     let g = Gpu::new(&ContextOptions::default()).expect("no Vulkan device");
     println!("scene {} ({} triangles), device {} ({})", scene.name, scene.len(), g.info.name, g.info.driver);
-    println!("{:<10} {:<26} {:>8} {:>10} {:>10} {:>10} {:>9}", "rays", "variant", "count", "median ms", "min ms", "max ms", "Mrays/s");
+    println!(
+        "{:<10} {:<26} {:>8} {:>10} {:>10} {:>10} {:>9}",
+        "rays", "variant", "count", "median ms", "min ms", "max ms", "Mrays/s"
+    );
     let params = RayParams { width: 512, height: 512, ..Default::default() };
     for kind in [RayKind::Primary, RayKind::Ao] {
         let rays = make_rays(&scene, &bin, &kind, &params).unwrap();
@@ -33,12 +39,28 @@ fn main() {
                 let (cpu_hits, cpu_counters) = enc.trace(&rays, p, v.math);
                 let k = Kernel::build(&g, &v, choose_impl(&g, &v, None), false, &Source::Builtin).unwrap();
                 let target = KernelTarget { gpu: &g, bvh: &gb, timed: &k, counting: None };
-                let m = validate_then_time(&target, &rays, Reference::Exact { hits: &cpu_hits, counters: &cpu_counters }, &f32_hits, Plan { warmup: 2, repeat: 10, count: false }).unwrap();
+                let m = validate_then_time(
+                    &target,
+                    &rays,
+                    Reference::Exact { hits: &cpu_hits, counters: &cpu_counters },
+                    &f32_hits,
+                    Plan { warmup: 2, repeat: 10, count: false },
+                )
+                .unwrap();
                 if let Some(f) = m.failure {
                     panic!("{f}");
                 }
                 let t = m.timing.unwrap();
-                println!("{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}", kind.to_string(), k.name(), rays.len(), t.median, t.min, t.max, t.mrays(rays.len()).0);
+                println!(
+                    "{:<10} {:<26} {:>8} {:>10.2} {:>10.2} {:>10.2} {:>9.2}",
+                    kind.to_string(),
+                    k.name(),
+                    rays.len(),
+                    t.median,
+                    t.min,
+                    t.max,
+                    t.mrays(rays.len()).0
+                );
             }
         }
     }

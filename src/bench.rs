@@ -85,7 +85,8 @@ fn variants(kind: &RayKind, only: &[LayoutId]) -> Vec<Variant> {
     let mut v = Vec::new();
     for layout in LayoutId::layouts() {
         let l = layout.bvh().expect("a BVH layout");
-        let chosen = layout == LayoutId::f32() || if only.is_empty() { l.conservative() } else { only.contains(&layout) };
+        let chosen =
+            layout == LayoutId::f32() || if only.is_empty() { l.conservative() } else { only.contains(&layout) };
         if !chosen {
             continue;
         }
@@ -115,7 +116,10 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
     anyhow::ensure!(cfg.rounds >= 1 && cfg.repeat >= 1, "bench: --rounds and --repeat must be at least 1");
     let g = Gpu::new(&ContextOptions { device: cfg.device.clone(), validation: cfg.validation, ..Default::default() })?;
     let device = format!("{} ({})", g.info.name, g.info.driver);
-    eprintln!("bench: device {device}; {} rounds of 1 warm-up + {} timed dispatches per target", cfg.rounds, cfg.repeat);
+    eprintln!(
+        "bench: device {device}; {} rounds of 1 warm-up + {} timed dispatches per target",
+        cfg.rounds, cfg.repeat
+    );
     let mut base_devs: Vec<(LayoutId, Box<dyn BaselineDevice + '_>)> = Vec::new();
     for b in LayoutId::all().filter(|l| l.baseline().is_some()) {
         let bl = b.baseline().expect("a baseline");
@@ -154,7 +158,14 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
             };
             let mut push = |what: &str, a: &Key, b: &Key, target: Option<f64>| {
                 if let Some(r) = ratio(a, b) {
-                    ratios.push(Ratio { what: what.into(), scene: name.clone(), rays: set.kind.to_string(), pair: format!("{} ÷ {}", a.label(), b.label()), ratio: r, target });
+                    ratios.push(Ratio {
+                        what: what.into(),
+                        scene: name.clone(),
+                        rays: set.kind.to_string(),
+                        pair: format!("{} ÷ {}", a.label(), b.label()),
+                        ratio: r,
+                        target,
+                    });
                 }
             };
             let f32_ = |b: usize, p: usize| Key::Variant(Variant::new(LayoutId::f32(), b, p));
@@ -177,24 +188,42 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
             }
             let largest_scene = *name == largest.1;
             if let Some((a, b, _)) = best {
-                let what = if largest_scene { "best reduced-precision ÷ f32 (same B), largest scene" } else { "best reduced-precision ÷ f32 (same B)" };
+                let what = if largest_scene {
+                    "best reduced-precision ÷ f32 (same B), largest scene"
+                } else {
+                    "best reduced-precision ÷ f32 (same B)"
+                };
                 push(what, &a, &b, largest_scene.then_some(1.1));
             }
             // The best of ours (any variant) against the host CPU's Embree.
             let embree = LayoutId::parse("embree").ok().map(Key::Baseline);
             let rq = LayoutId::parse("rq").ok().map(Key::Baseline);
-            let ours: Vec<Key> = times.keys().filter(|(kk, k)| *kk == ki && matches!(k, Key::Variant(_))).map(|(_, k)| *k).collect();
+            let ours: Vec<Key> =
+                times.keys().filter(|(kk, k)| *kk == ki && matches!(k, Key::Variant(_))).map(|(_, k)| *k).collect();
             let best_of = |against: &Key| -> Option<Key> {
-                ours.iter().filter_map(|k| Some((*k, ratio(k, against)?.median))).max_by(|a, b| a.1.total_cmp(&b.1)).map(|x| x.0)
+                ours.iter()
+                    .filter_map(|k| Some((*k, ratio(k, against)?.median)))
+                    .max_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|x| x.0)
             };
             if let Some(e) = embree.filter(|e| t(e).is_some()) {
                 if let Some(k) = best_of(&e) {
-                    push("best halftrace variant ÷ embree (host CPU)", &k, &e, (set.kind == RayKind::Primary).then_some(0.5));
+                    push(
+                        "best halftrace variant ÷ embree (host CPU)",
+                        &k,
+                        &e,
+                        (set.kind == RayKind::Primary).then_some(0.5),
+                    );
                 }
             }
             if set.kind == RayKind::Primary {
                 for p in BENCH_PACKETS {
-                    push(&format!("P = {p} ÷ P = 1, f32, B = 4"), &f32_(4, p), &f32_(4, 1), Some(if p == 8 { 1.0 } else { 0.5 }));
+                    push(
+                        &format!("P = {p} ÷ P = 1, f32, B = 4"),
+                        &f32_(4, p),
+                        &f32_(4, 1),
+                        Some(if p == 8 { 1.0 } else { 0.5 }),
+                    );
                 }
             }
             if let Some(q) = rq.filter(|q| t(q).is_some()) {
@@ -214,7 +243,14 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
 
 type Times = BTreeMap<(usize, Key), Vec<f64>>;
 
-fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh, base_devs: &[(LayoutId, Box<dyn BaselineDevice + 'g>)], kernels: &mut HashMap<Variant, Kernel<'g>>) -> anyhow::Result<(Vec<RaySet>, Times)> {
+fn bench_scene<'g>(
+    g: &'g Gpu,
+    cfg: &BenchConfig,
+    scene: &Scene,
+    bin: &BinaryBvh,
+    base_devs: &[(LayoutId, Box<dyn BaselineDevice + 'g>)],
+    kernels: &mut HashMap<Variant, Kernel<'g>>,
+) -> anyhow::Result<(Vec<RaySet>, Times)> {
     let f32_enc = Encoded::new(scene, bin, LayoutId::f32(), 4)?;
     let mut sets = Vec::new();
     for kind in &cfg.kinds {
@@ -243,7 +279,10 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
         // A scene beyond one storage buffer is read by address: kernels are kept per build.
         let kv = v.with_buffers(encs[&(v.layout, v.branching)].1.buffers);
         if let std::collections::hash_map::Entry::Vacant(slot) = kernels.entry(kv) {
-            slot.insert(Kernel::build(g, &kv, choose_impl(g, v, None), false, &Source::Builtin).with_context(|| v.name(false))?);
+            slot.insert(
+                Kernel::build(g, &kv, choose_impl(g, v, None), false, &Source::Builtin)
+                    .with_context(|| v.name(false))?,
+            );
         }
     }
     let mut base_scenes: Vec<(LayoutId, Box<dyn BaselineScene + '_>)> = Vec::new();
@@ -269,11 +308,23 @@ fn bench_scene<'g>(g: &'g Gpu, cfg: &BenchConfig, scene: &Scene, bin: &BinaryBvh
             Key::Variant(v) => {
                 let (enc, _) = &encs[&(v.layout, v.branching)];
                 let (hits, counters) = enc.trace_fc(&set.rays, v.packet, v.math, v.fc);
-                measure::validate_then_time(t.as_ref(), &set.rays, Reference::Exact { hits: &hits, counters: &counters }, &set.f32_hits, one)?
+                measure::validate_then_time(
+                    t.as_ref(),
+                    &set.rays,
+                    Reference::Exact { hits: &hits, counters: &counters },
+                    &set.f32_hits,
+                    one,
+                )?
             }
             Key::Baseline(b) => {
                 let m = measure::validate_then_time(t.as_ref(), &set.rays, Reference::Agreement, &set.f32_hits, one)?;
-                eprintln!("bench: {} {} {b}: agrees with f32 on {:.4}% of {} rays", scene.name, set.kind, 100.0 * m.vs_f32.rate(), m.vs_f32.total);
+                eprintln!(
+                    "bench: {} {} {b}: agrees with f32 on {:.4}% of {} rays",
+                    scene.name,
+                    set.kind,
+                    100.0 * m.vs_f32.rate(),
+                    m.vs_f32.total
+                );
                 m
             }
         };
@@ -304,7 +355,11 @@ pub fn markdown(cfg: &BenchConfig, r: &BenchResult) -> String {
             Some(t) => (format!("≥ {t}"), if x.ratio.median >= t { "yes" } else { "**no**" }),
             None => ("–".into(), ""),
         };
-        let _ = writeln!(md, "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {t} | {met} |", x.what, x.scene, x.rays, x.pair, x.ratio.median, x.ratio.min, x.ratio.max);
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.3} | {t} | {met} |",
+            x.what, x.scene, x.rays, x.pair, x.ratio.median, x.ratio.min, x.ratio.max
+        );
     }
     md += "\n| scene | rays | target | Mrays/s median | min | max |\n|---|---|---|---:|---:|---:|\n";
     for (s, k, t, med, lo, hi) in &r.speeds {

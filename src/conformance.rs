@@ -112,7 +112,8 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     for layout in LayoutId::layouts() {
         let l = layout.bvh().expect("a BVH layout");
         let maths = layout.caps().maths;
-        let fcs: Vec<FloatControls> = if l.float_controls_off() { vec![FloatControls::On, FloatControls::Off] } else { vec![FloatControls::On] };
+        let fcs: Vec<FloatControls> =
+            if l.float_controls_off() { vec![FloatControls::On, FloatControls::Off] } else { vec![FloatControls::On] };
         if quick {
             for b in BRANCHINGS {
                 out.push((Variant::new(layout, b, 1), PacketImpl::Single));
@@ -126,7 +127,12 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
             }
             if fcs.contains(&FloatControls::Off) {
                 for (i, &m) in maths.iter().enumerate() {
-                    out.push((Variant::new(layout, BRANCHINGS[(i + 1) % BRANCHINGS.len()], 1).with_math(m).with_fc(FloatControls::Off), PacketImpl::Single));
+                    out.push((
+                        Variant::new(layout, BRANCHINGS[(i + 1) % BRANCHINGS.len()], 1)
+                            .with_math(m)
+                            .with_fc(FloatControls::Off),
+                        PacketImpl::Single,
+                    ));
                 }
                 let v = Variant::new(layout, 8, 8).with_math(maths[maths.len() - 1]).with_fc(FloatControls::Off);
                 out.extend(imps(8).into_iter().map(|imp| (v, imp)));
@@ -151,21 +157,36 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
 fn ray_sets(scene: &Scene, bin: &BinaryBvh, quick: bool) -> anyhow::Result<Vec<(RayKind, Vec<Ray>)>> {
     let (res, grazing) = if quick { (16, 256) } else { (32, 1000) };
     let params = RayParams { width: res, height: res, camera: None, seed: 7, grazing };
-    [RayKind::Primary, RayKind::Ao, RayKind::Diffuse, RayKind::Grazing].into_iter().map(|k| Ok((k.clone(), make_rays(scene, bin, &k, &params)?))).collect()
+    [RayKind::Primary, RayKind::Ao, RayKind::Diffuse, RayKind::Grazing]
+        .into_iter()
+        .map(|k| Ok((k.clone(), make_rays(scene, bin, &k, &params)?)))
+        .collect()
 }
 
 /// The first rays whose hits differ, for a failure message.
 fn first_diff(rays: &[Ray], want: &[Hit], got: &[Hit]) -> Option<String> {
     let bad: Vec<usize> = (0..got.len()).filter(|&i| !want[i].same_bits(&got[i])).collect();
     let &i = bad.first()?;
-    Some(format!("{} of {} rays differ; ray {i} {:?}: expected {:?}, got {:?}", bad.len(), got.len(), rays[i], want[i], got[i]))
+    Some(format!(
+        "{} of {} rays differ; ray {i} {:?}: expected {:?}, got {:?}",
+        bad.len(),
+        got.len(),
+        rays[i],
+        want[i],
+        got[i]
+    ))
 }
 
 /// Runs the checks; `progress` gets a line as kernels are built and as each scene finishes.
 pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Outcome> {
     let t0 = Instant::now();
     anyhow::ensure!(!opts.scenes.is_empty(), "conformance needs at least one scene");
-    let g = Gpu::new(&gpu::ContextOptions { device: opts.device.clone(), mask_features: opts.mask_features.clone(), validation: opts.validation, ..Default::default() })?;
+    let g = Gpu::new(&gpu::ContextOptions {
+        device: opts.device.clone(),
+        mask_features: opts.mask_features.clone(),
+        validation: opts.validation,
+        ..Default::default()
+    })?;
     let plan = plan(&g.info, opts.quick);
     let mut checks: Vec<Check> = plan
         .iter()
@@ -179,7 +200,10 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
         .collect();
     // Kernels (timed, counting) of every runnable check, built once per way of reaching the
     // scene's buffers (bound up front; read by address when a scene needs it).
-    let pair = |v: &Variant, imp: PacketImpl| Kernel::build(&g, v, imp, false, &Source::Builtin).and_then(|a| Ok((a, Kernel::build(&g, v, imp, true, &Source::Builtin)?)));
+    let pair = |v: &Variant, imp: PacketImpl| {
+        Kernel::build(&g, v, imp, false, &Source::Builtin)
+            .and_then(|a| Ok((a, Kernel::build(&g, v, imp, true, &Source::Builtin)?)))
+    };
     let mut kernels: HashMap<(usize, Buffers), (Kernel, Kernel)> = HashMap::new();
     let total = checks.len();
     progress(&format!("{total} kernels on {}: building pipelines", g.info.name));
@@ -208,14 +232,19 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
         let f32_enc = Encoded::new(&scene, &bin, LayoutId::f32(), 4)?;
         let f32_hits: Vec<Vec<Hit>> = sets.iter().map(|(_, r)| f32_enc.trace_default(r).0).collect();
         // One encoding per (layout, B), uploaded while its checks run.
-        let mut keys: Vec<(LayoutId, usize)> = checks.iter().filter(|c| c.status == Status::Pass).map(|c| (c.variant.layout, c.variant.branching)).collect();
+        let mut keys: Vec<(LayoutId, usize)> = checks
+            .iter()
+            .filter(|c| c.status == Status::Pass)
+            .map(|c| (c.variant.layout, c.variant.branching))
+            .collect();
         keys.sort();
         keys.dedup();
         for (layout, b) in keys {
             let tg = Instant::now();
             let enc = Encoded::new(&scene, &bin, layout, b)?;
             let gb = GpuBvh::upload(&g, &enc).with_context(|| format!("{} {layout} B={b}", scene.name))?;
-            let mut refs: HashMap<(usize, crate::layout::Math, FloatControls, usize), (Vec<Hit>, Vec<Counters>)> = HashMap::new();
+            let mut refs: HashMap<(usize, crate::layout::Math, FloatControls, usize), (Vec<Hit>, Vec<Counters>)> =
+                HashMap::new();
             for (i, c) in checks.iter_mut().enumerate() {
                 if c.status != Status::Pass || c.variant.layout != layout || c.variant.branching != b {
                     continue;
@@ -228,7 +257,8 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                             slot.insert(k);
                         }
                         Err(e) => {
-                            c.status = Status::Fail(format!("building the kernel that reads the scene by address: {e}"));
+                            c.status =
+                                Status::Fail(format!("building the kernel that reads the scene by address: {e}"));
                             continue;
                         }
                     }
@@ -236,12 +266,16 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                 let (timed, counting) = &kernels[&(i, gb.buffers)];
                 let v = c.variant;
                 for (k, (kind, rays)) in sets.iter().enumerate() {
-                    let (hits, counters) = refs.entry((v.packet, v.math, v.fc, k)).or_insert_with(|| enc.trace_fc(rays, v.packet, v.math, v.fc));
+                    let (hits, counters) = refs
+                        .entry((v.packet, v.math, v.fc, k))
+                        .or_insert_with(|| enc.trace_fc(rays, v.packet, v.math, v.fc));
                     let what = format!("{} {kind}", scene.name);
                     let result = (|| -> Result<usize, String> {
                         // A conservative layout's reference must be f32's hits (the seed's
                         // literal algorithm is checked against its own reference only).
-                        if let Some(d) = first_diff(rays, &f32_hits[k], hits).filter(|_| layout.bvh().is_some_and(|l| l.conservative())) {
+                        if let Some(d) = first_diff(rays, &f32_hits[k], hits)
+                            .filter(|_| layout.bvh().is_some_and(|l| l.conservative()))
+                        {
                             return Err(format!("{what}: CPU reference vs f32: {d}"));
                         }
                         let a = timed.run(&g, &gb, rays, 0, 1).map_err(|e| format!("{what}: {e}"))?;
@@ -254,10 +288,21 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                         }
                         let gc = s.counters.unwrap_or_default();
                         let diff: Vec<usize> = (0..rays.len()).filter(|&r| gc.get(r) != counters.get(r)).collect();
-                        let allowed = if v.fc == FloatControls::Off { (FC_OFF_COUNTER_BOUND * rays.len() as f64) as usize } else { 0 };
+                        let allowed = if v.fc == FloatControls::Off {
+                            (FC_OFF_COUNTER_BOUND * rays.len() as f64) as usize
+                        } else {
+                            0
+                        };
                         if diff.len() > allowed {
                             let r = diff[0];
-                            return Err(format!("{what}: counters differ on {} of {} rays; ray {r} {:?}: GPU {:?}, CPU {:?}", diff.len(), rays.len(), rays[r], gc.get(r), counters.get(r)));
+                            return Err(format!(
+                                "{what}: counters differ on {} of {} rays; ray {r} {:?}: GPU {:?}, CPU {:?}",
+                                diff.len(),
+                                rays.len(),
+                                rays[r],
+                                gc.get(r),
+                                counters.get(r)
+                            ));
                         }
                         Ok(diff.len())
                     })();
@@ -275,16 +320,33 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                 c.secs += t.elapsed().as_secs_f64();
             }
             if tg.elapsed().as_secs_f64() > 10.0 {
-                progress(&format!("  {} {layout} B={b}: {:.0} s (pipelines compiled on first use)", scene.name, tg.elapsed().as_secs_f64()));
+                progress(&format!(
+                    "  {} {layout} B={b}: {:.0} s (pipelines compiled on first use)",
+                    scene.name,
+                    tg.elapsed().as_secs_f64()
+                ));
             }
         }
         scene_names.push(scene.name.clone());
         let fails = checks.iter().filter(|c| matches!(c.status, Status::Fail(_))).count();
-        progress(&format!("scene {}/{} {} checked ({fails} failing kernels so far, {:.0} s)", scene_names.len(), opts.scenes.len(), scene.name, t0.elapsed().as_secs_f64()));
+        progress(&format!(
+            "scene {}/{} {} checked ({fails} failing kernels so far, {:.0} s)",
+            scene_names.len(),
+            opts.scenes.len(),
+            scene.name,
+            t0.elapsed().as_secs_f64()
+        ));
     }
     drop(kernels);
     let validation = g.validation_messages();
-    Ok(Outcome { device: g.info.name.clone(), driver: g.info.driver.clone(), scenes: scene_names, checks, validation, secs: t0.elapsed().as_secs_f64() })
+    Ok(Outcome {
+        device: g.info.name.clone(),
+        driver: g.info.driver.clone(),
+        scenes: scene_names,
+        checks,
+        validation,
+        secs: t0.elapsed().as_secs_f64(),
+    })
 }
 
 /// The pass/fail table (Markdown).
@@ -303,7 +365,17 @@ pub fn markdown(o: &Outcome, quick: bool) -> String {
         let v = c.variant;
         md += &format!(
             "| {} | {} | {} | {} | {} | {:?} | {} | {} | {} | {:.1} | {} |\n",
-            v.kernel_name(c.imp, false), v.layout, v.math.name(), v.branching, v.packet, c.imp, v.fc.name(), c.rays, c.counter_diffs, c.secs, c.status.label().replace('|', "/")
+            v.kernel_name(c.imp, false),
+            v.layout,
+            v.math.name(),
+            v.branching,
+            v.packet,
+            c.imp,
+            v.fc.name(),
+            c.rays,
+            c.counter_diffs,
+            c.secs,
+            c.status.label().replace('|', "/")
         );
     }
     for m in &o.validation {
@@ -317,7 +389,21 @@ pub fn markdown(o: &Outcome, quick: bool) -> String {
 pub fn write(o: &Outcome, quick: bool, dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut csv = csv::Writer::from_writer(Vec::new());
-    csv.write_record(["kernel", "layout", "math", "branching", "packet", "implementation", "float_controls", "rays", "counter_diffs", "seconds", "status", "device", "driver"])?;
+    csv.write_record([
+        "kernel",
+        "layout",
+        "math",
+        "branching",
+        "packet",
+        "implementation",
+        "float_controls",
+        "rays",
+        "counter_diffs",
+        "seconds",
+        "status",
+        "device",
+        "driver",
+    ])?;
     for c in &o.checks {
         let v = c.variant;
         csv.write_record([

@@ -31,9 +31,18 @@ static FILE: Mutex<()> = Mutex::new(());
 pub fn record(kind: &str, label: &str, rays: &[Ray], hits: &[Hit], counters: Option<&[Counters]>) {
     let Some(path) = std::env::var_os(VAR) else { return };
     let c = counters.map(|c| format!("{:016x}", fnv1a(bytemuck::cast_slice(c)))).unwrap_or_else(|| "-".into());
-    let line = format!("{kind}\t{label}\trays={}:{:016x}\thits={:016x}\tcounters={c}\n", rays.len(), fnv1a(bytemuck::cast_slice(rays)), fnv1a(bytemuck::cast_slice(hits)));
+    let line = format!(
+        "{kind}\t{label}\trays={}:{:016x}\thits={:016x}\tcounters={c}\n",
+        rays.len(),
+        fnv1a(bytemuck::cast_slice(rays)),
+        fnv1a(bytemuck::cast_slice(hits))
+    );
     let _guard = FILE.lock();
-    let written = std::fs::OpenOptions::new().create(true).append(true).open(&path).and_then(|mut f| f.write_all(line.as_bytes()));
+    let written = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .and_then(|mut f| f.write_all(line.as_bytes()));
     if let Err(e) = written {
         eprintln!("warning: {VAR}={}: {e}", path.to_string_lossy());
     }

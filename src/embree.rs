@@ -99,7 +99,11 @@ fn trace(committed: &CommittedScene, rays: &[Ray], out: &mut [Hit]) {
             let ray = embree::Ray::segment(Vector3::from(r.origin), Vector3::from(r.dir), r.tmin, r.tmax);
             let mut rh = RayHit::new(ray);
             committed.intersect(&mut ctx, &mut rh);
-            *h = if rh.hit.hit() { Hit { t: rh.ray.tfar, prim: rh.hit.primID as i32, u: rh.hit.u, v: rh.hit.v } } else { Hit::MISS };
+            *h = if rh.hit.hit() {
+                Hit { t: rh.ray.tfar, prim: rh.hit.primID as i32, u: rh.hit.u, v: rh.hit.v }
+            } else {
+                Hit::MISS
+            };
         }
     });
 }

@@ -29,10 +29,13 @@ pub fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Resul
     let mut buffers: Vec<Cow<[u8]>> = Vec::new();
     for b in g.document.buffers() {
         let what = format!("buffer {}", b.index());
-        let data = match b.source() {
-            gltf::buffer::Source::Bin => Cow::Borrowed(g.blob.as_deref().ok_or_else(|| bad(path, format!("{what} is the GLB binary chunk, which the file does not have")))?),
-            gltf::buffer::Source::Uri(uri) => Cow::Owned(read_uri(path, &dir, uri, &what)?),
-        };
+        let data =
+            match b.source() {
+                gltf::buffer::Source::Bin => Cow::Borrowed(g.blob.as_deref().ok_or_else(|| {
+                    bad(path, format!("{what} is the GLB binary chunk, which the file does not have"))
+                })?),
+                gltf::buffer::Source::Uri(uri) => Cow::Owned(read_uri(path, &dir, uri, &what)?),
+            };
         if data.len() < b.length() {
             return Err(bad(path, format!("{what}: {} bytes, the file declares {}", data.len(), b.length())));
         }
@@ -50,10 +53,14 @@ pub fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Resul
         }
     };
     // Depth first, children in file order; a node reached twice on one path is a cycle.
-    let mut stack: Vec<(gltf::Node, Mat4, Vec<usize>)> = roots.into_iter().rev().map(|(n, m)| (n, m, Vec::new())).collect();
+    let mut stack: Vec<(gltf::Node, Mat4, Vec<usize>)> =
+        roots.into_iter().rev().map(|(n, m)| (n, m, Vec::new())).collect();
     while let Some((node, parent, mut path_nodes)) = stack.pop() {
         if path_nodes.contains(&node.index()) {
-            return Err(bad(path, format!("node {} is its own ancestor (a cycle in the node hierarchy)", node.index())));
+            return Err(bad(
+                path,
+                format!("node {} is its own ancestor (a cycle in the node hierarchy)", node.index()),
+            ));
         }
         if path_nodes.len() > 1024 {
             return Err(bad(path, format!("node {}: the hierarchy is deeper than 1024 levels", node.index())));
@@ -77,12 +84,18 @@ pub fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Resul
 /// The bytes of a buffer URI: a `data:` URI (base64) or a file beside the glTF.
 fn read_uri(path: &Path, dir: &Path, uri: &str, what: &str) -> Result<Vec<u8>, SceneError> {
     if let Some(rest) = uri.strip_prefix("data:") {
-        let (_, b64) = rest.split_once(";base64,").ok_or_else(|| bad(path, format!("{what}: a data URI that is not base64")))?;
+        let (_, b64) =
+            rest.split_once(";base64,").ok_or_else(|| bad(path, format!("{what}: a data URI that is not base64")))?;
         use base64::Engine;
-        return base64::engine::general_purpose::STANDARD.decode(b64.trim()).map_err(|e| bad(path, format!("{what}: invalid base64 data URI: {e}")));
+        return base64::engine::general_purpose::STANDARD
+            .decode(b64.trim())
+            .map_err(|e| bad(path, format!("{what}: invalid base64 data URI: {e}")));
     }
     if uri.contains("://") {
-        return Err(bad(path, format!("{what}: URI '{uri}' is not a file beside the glTF (halftrace reads no network)")));
+        return Err(bad(
+            path,
+            format!("{what}: URI '{uri}' is not a file beside the glTF (halftrace reads no network)"),
+        ));
     }
     let f: PathBuf = dir.join(percent_decode(uri));
     let meta = std::fs::metadata(&f).map_err(|e| bad(path, format!("{what}: {}: {e}", f.display())))?;
@@ -138,12 +151,21 @@ fn view<'b>(path: &Path, buffers: &'b [Cow<[u8]>], a: &gltf::Accessor, what: &st
     let stride = v.stride().unwrap_or(size).max(size);
     let start = v.offset().checked_add(a.offset()).ok_or_else(|| bad(path, format!("{what}: offset overflows")))?;
     let count = a.count();
-    let view_end = v.offset().checked_add(v.length()).filter(|&e| e <= data.len()).ok_or_else(|| bad(path, format!("{what}: buffer view {} runs past its buffer ({} bytes)", v.index(), data.len())))?;
+    let view_end = v.offset().checked_add(v.length()).filter(|&e| e <= data.len()).ok_or_else(|| {
+        bad(path, format!("{what}: buffer view {} runs past its buffer ({} bytes)", v.index(), data.len()))
+    })?;
     if count > 0 {
         let last = (count - 1).checked_mul(stride).and_then(|x| x.checked_add(start)).and_then(|x| x.checked_add(size));
         match last {
             Some(end) if end <= view_end => {}
-            _ => return Err(bad(path, format!("{what}: accessor {} ({count} elements of {size} bytes, stride {stride}) runs past buffer view {}", a.index(), v.index()))),
+            _ => return Err(bad(
+                path,
+                format!(
+                    "{what}: accessor {} ({count} elements of {size} bytes, stride {stride}) runs past buffer view {}",
+                    a.index(),
+                    v.index()
+                ),
+            )),
         }
     }
     Ok(View { data, start, stride, count, size })
@@ -164,7 +186,14 @@ fn fan_tri(i: usize) -> [usize; 3] {
     [0, i - 1, i]
 }
 
-fn mesh_triangles(path: &Path, buffers: &[Cow<[u8]>], m: &gltf::Mesh, world: Mat4, tris: &mut Vec<[Vec3; 3]>, warnings: &mut Vec<String>) -> Result<(), SceneError> {
+fn mesh_triangles(
+    path: &Path,
+    buffers: &[Cow<[u8]>],
+    m: &gltf::Mesh,
+    world: Mat4,
+    tris: &mut Vec<[Vec3; 3]>,
+    warnings: &mut Vec<String>,
+) -> Result<(), SceneError> {
     use gltf::accessor::{DataType, Dimensions};
     use gltf::mesh::{Mode, Semantic};
     for p in m.primitives() {
@@ -176,7 +205,10 @@ fn mesh_triangles(path: &Path, buffers: &[Cow<[u8]>], m: &gltf::Mesh, world: Mat
         }
         let pa = p.get(&Semantic::Positions).ok_or_else(|| bad(path, format!("{what}: no POSITION attribute")))?;
         if pa.data_type() != DataType::F32 || pa.dimensions() != Dimensions::Vec3 {
-            return Err(bad(path, format!("{what}: POSITION is {:?} {:?}, expected float VEC3", pa.data_type(), pa.dimensions())));
+            return Err(bad(
+                path,
+                format!("{what}: POSITION is {:?} {:?}, expected float VEC3", pa.data_type(), pa.dimensions()),
+            ));
         }
         let pv = view(path, buffers, &pa, &format!("{what} POSITION"))?;
         let mut pos = Vec::with_capacity(pv.count);
@@ -216,7 +248,12 @@ fn mesh_triangles(path: &Path, buffers: &[Cow<[u8]>], m: &gltf::Mesh, world: Mat
         match mode {
             Mode::Triangles => {
                 if !idx.len().is_multiple_of(3) {
-                    warnings.push(format!("{}: {what}: {} indices is not a multiple of 3; the last {} ignored", path.display(), idx.len(), idx.len() % 3));
+                    warnings.push(format!(
+                        "{}: {what}: {} indices is not a multiple of 3; the last {} ignored",
+                        path.display(),
+                        idx.len(),
+                        idx.len() % 3
+                    ));
                 }
                 tris.extend(idx.chunks_exact(3).map(|t| [v(t[0]), v(t[1]), v(t[2])]));
             }
@@ -256,7 +293,10 @@ pub fn load_ply(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError>
         pos.push(v);
     }
     let list = |e: &ply_rs::ply::DefaultElement, what: &str| -> Result<Vec<i64>, SceneError> {
-        let p = e.get("vertex_indices").or_else(|| e.get("vertex_index")).ok_or_else(|| bad(path, format!("{what}: no 'vertex_indices' list")))?;
+        let p = e
+            .get("vertex_indices")
+            .or_else(|| e.get("vertex_index"))
+            .ok_or_else(|| bad(path, format!("{what}: no 'vertex_indices' list")))?;
         Ok(match p {
             Property::ListChar(v) => v.iter().map(|&x| x as i64).collect(),
             Property::ListUChar(v) => v.iter().map(|&x| x as i64).collect(),
@@ -268,7 +308,10 @@ pub fn load_ply(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError>
         })
     };
     let get = |what: &str, i: i64| -> Result<Vec3, SceneError> {
-        usize::try_from(i).ok().and_then(|i| pos.get(i).copied()).ok_or_else(|| bad(path, format!("{what}: vertex index {i} is out of range ({} vertices)", pos.len())))
+        usize::try_from(i)
+            .ok()
+            .and_then(|i| pos.get(i).copied())
+            .ok_or_else(|| bad(path, format!("{what}: vertex index {i} is out of range ({} vertices)", pos.len())))
     };
     let mut tris = Vec::new();
     if let Some(faces) = ply.payload.get("face") {
@@ -324,10 +367,15 @@ pub fn instanced_glb(scene: &crate::scene::Scene, count: usize, seed: u64) -> Ve
             nodes.push(format!(r#"{{"mesh":0,"translation":[{},{},{}]}}"#, t.x, t.y, t.z));
             continue;
         }
-        let axis = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).try_normalize().unwrap_or(Vec3::Y);
+        let axis = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5)
+            .try_normalize()
+            .unwrap_or(Vec3::Y);
         let q = glam::Quat::from_axis_angle(axis, rng.next_f32() * std::f32::consts::TAU);
         let s = 0.5 * 4f32.powf(rng.next_f32());
-        nodes.push(format!(r#"{{"mesh":0,"translation":[{},{},{}],"rotation":[{},{},{},{}],"scale":[{s},{s},{s}]}}"#, t.x, t.y, t.z, q.x, q.y, q.z, q.w));
+        nodes.push(format!(
+            r#"{{"mesh":0,"translation":[{},{},{}],"rotation":[{},{},{},{}],"scale":[{s},{s},{s}]}}"#,
+            t.x, t.y, t.z, q.x, q.y, q.z, q.w
+        ));
     }
     let n = scene.tris.len() * 3;
     let json = format!(
@@ -335,7 +383,12 @@ pub fn instanced_glb(scene: &crate::scene::Scene, count: usize, seed: u64) -> Ve
         (0..count).map(|i| i.to_string()).collect::<Vec<_>>().join(","),
         nodes.join(","),
         scene.name.replace(['"', '\\'], "_"),
-        lo.x, lo.y, lo.z, hi.x, hi.y, hi.z,
+        lo.x,
+        lo.y,
+        lo.z,
+        hi.x,
+        hi.y,
+        hi.z,
         bin.len(),
         bin.len()
     );

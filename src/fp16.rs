@@ -195,7 +195,11 @@ mod tests {
         let vals: Vec<f16> = (0..=0xffffu16).step_by(97).map(f16::from_bits).filter(|h| h.is_finite()).collect();
         for &a in &vals {
             for &b in vals.iter().step_by(13) {
-                for (got, exact) in [(a + b, a.to_f64() + b.to_f64()), (a - b, a.to_f64() - b.to_f64()), (a * b, a.to_f64() * b.to_f64())] {
+                for (got, exact) in [
+                    (a + b, a.to_f64() + b.to_f64()),
+                    (a - b, a.to_f64() - b.to_f64()),
+                    (a * b, a.to_f64() * b.to_f64()),
+                ] {
                     assert_eq!(got, f16::from_f64(exact), "{a} {b}");
                 }
             }
@@ -207,7 +211,11 @@ mod tests {
         let check = |x: f32| {
             let want = f16::from_f32(x).to_f32();
             let got = rte16_emulated(x);
-            assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{x:e} ({:#x}): {got:e} vs {want:e}", x.to_bits());
+            assert!(
+                got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                "{x:e} ({:#x}): {got:e} vs {want:e}",
+                x.to_bits()
+            );
         };
         // Every f32 whose exponent reaches fp16 (and a margin), in steps that hit every low
         // bit pattern class, plus every fp16 value, midpoint and their neighbours.
@@ -224,7 +232,20 @@ mod tests {
                 check(-x);
             }
         }
-        for x in [0.0, -0.0, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, f32::MIN_POSITIVE, 1e-40, 65504.0, 65519.99, 65520.0, 2.0f32.powi(-25), 2.0f32.powi(-26)] {
+        for x in [
+            0.0,
+            -0.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN_POSITIVE,
+            1e-40,
+            65504.0,
+            65519.99,
+            65520.0,
+            2.0f32.powi(-25),
+            2.0f32.powi(-26),
+        ] {
             check(x);
             check(-x);
         }
@@ -253,7 +274,8 @@ mod tests {
             // Exponents close together (cancellation, carries) and far apart (sticky bits).
             let a = f32::from_bits(r as u32);
             let spread = (r >> 32) as u32 % 40;
-            let b_bits = ((r >> 40) as u32 & 0x807f_ffff) | ((((a.to_bits() >> 23) & 0xff).saturating_sub(spread) & 0xff) << 23);
+            let b_bits =
+                ((r >> 40) as u32 & 0x807f_ffff) | ((((a.to_bits() >> 23) & 0xff).saturating_sub(spread) & 0xff) << 23);
             let b = f32::from_bits(b_bits);
             if a.is_finite() && b.is_finite() {
                 check(a, b);
@@ -265,7 +287,16 @@ mod tests {
                 check(c, d);
             }
         }
-        for (a, b) in [(0.0f32, -0.0f32), (-0.0, -0.0), (1.0, -1.0), (1.0, f32::EPSILON / 2.0), (1.0, f32::EPSILON / 2.0 + f32::EPSILON / 4.0), (f32::MIN_POSITIVE, -f32::MIN_POSITIVE / 2.0), (1e-45, 1e-45), (16384.0, -0.000_061_035_156)] {
+        for (a, b) in [
+            (0.0f32, -0.0f32),
+            (-0.0, -0.0),
+            (1.0, -1.0),
+            (1.0, f32::EPSILON / 2.0),
+            (1.0, f32::EPSILON / 2.0 + f32::EPSILON / 4.0),
+            (f32::MIN_POSITIVE, -f32::MIN_POSITIVE / 2.0),
+            (1e-45, 1e-45),
+            (16384.0, -0.000_061_035_156),
+        ] {
             check(a, b);
             check(-a, -b);
         }

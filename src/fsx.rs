@@ -9,7 +9,11 @@ use std::path::{Path, PathBuf};
 /// same folder (so the rename is atomic), keeping the extension (so format detection works).
 pub fn temp_path(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.partial-{}.{}", std::process::id(), path.extension().map(|e| e.to_string_lossy().to_string()).unwrap_or_else(|| "tmp".into())))
+    path.with_file_name(format!(
+        ".{name}.partial-{}.{}",
+        std::process::id(),
+        path.extension().map(|e| e.to_string_lossy().to_string()).unwrap_or_else(|| "tmp".into())
+    ))
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename.

@@ -8,7 +8,14 @@ use std::path::Path;
 
 /// Writes a shaded PNG of primary hits: grey by |cos| between ray and geometric normal.
 pub fn render(path: &Path, scene: &Scene, rays: &[Ray], hits: &[Hit], width: u32, height: u32) -> anyhow::Result<()> {
-    anyhow::ensure!(rays.len() as u64 == width as u64 * height as u64, "--image needs primary rays ({}x{} = {} rays, got {})", width, height, width as u64 * height as u64, rays.len());
+    anyhow::ensure!(
+        rays.len() as u64 == width as u64 * height as u64,
+        "--image needs primary rays ({}x{} = {} rays, got {})",
+        width,
+        height,
+        width as u64 * height as u64,
+        rays.len()
+    );
     let mut img = image::RgbImage::new(width, height);
     for (&(x, y), (r, h)) in rays::pixel_order(width, height).iter().zip(rays.iter().zip(hits)) {
         let px = if h.is_hit() {

@@ -130,15 +130,29 @@ pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
     s += &format!("const uint CHILD_EMPTY = {CHILD_EMPTY:#010x}u;\nconst uint LEAF_BIT = {LEAF_BIT:#010x}u;\n");
     s += &format!("const uint LEAF_FIRST_MASK = {:#010x}u;\nconst uint LEAF_COUNT_SHIFT = {LEAF_FIRST_BITS}u;\nconst uint LEAF_COUNT_MASK = {:#x}u;\n", (1u32 << LEAF_FIRST_BITS) - 1, (1u32 << LEAF_COUNT_BITS) - 1);
     s += &format!("const uint RAY_FLOATS = {RAY_FLOATS}u;\nconst int PRIM_OVERFLOW = {PRIM_OVERFLOW};\n");
-    for (name, value) in [("NODES", binding::NODES), ("TRI_VERTS", binding::TRI_VERTS), ("TRI_IDS", binding::TRI_IDS), ("RAYS", binding::RAYS), ("HITS", binding::HITS), ("COUNTERS", binding::COUNTERS)] {
+    for (name, value) in [
+        ("NODES", binding::NODES),
+        ("TRI_VERTS", binding::TRI_VERTS),
+        ("TRI_IDS", binding::TRI_IDS),
+        ("RAYS", binding::RAYS),
+        ("HITS", binding::HITS),
+        ("COUNTERS", binding::COUNTERS),
+    ] {
         s += &format!("#define BINDING_{name} {value}\n");
     }
     s += &format!("layout(push_constant) uniform Push {{{} }} pc;\n", glsl_fields(PushConstants::FIELDS));
     s += &format!("struct Hit {{{} }};\n", glsl_fields(Hit::FIELDS));
     s += &format!("struct Counters {{{} }};\n", glsl_fields(Counters::FIELDS));
     if let Some((entry, constants)) = layout {
-        s += &format!("// The layout's stack entry besides the node index ({} bytes with it) and its constants.\n", stack_entry_bytes(entry));
-        s += &format!("struct Entry {{{} }};\n#define STACK_ENTRY_BYTES {}\n", glsl_fields(entry), stack_entry_bytes(entry));
+        s += &format!(
+            "// The layout's stack entry besides the node index ({} bytes with it) and its constants.\n",
+            stack_entry_bytes(entry)
+        );
+        s += &format!(
+            "struct Entry {{{} }};\n#define STACK_ENTRY_BYTES {}\n",
+            glsl_fields(entry),
+            stack_entry_bytes(entry)
+        );
         s += constants;
     }
     s

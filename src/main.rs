@@ -314,7 +314,14 @@ fn load_scene(path: &PathBuf) -> anyhow::Result<scene::Scene> {
 }
 
 fn print_timing(t: &measure::Timing, warmup: usize, rays: usize) -> anyhow::Result<()> {
-    outln!("time over {} dispatches after {warmup} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s", t.count, t.median, t.min, t.max, t.mrays(rays).0);
+    outln!(
+        "time over {} dispatches after {warmup} warm-up: median {:.3} ms (min {:.3}, max {:.3}), {:.2} Mrays/s",
+        t.count,
+        t.median,
+        t.min,
+        t.max,
+        t.mrays(rays).0
+    );
     Ok(())
 }
 
@@ -323,7 +330,11 @@ fn print_counters(c: &[halftrace::trace::Counters], rays: usize, packet: usize) 
     outln!("per ray: {:.2} nodes, {:.2} box tests, {:.2} triangle tests, {:.3} re-anchors", m[0], m[1], m[2], m[3]);
     let packets = rays.div_ceil(packet).max(1);
     let pn: u64 = c.iter().map(|x| x.packet_nodes as u64).sum();
-    outln!("per packet of {packet}: {:.2} nodes visited; SIMD utilisation {:.1}% (active rays per visited node)", pn as f64 / packets as f64, 100.0 * halftrace::trace::simd_utilisation(c, packet));
+    outln!(
+        "per packet of {packet}: {:.2} nodes visited; SIMD utilisation {:.1}% (active rays per visited node)",
+        pn as f64 / packets as f64,
+        100.0 * halftrace::trace::simd_utilisation(c, packet)
+    );
     Ok(())
 }
 
@@ -349,7 +360,12 @@ fn trace_inputs(a: &TraceArgs) -> anyhow::Result<Traced> {
 }
 
 fn open_gpu(a: &TraceArgs) -> anyhow::Result<gpu::Gpu> {
-    let opts = gpu::ContextOptions { device: a.device.clone(), mask_features: a.mask_feature.clone(), kernel_timeout_s: a.kernel_timeout, ..Default::default() };
+    let opts = gpu::ContextOptions {
+        device: a.device.clone(),
+        mask_features: a.mask_feature.clone(),
+        kernel_timeout_s: a.kernel_timeout,
+        ..Default::default()
+    };
     Ok(gpu::Gpu::new(&opts)?)
 }
 
@@ -360,7 +376,9 @@ fn trace_baseline(a: &TraceArgs, layout: LayoutId) -> anyhow::Result<()> {
     anyhow::ensure!(a.backend.as_deref() != Some("cpu"), "--layout {layout} runs on the GPU only");
     // A baseline has no B, P, math, float controls, counters or kernel of ours: say so rather
     // than ignore the flag.
-    let na = |flag: &str| anyhow::anyhow!("{flag} does not apply to --layout {layout} (a baseline: the driver's traversal has no B, P, math mode, float controls, work counters or user kernel)");
+    let na = |flag: &str| {
+        anyhow::anyhow!("{flag} does not apply to --layout {layout} (a baseline: the driver's traversal has no B, P, math mode, float controls, work counters or user kernel)")
+    };
     if a.branching != 4 {
         bvh::check_branching(a.branching).context("--branching")?;
         return Err(na("--branching"));
@@ -368,22 +386,47 @@ fn trace_baseline(a: &TraceArgs, layout: LayoutId) -> anyhow::Result<()> {
     if a.packet != 1 {
         return Err(na("--packet"));
     }
-    for (flag, given) in [("--math", a.math.is_some()), ("--packet-impl", a.packet_impl.is_some()), ("--stats", a.stats), ("--kernel", a.kernel.is_some()), ("--float-controls", a.float_controls != "auto")] {
+    for (flag, given) in [
+        ("--math", a.math.is_some()),
+        ("--packet-impl", a.packet_impl.is_some()),
+        ("--stats", a.stats),
+        ("--kernel", a.kernel.is_some()),
+        ("--float-controls", a.float_controls != "auto"),
+    ] {
         if given {
             return Err(na(flag));
         }
     }
     let t = trace_inputs(a)?;
     let g = open_gpu(a)?;
-    outln!("scene {} ({} triangles), layout {layout}, rays {}: {} rays; device {} ({})", t.scene.name, t.scene.len(), t.kind, t.rays.len(), g.info.name, g.info.driver);
+    outln!(
+        "scene {} ({} triangles), layout {layout}, rays {}: {} rays; device {} ({})",
+        t.scene.name,
+        t.scene.len(),
+        t.kind,
+        t.rays.len(),
+        g.info.name,
+        g.info.driver
+    );
     let dev = b.prepare(&g)?;
     let bs = dev.scene(&t.scene)?;
     outln!("acceleration structures: {} bytes, built in {:.2} ms", bs.bytes(), bs.build_ms());
     let f32_hits = Encoded::new(&t.scene, &t.bin, LayoutId::f32(), 4)?.trace_default(&t.rays).0;
     let plan = Plan { warmup: a.warmup, repeat: a.repeat, count: false };
-    let m = measure::validate_then_time(&BaselineTarget { name: b.kernel(), scene: bs.as_ref() }, &t.rays, Reference::Agreement, &f32_hits, plan)?;
+    let m = measure::validate_then_time(
+        &BaselineTarget { name: b.kernel(), scene: bs.as_ref() },
+        &t.rays,
+        Reference::Agreement,
+        &f32_hits,
+        plan,
+    )?;
     let agree = m.vs_f32;
-    outln!("agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)", 100.0 * agree.rate(), agree.agree, agree.total);
+    outln!(
+        "agreement with the f32 reference: {:.4}% ({} of {} rays: same prim, or t within 1e-5 relative)",
+        100.0 * agree.rate(),
+        agree.agree,
+        agree.total
+    );
     print_timing(m.timing.as_ref().expect("baselines are always timed"), a.warmup, t.rays.len())?;
     if let Some(p) = &a.out {
         npy::write_hits(p, &m.hits)?;
@@ -417,7 +460,11 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
     if let Some(k) = &a.kernel {
         inputs.push(("--kernel", k.clone()));
     }
-    let outputs: Vec<(&str, &PathBuf)> = [("--out", a.out.as_ref()), ("--save-rays", a.save_rays.as_ref()), ("--image", a.image.as_ref())].into_iter().filter_map(|(n, p)| Some((n, p?))).collect();
+    let outputs: Vec<(&str, &PathBuf)> =
+        [("--out", a.out.as_ref()), ("--save-rays", a.save_rays.as_ref()), ("--image", a.image.as_ref())]
+            .into_iter()
+            .filter_map(|(n, p)| Some((n, p?)))
+            .collect();
     for (i, (n, p)) in outputs.iter().enumerate() {
         for (m, q) in &inputs {
             anyhow::ensure!(!same(p, q), "{n} {} is also the {m} input: an input is never overwritten", p.display());
@@ -430,7 +477,11 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(p) = &a.image {
-        anyhow::ensure!(p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")), "--image {}: name a .png file (the image is written as PNG)", p.display());
+        anyhow::ensure!(
+            p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")),
+            "--image {}: name a .png file (the image is written as PNG)",
+            p.display()
+        );
         anyhow::ensure!(a.rays == "primary", "--image needs --rays primary (got --rays {})", a.rays);
     }
     Ok(())
@@ -438,15 +489,32 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
 
 fn instance(scene: &std::path::Path, count: usize, seed: u64, out: &std::path::Path) -> anyhow::Result<()> {
     anyhow::ensure!(count >= 1, "--count must be at least 1");
-    anyhow::ensure!(out.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb")), "--out {}: name a .glb file", out.display());
+    anyhow::ensure!(
+        out.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb")),
+        "--out {}: name a .glb file",
+        out.display()
+    );
     anyhow::ensure!(!out.exists(), "--out {} exists; it is not overwritten", out.display());
     let s = halftrace::scene::load(scene)?;
     let Some(total) = s.len().checked_mul(count).filter(|&t| t <= halftrace::scene::MAX_TRIANGLES) else {
-        anyhow::bail!("{} instances of {} triangles exceed the {} triangles a scene may have", count, s.len(), halftrace::scene::MAX_TRIANGLES);
+        anyhow::bail!(
+            "{} instances of {} triangles exceed the {} triangles a scene may have",
+            count,
+            s.len(),
+            halftrace::scene::MAX_TRIANGLES
+        );
     };
     let bytes = halftrace::formats::instanced_glb(&s, count, seed);
     halftrace::fsx::write_atomic(out, &bytes)?;
-    outln!("{}: {} instances of {} ({} triangles each): {} triangles, {} bytes", out.display(), count, s.name, s.len(), total, bytes.len());
+    outln!(
+        "{}: {} instances of {} ({} triangles each): {} triangles, {} bytes",
+        out.display(),
+        count,
+        s.name,
+        s.len(),
+        total,
+        bytes.len()
+    );
     Ok(())
 }
 
@@ -463,7 +531,10 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     let mut kinds = Vec::new();
     for r in &a.rays {
         let k: RayKind = r.parse().with_context(|| format!("--rays {r}"))?;
-        anyhow::ensure!(!matches!(k, RayKind::File(_)), "--rays {r}: bench uses the generated kinds (primary, ao, diffuse, grazing)");
+        anyhow::ensure!(
+            !matches!(k, RayKind::File(_)),
+            "--rays {r}: bench uses the generated kinds (primary, ao, diffuse, grazing)"
+        );
         kinds.push(k);
     }
     halftrace::rays::check_image_size(a.width, a.height).map_err(anyhow::Error::msg)?;
@@ -473,10 +544,23 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     let mut layouts = Vec::new();
     for l in &a.layouts {
         let id: LayoutId = l.parse().with_context(|| format!("--layouts {l}"))?;
-        anyhow::ensure!(id.bvh().is_some(), "--layouts {l}: a baseline; rq and embree are always timed when the device has them");
+        anyhow::ensure!(
+            id.bvh().is_some(),
+            "--layouts {l}: a baseline; rq and embree are always timed when the device has them"
+        );
         layouts.push(id);
     }
-    let cfg = halftrace::bench::BenchConfig { scenes, kinds, width: a.width, height: a.height, rounds: a.rounds, repeat: a.repeat, device: a.device.clone(), validation: a.validation, layouts };
+    let cfg = halftrace::bench::BenchConfig {
+        scenes,
+        kinds,
+        width: a.width,
+        height: a.height,
+        rounds: a.rounds,
+        repeat: a.repeat,
+        device: a.device.clone(),
+        validation: a.validation,
+        layouts,
+    };
     let r = halftrace::bench::run(&cfg)?;
     let md = halftrace::bench::markdown(&cfg, &r);
     outln!("{md}");
@@ -496,13 +580,21 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         return trace_baseline(&a, layout);
     }
     bvh::check_branching(a.branching).context("--branching")?;
-    anyhow::ensure!(halftrace::variant::PACKETS.contains(&a.packet), "--packet {}: use one of 1, 4, 8, 16, 32, 64", a.packet);
+    anyhow::ensure!(
+        halftrace::variant::PACKETS.contains(&a.packet),
+        "--packet {}: use one of 1, 4, 8, 16, 32, 64",
+        a.packet
+    );
     let maths = layout.caps().maths;
     let math = match &a.math {
         None => maths[0],
         Some(m) => {
             let math: Math = m.parse().map_err(anyhow::Error::msg).context("--math")?;
-            anyhow::ensure!(maths.contains(&math), "--math {m}: layout {layout} has {}", maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", "));
+            anyhow::ensure!(
+                maths.contains(&math),
+                "--math {m}: layout {layout} has {}",
+                maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ")
+            );
             math
         }
     };
@@ -536,7 +628,11 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let rays = &rays;
     // Memory on big scenes: f32's hits (the GPU run's "against f32" line) are taken and its
     // encoding dropped before the layout's is made, and the binary BVH goes once encoded.
-    let f32_hits = if backend == "gpu" && layout != LayoutId::f32() { Some(Encoded::new(&scene, &bin, LayoutId::f32(), a.branching)?.trace_default(rays).0) } else { None };
+    let f32_hits = if backend == "gpu" && layout != LayoutId::f32() {
+        Some(Encoded::new(&scene, &bin, LayoutId::f32(), a.branching)?.trace_default(rays).0)
+    } else {
+        None
+    };
     let enc = Encoded::new(&scene, &bin, layout, a.branching)?;
     drop(bin);
     outln!("scene {} ({} triangles), variant {variant}, rays {}: {} rays", scene.name, scene.len(), kind, rays.len());
@@ -544,18 +640,32 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
     let (ref_hits, ref_counters) = enc.trace_fc(rays, a.packet, math, variant.fc);
     let cpu_secs = t1.elapsed().as_secs_f64();
     let (hits, counters) = if backend == "cpu" {
-        outln!("backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms", cpu_secs * 1e3, rays.len() as f64 / cpu_secs / 1e6, build_ms);
+        outln!(
+            "backend cpu (reference): {:.1} ms, {:.2} Mrays/s; BVH build {:.1} ms",
+            cpu_secs * 1e3,
+            rays.len() as f64 / cpu_secs / 1e6,
+            build_ms
+        );
         (ref_hits, Some(ref_counters))
     } else {
         let g = open_gpu(&a)?;
         outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
         let resolved = gpu::support::resolve(&g.info, variant, fc_choice).map_err(anyhow::Error::msg)?;
         match &a.kernel {
-            Some(k) => outln!("kernel {} (the user's, in place of {}; float controls {})", k.display(), resolved.name(false), resolved.fc.name()),
+            Some(k) => outln!(
+                "kernel {} (the user's, in place of {}; float controls {})",
+                k.display(),
+                resolved.name(false),
+                resolved.fc.name()
+            ),
             None => outln!("kernel {} (float controls {})", resolved.name(false), resolved.fc.name()),
         }
         // The reference of the build the device runs (without float controls its bounds differ).
-        let (ref_hits, ref_counters) = if resolved.fc == variant.fc { (ref_hits, ref_counters) } else { enc.trace_fc(rays, a.packet, math, resolved.fc) };
+        let (ref_hits, ref_counters) = if resolved.fc == variant.fc {
+            (ref_hits, ref_counters)
+        } else {
+            enc.trace_fc(rays, a.packet, math, resolved.fc)
+        };
         let variant = resolved;
         let imp = kernel::choose_impl(&g, &variant, force_impl);
         let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
@@ -581,7 +691,13 @@ fn trace(a: TraceArgs) -> anyhow::Result<()> {
         let target = KernelTarget { gpu: &g, bvh: &gb, timed: &timed, counting: counting.as_ref() };
         let plan = Plan { warmup: a.warmup, repeat: a.repeat, count: counting.is_some() };
         // Correctness before speed: the CPU reference of the same layout, packet size and math.
-        let m = measure::validate_then_time(&target, rays, Reference::Exact { hits: &ref_hits, counters: &ref_counters }, &f32_hits, plan)?;
+        let m = measure::validate_then_time(
+            &target,
+            rays,
+            Reference::Exact { hits: &ref_hits, counters: &ref_counters },
+            &f32_hits,
+            plan,
+        )?;
         if let Some(f) = m.failure {
             anyhow::bail!("{f}");
         }
@@ -628,8 +744,26 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let bin = bvh::build_binary(&scene);
     let ms = t0.elapsed().as_secs_f64() * 1e3;
-    outln!("scene {} ({} triangles, {} degenerate); binary SAH build {:.1} ms ({:.2} Mtris/s)", scene.name, scene.len(), scene.degenerate, ms, scene.len() as f64 / ms / 1e3);
-    outln!("{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9} {:>6}", "B", "layout", "nodes", "leaves", "node bytes", "bytes/node", "depth", "SAH cost", "fill");
+    outln!(
+        "scene {} ({} triangles, {} degenerate); binary SAH build {:.1} ms ({:.2} Mtris/s)",
+        scene.name,
+        scene.len(),
+        scene.degenerate,
+        ms,
+        scene.len() as f64 / ms / 1e3
+    );
+    outln!(
+        "{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9} {:>6}",
+        "B",
+        "layout",
+        "nodes",
+        "leaves",
+        "node bytes",
+        "bytes/node",
+        "depth",
+        "SAH cost",
+        "fill"
+    );
     for b in bvh::BRANCHINGS {
         let w = bvh::collapse(&bin, b);
         let st = stats(&w);
@@ -637,7 +771,15 @@ fn bvh_stats(path: &PathBuf) -> anyhow::Result<()> {
             let enc = Encoded::new(&scene, &bin, layout, b)?;
             outln!(
                 "{:>3} {:>6} {:>9} {:>9} {:>12} {:>10} {:>6} {:>9.2} {:>6.2}",
-                b, layout.name(), st.inner_nodes, st.leaves, enc.node_bytes(), enc.node_size(), st.depth, st.sah_cost, st.fill
+                b,
+                layout.name(),
+                st.inner_nodes,
+                st.leaves,
+                enc.node_bytes(),
+                enc.node_size(),
+                st.depth,
+                st.sah_cost,
+                st.fill
             );
         }
     }
@@ -654,7 +796,8 @@ fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Resu
     if let Some(want) = &device {
         // The same choice --device makes everywhere (gpu::pick).
         let all: Vec<String> = list.iter().map(|d| format!("{}: {}", d.index, d.name)).collect();
-        let i = gpu::pick(&list, Some(want)).map_err(|_| anyhow::anyhow!("--device {want}: no such device (found: {})", all.join("; ")))?;
+        let i = gpu::pick(&list, Some(want))
+            .map_err(|_| anyhow::anyhow!("--device {want}: no such device (found: {})", all.join("; ")))?;
         list = vec![list.swap_remove(i)];
     }
     for d in &mut list {
@@ -667,8 +810,15 @@ fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Resu
         );
         outln!(
             "   float controls: RTE fp16 {}, RTE fp32 {}, inf/NaN preserve fp16 {}, fp32 {}; subgroup size control {}",
-            d.fp16_rte, d.fp32_rte, d.preserve_16, d.preserve_32,
-            if d.subgroup_size_control { format!("{}..{}", d.min_subgroup_size, d.max_subgroup_size) } else { "no".into() }
+            d.fp16_rte,
+            d.fp32_rte,
+            d.preserve_16,
+            d.preserve_32,
+            if d.subgroup_size_control {
+                format!("{}..{}", d.min_subgroup_size, d.max_subgroup_size)
+            } else {
+                "no".into()
+            }
         );
         for line in device_plan(d) {
             outln!("   {line}");
@@ -677,8 +827,17 @@ fn devices(bench: bool, device: Option<String>, mask: &[String]) -> anyhow::Resu
     outln!("\nlayouts and baselines (--layout):");
     for l in LayoutId::all() {
         let c = l.caps();
-        let maths = if c.maths.is_empty() { "n/a".to_string() } else { c.maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ") };
-        outln!("  {:<9} {} ({}; math: {maths})", l.name(), l.summary(), if l.baseline().is_some() { "baseline" } else { "layout" });
+        let maths = if c.maths.is_empty() {
+            "n/a".to_string()
+        } else {
+            c.maths.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ")
+        };
+        outln!(
+            "  {:<9} {} ({}; math: {maths})",
+            l.name(),
+            l.summary(),
+            if l.baseline().is_some() { "baseline" } else { "layout" }
+        );
     }
     if bench {
         let g = gpu::Gpu::new(&gpu::ContextOptions { device, ..Default::default() })?;
@@ -719,7 +878,11 @@ fn device_plan(d: &gpu::DeviceInfo) -> Vec<String> {
         .collect();
     out.push(format!("packets: {}", packets.join(", ")));
     for (l, b) in LayoutId::all().filter_map(|l| Some((l, l.baseline()?))) {
-        out.push(format!("{:<9} {}", l.name(), b.unavailable(d).map(|why| format!("skipped: {why}")).unwrap_or_else(|| "runs".into())));
+        out.push(format!(
+            "{:<9} {}",
+            l.name(),
+            b.unavailable(d).map(|why| format!("skipped: {why}")).unwrap_or_else(|| "runs".into())
+        ));
     }
     out
 }
@@ -742,16 +905,35 @@ fn conformance(a: ConformanceArgs) -> anyhow::Result<()> {
     }
     let out = a.out.clone().unwrap_or_else(|| {
         let d = halftrace::sweep::default_out();
-        d.with_file_name(format!("conformance-{}", d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default()))
+        d.with_file_name(format!(
+            "conformance-{}",
+            d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default()
+        ))
     });
-    let opts = conformance::Options { quick: a.quick, scenes, device: a.device.clone(), mask_features: a.mask_feature.clone(), validation: a.validation };
+    let opts = conformance::Options {
+        quick: a.quick,
+        scenes,
+        device: a.device.clone(),
+        mask_features: a.mask_feature.clone(),
+        validation: a.validation,
+    };
     let o = conformance::run(&opts, |line| eprintln!("{line}"))?;
     conformance::write(&o, a.quick, &out)?;
     outln!("{}", conformance::markdown(&o, a.quick));
     outln!("written to {}", out.join("conformance.md").display());
     let fails = o.failures();
-    anyhow::ensure!(o.validation.is_empty(), "{} validation layer message(s); see {}", o.validation.len(), out.join("conformance.md").display());
-    anyhow::ensure!(fails.is_empty(), "{} kernel(s) failed conformance: {}", fails.len(), fails.iter().map(|c| c.variant.kernel_name(c.imp, false)).collect::<Vec<_>>().join(", "));
+    anyhow::ensure!(
+        o.validation.is_empty(),
+        "{} validation layer message(s); see {}",
+        o.validation.len(),
+        out.join("conformance.md").display()
+    );
+    anyhow::ensure!(
+        fails.is_empty(),
+        "{} kernel(s) failed conformance: {}",
+        fails.len(),
+        fails.iter().map(|c| c.variant.kernel_name(c.imp, false)).collect::<Vec<_>>().join(", ")
+    );
     Ok(())
 }
 
@@ -808,7 +990,13 @@ fn sweep(a: SweepArgs) -> anyhow::Result<()> {
         out = out.join(s.folder());
     }
     anyhow::ensure!(!(a.resume && a.force), "--resume and --force exclude each other");
-    let mode = if a.resume { sweep::OutMode::Resume } else if a.force { sweep::OutMode::Force } else { sweep::OutMode::New };
+    let mode = if a.resume {
+        sweep::OutMode::Resume
+    } else if a.force {
+        sweep::OutMode::Force
+    } else {
+        sweep::OutMode::New
+    };
     let kept = sweep::prepare_out(&out, mode)?;
     halftrace::progress::set_quiet(a.quiet);
     let t0 = Instant::now();
@@ -828,11 +1016,28 @@ fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
     for (i, d) in dirs.iter().enumerate() {
         let c = d.canonicalize().unwrap_or_else(|_| d.clone());
         if let Some(j) = canon.iter().position(|x| *x == c) {
-            anyhow::bail!("{} is named twice (as {} and {}): its rows would count twice", c.display(), dirs[j].display(), d.display());
+            anyhow::bail!(
+                "{} is named twice (as {} and {}): its rows would count twice",
+                c.display(),
+                dirs[j].display(),
+                d.display()
+            );
         }
         canon.push(c);
         for (k, r) in halftrace::report::read_rows(d)?.into_iter().enumerate() {
-            let id = format!("{} | {} | {} | {} | {} | {}/{}/B{}/P{} fc {}", r.device, r.driver, r.scene, r.rays, r.kernel, r.layout, r.math, r.branching, r.packet, r.float_controls);
+            let id = format!(
+                "{} | {} | {} | {} | {} | {}/{}/B{}/P{} fc {}",
+                r.device,
+                r.driver,
+                r.scene,
+                r.rays,
+                r.kernel,
+                r.layout,
+                r.math,
+                r.branching,
+                r.packet,
+                r.float_controls
+            );
             if let Some(&(f, line)) = seen.get(&id) {
                 anyhow::bail!(
                     "{}/results.csv line {} and {}/results.csv line {} are the same variant ({id}); a merged report would average or double-count them — remove one, or report the folders separately",
@@ -850,7 +1055,11 @@ fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
     // Into a folder of its own, the merged rows too (never into a folder it read from).
     let own = !canon.iter().any(|c| out.canonicalize().is_ok_and(|o| o == *c));
     if own {
-        anyhow::ensure!(!out.join("results.csv").exists(), "--out {} already holds results.csv; name a new folder for the merged report", out.display());
+        anyhow::ensure!(
+            !out.join("results.csv").exists(),
+            "--out {} already holds results.csv; name a new folder for the merged report",
+            out.display()
+        );
         halftrace::report::write_rows(&out, &halftrace::report::sorted(&rows))?;
         // The images a sweep renders (render, heat maps, diff masks) come along from the
         // folder that has them, so the merged report shows what the unsplit one does.
@@ -864,7 +1073,13 @@ fn report(dirs: &[PathBuf], out: Option<&PathBuf>) -> anyhow::Result<()> {
         }
     }
     halftrace::report::render(&rows, &out, dirs)?;
-    outln!("{} rows from {} folder(s); report: {}{}", rows.len(), dirs.len(), out.join("report.md").display(), if own { format!(", merged rows: {}", out.join("results.csv").display()) } else { String::new() });
+    outln!(
+        "{} rows from {} folder(s); report: {}{}",
+        rows.len(),
+        dirs.len(),
+        out.join("report.md").display(),
+        if own { format!(", merged rows: {}", out.join("results.csv").display()) } else { String::new() }
+    );
     Ok(())
 }
 

@@ -60,7 +60,9 @@ impl Target for KernelTarget<'_, '_> {
         self.timed.run(self.gpu, self.bvh, rays, warmup, repeat)
     }
     fn count(&self, rays: &[Ray]) -> Option<Result<Vec<Counters>, GpuError>> {
-        self.counting.map(|k| k.run(self.gpu, self.bvh, rays, 0, 1).map(|o| o.counters.expect("a counting kernel returns counters")))
+        self.counting.map(|k| {
+            k.run(self.gpu, self.bvh, rays, 0, 1).map(|o| o.counters.expect("a counting kernel returns counters"))
+        })
     }
 }
 
@@ -123,17 +125,38 @@ impl Measurement {
 
 /// Where `got` and `want` (per-ray `what`: hits or counters) differ, as a message naming the
 /// target, how many rays, the first ray and both results; `None` when they agree.
-pub fn compare<T: std::fmt::Debug>(label: &str, what: &str, against: &str, rays: &[Ray], got: &[T], want: &[T], same: impl Fn(&T, &T) -> bool) -> Option<String> {
+pub fn compare<T: std::fmt::Debug>(
+    label: &str,
+    what: &str,
+    against: &str,
+    rays: &[Ray],
+    got: &[T],
+    want: &[T],
+    same: impl Fn(&T, &T) -> bool,
+) -> Option<String> {
     let bad: Vec<usize> = (0..got.len()).filter(|&i| !same(&got[i], &want[i])).collect();
     let &i = bad.first()?;
-    Some(format!("{label}: {} of {} rays differ from {against} in their {what}; first: ray {i} {:?}: got {:?}, {against} {:?}", bad.len(), got.len(), rays[i], got[i], want[i]))
+    Some(format!(
+        "{label}: {} of {} rays differ from {against} in their {what}; first: ray {i} {:?}: got {:?}, {against} {:?}",
+        bad.len(),
+        got.len(),
+        rays[i],
+        got[i],
+        want[i]
+    ))
 }
 
 const CPU: &str = "the CPU reference";
 
 /// Validates `target` on `rays` against `reference`, then times it (see the module docs).
 /// `f32_hits` are the f32 reference's hits, for the agreement every row reports.
-pub fn validate_then_time(target: &dyn Target, rays: &[Ray], reference: Reference, f32_hits: &[Hit], plan: Plan) -> Result<Measurement, GpuError> {
+pub fn validate_then_time(
+    target: &dyn Target,
+    rays: &[Ray],
+    reference: Reference,
+    f32_hits: &[Hit],
+    plan: Plan,
+) -> Result<Measurement, GpuError> {
     let label = target.label();
     let first = target.dispatch(rays, 0, 1)?;
     let vs_f32 = agreement(&first.hits, f32_hits);

@@ -91,7 +91,8 @@ fn write_npy(path: &Path, descr: &str, shape: &str, data: &[u8]) -> Result<(), N
     bytes.extend_from_slice(header.as_bytes());
     bytes.extend_from_slice(data);
     // Through a temporary file and a rename: a failed write never leaves a truncated file.
-    crate::fsx::write_atomic(path, &bytes).map_err(|e| NpyError::Io { path: path.into(), source: std::io::Error::other(format!("{e:#}")) })
+    crate::fsx::write_atomic(path, &bytes)
+        .map_err(|e| NpyError::Io { path: path.into(), source: std::io::Error::other(format!("{e:#}")) })
 }
 
 /// Reads rays from a float32 array of shape (N, 8): `ox oy oz tmin dx dy dz tmax`.
@@ -100,21 +101,41 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
     let b = std::fs::read(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
     let h = parse_header(path, &b)?;
     if h.descr != "<f4" && h.descr != "=f4" {
-        return Err(NpyError::Shape { path: path.into(), expected: "dtype float32 ('<f4')".into(), found: format!("dtype '{}'", h.descr) });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: "dtype float32 ('<f4')".into(),
+            found: format!("dtype '{}'", h.descr),
+        });
     }
     if h.fortran {
-        return Err(NpyError::Shape { path: path.into(), expected: "C order".into(), found: "fortran_order True".into() });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: "C order".into(),
+            found: "fortran_order True".into(),
+        });
     }
     if h.shape.len() != 2 || h.shape[1] != 8 {
-        return Err(NpyError::Shape { path: path.into(), expected: "shape (N, 8)".into(), found: format!("shape {:?}", h.shape) });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: "shape (N, 8)".into(),
+            found: format!("shape {:?}", h.shape),
+        });
     }
     let n = h.shape[0];
     let data = &b[h.data_offset..];
     let Some(need) = n.checked_mul(32) else {
-        return Err(NpyError::Shape { path: path.into(), expected: "a ray count whose data fits in memory".into(), found: format!("shape ({n}, 8)") });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: "a ray count whose data fits in memory".into(),
+            found: format!("shape ({n}, 8)"),
+        });
     };
     if data.len() != need {
-        return Err(NpyError::Shape { path: path.into(), expected: format!("{need} data bytes for {n} rays"), found: format!("{} bytes", data.len()) });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: format!("{need} data bytes for {n} rays"),
+            found: format!("{} bytes", data.len()),
+        });
     }
     Ok(data
         .chunks_exact(32)
@@ -132,7 +153,12 @@ pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<(), NpyError> {
 
 /// Writes hits as a structured array with fields `t` (f32), `prim` (i32), `u`, `v` (f32).
 pub fn write_hits(path: &Path, hits: &[Hit]) -> Result<(), NpyError> {
-    write_npy(path, "[('t', '<f4'), ('prim', '<i4'), ('u', '<f4'), ('v', '<f4')]", &format!("({},)", hits.len()), bytemuck::cast_slice(hits))
+    write_npy(
+        path,
+        "[('t', '<f4'), ('prim', '<i4'), ('u', '<f4'), ('v', '<f4')]",
+        &format!("({},)", hits.len()),
+        bytemuck::cast_slice(hits),
+    )
 }
 
 /// Reads a hit file written by [`write_hits`] (used by tests and `report`).
@@ -140,11 +166,19 @@ pub fn read_hits(path: &Path) -> Result<Vec<Hit>, NpyError> {
     let b = std::fs::read(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
     let h = parse_header(path, &b)?;
     if !h.descr.contains("'t'") || h.shape.len() != 1 {
-        return Err(NpyError::Shape { path: path.into(), expected: "structured hits (t, prim, u, v), shape (N,)".into(), found: format!("{} {:?}", h.descr, h.shape) });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: "structured hits (t, prim, u, v), shape (N,)".into(),
+            found: format!("{} {:?}", h.descr, h.shape),
+        });
     }
     let data = &b[h.data_offset..];
     if h.shape[0].checked_mul(16) != Some(data.len()) {
-        return Err(NpyError::Shape { path: path.into(), expected: format!("{} hits × 16 bytes", h.shape[0]), found: format!("{} bytes", data.len()) });
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: format!("{} hits × 16 bytes", h.shape[0]),
+            found: format!("{} bytes", data.len()),
+        });
     }
     Ok(data.chunks_exact(16).map(|c| bytemuck::pod_read_unaligned(c)).collect())
 }

@@ -42,7 +42,8 @@ pub fn step<T>(label: &str, f: impl FnOnce() -> T) -> T {
 /// The process's peak resident set size in bytes (Linux: `VmHWM` in /proc/self/status).
 pub fn peak_rss_bytes() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kb: u64 = s.lines().find_map(|l| l.strip_prefix("VmHWM:"))?.trim().trim_end_matches("kB").trim().parse().ok()?;
+    let kb: u64 =
+        s.lines().find_map(|l| l.strip_prefix("VmHWM:"))?.trim().trim_end_matches("kB").trim().parse().ok()?;
     Some(kb << 10)
 }
 
@@ -52,9 +53,12 @@ mod tests {
     fn a_step_returns_its_value_quick_or_slow() {
         assert_eq!(super::step("quick", || 7), 7);
         assert!(super::peak_rss_bytes().is_some_and(|b| b > 0));
-        assert_eq!(super::step("slow (a test of the progress line)", || {
-            std::thread::sleep(std::time::Duration::from_millis(1200));
+        assert_eq!(
+            super::step("slow (a test of the progress line)", || {
+                std::thread::sleep(std::time::Duration::from_millis(1200));
+                "done"
+            }),
             "done"
-        }), "done");
+        );
     }
 }

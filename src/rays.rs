@@ -101,9 +101,15 @@ impl Camera {
     /// Parses `ex,ey,ez,tx,ty,tz,fov`.
     pub fn parse(s: &str) -> Result<Camera, RayError> {
         let v: Result<Vec<f32>, _> = s.split(',').map(|x| x.trim().parse::<f32>()).collect();
-        let v = v.map_err(|_| RayError::Param(format!("--camera '{s}': expected 7 numbers eye_x,eye_y,eye_z,target_x,target_y,target_z,fov")))?;
+        let v = v.map_err(|_| {
+            RayError::Param(format!(
+                "--camera '{s}': expected 7 numbers eye_x,eye_y,eye_z,target_x,target_y,target_z,fov"
+            ))
+        })?;
         if v.len() != 7 || v.iter().any(|x| !x.is_finite()) {
-            return Err(RayError::Param(format!("--camera '{s}': expected 7 finite numbers eye_x,eye_y,eye_z,target_x,target_y,target_z,fov")));
+            return Err(RayError::Param(format!(
+                "--camera '{s}': expected 7 finite numbers eye_x,eye_y,eye_z,target_x,target_y,target_z,fov"
+            )));
         }
         let cam = Camera { eye: Vec3::new(v[0], v[1], v[2]), target: Vec3::new(v[3], v[4], v[5]), fov_deg: v[6] };
         if cam.eye == cam.target {
@@ -151,7 +157,9 @@ pub const MAX_IMAGE_RAYS: u64 = 1 << 26;
 pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {
     let n = width as u64 * height as u64;
     if n > MAX_IMAGE_RAYS {
-        return Err(format!("image size {width}x{height} = {n} rays: more than the {MAX_IMAGE_RAYS} (2^26) one ray set may have"));
+        return Err(format!(
+            "image size {width}x{height} = {n} rays: more than the {MAX_IMAGE_RAYS} (2^26) one ray set may have"
+        ));
     }
     Ok(())
 }
@@ -163,8 +171,13 @@ pub fn primary(cam: &Camera, width: u32, height: u32) -> Result<Vec<Ray>, RayErr
     }
     check_image_size(width, height).map_err(RayError::Param)?;
     let finite = |v: Vec3| v.is_finite();
-    if !(finite(cam.eye) && finite(cam.target) && cam.fov_deg.is_finite() && cam.fov_deg > 0.0 && cam.fov_deg < 180.0) || cam.eye == cam.target {
-        return Err(RayError::Param(format!("camera eye {} target {} fov {}: eye and target must be finite and distinct, fov in (0, 180) degrees", cam.eye, cam.target, cam.fov_deg)));
+    if !(finite(cam.eye) && finite(cam.target) && cam.fov_deg.is_finite() && cam.fov_deg > 0.0 && cam.fov_deg < 180.0)
+        || cam.eye == cam.target
+    {
+        return Err(RayError::Param(format!(
+            "camera eye {} target {} fov {}: eye and target must be finite and distinct, fov in (0, 180) degrees",
+            cam.eye, cam.target, cam.fov_deg
+        )));
     }
     // Normalised in f64: the squared distance of an eye 1e20 away overflows fp32.
     let fwd = (cam.target.as_dvec3() - cam.eye.as_dvec3()).normalize().as_vec3();
@@ -264,11 +277,13 @@ pub fn grazing(scene: &Scene, boxes: &[Aabb], count: usize, seed: u64) -> Vec<Ra
     let axes = [Vec3::X, Vec3::Y, Vec3::Z];
     while out.len() < count {
         let b = boxes[pick(&mut rng, boxes.len())];
-        let corner = |m: u64| Vec3::new(
-            if m & 1 != 0 { b.max.x } else { b.min.x },
-            if m & 2 != 0 { b.max.y } else { b.min.y },
-            if m & 4 != 0 { b.max.z } else { b.min.z },
-        );
+        let corner = |m: u64| {
+            Vec3::new(
+                if m & 1 != 0 { b.max.x } else { b.min.x },
+                if m & 2 != 0 { b.max.y } else { b.min.y },
+                if m & 4 != 0 { b.max.z } else { b.min.z },
+            )
+        };
         let kind = rng.next_u64() % 8;
         let ray = match kind {
             0 => {
@@ -285,7 +300,9 @@ pub fn grazing(scene: &Scene, boxes: &[Aabb], count: usize, seed: u64) -> Vec<Ra
             1 => {
                 // Ray through a box corner from a random outside point.
                 let c = corner(rng.next_u64());
-                let o = c + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize_or_zero() * far;
+                let o = c + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5)
+                    .normalize_or_zero()
+                    * far;
                 Ray::new(o, c - o, 0.0, f32::INFINITY)
             }
             2 => {
@@ -295,7 +312,9 @@ pub fn grazing(scene: &Scene, boxes: &[Aabb], count: usize, seed: u64) -> Vec<Ra
                 let mut c1 = c0;
                 c1[a] = if c0[a] == b.min[a] { b.max[a] } else { b.min[a] };
                 let m = (c0 + c1) * 0.5;
-                let o = m + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize_or_zero() * far;
+                let o = m + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5)
+                    .normalize_or_zero()
+                    * far;
                 Ray::new(o, m - o, 0.0, f32::INFINITY)
             }
             3 => {
@@ -404,7 +423,11 @@ impl std::str::FromStr for RayKind {
             "diffuse" => RayKind::Diffuse,
             "grazing" => RayKind::Grazing,
             f if f.ends_with(".npy") => RayKind::File(PathBuf::from(f)),
-            other => return Err(RayError::Param(format!("--rays '{other}': use primary, ao, diffuse, grazing or a FILE.npy"))),
+            other => {
+                return Err(RayError::Param(format!(
+                    "--rays '{other}': use primary, ao, diffuse, grazing or a FILE.npy"
+                )))
+            }
         })
     }
 }
@@ -439,7 +462,12 @@ impl Default for RayParams {
 }
 
 /// Builds or reads the ray set. ao and diffuse trace the primary rays first (f32, B = 4).
-pub fn make_rays(scene: &Scene, bin: &crate::bvh::BinaryBvh, kind: &RayKind, p: &RayParams) -> anyhow::Result<Vec<Ray>> {
+pub fn make_rays(
+    scene: &Scene,
+    bin: &crate::bvh::BinaryBvh,
+    kind: &RayKind,
+    p: &RayParams,
+) -> anyhow::Result<Vec<Ray>> {
     let cam = p.camera.unwrap_or_else(|| Camera::framing(&scene.bounds));
     let rays = match kind {
         RayKind::Primary => primary(&cam, p.width, p.height)?,

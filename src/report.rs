@@ -2,11 +2,11 @@
 //! human-readable report (Markdown tables, plots, images) rendered from one or more result
 //! folders.
 
+use crate::layout::LayoutId;
 use anyhow::Context;
 use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use crate::layout::LayoutId;
 use std::path::{Path, PathBuf};
 
 /// One variant's results, with everything needed to read it alone months later.
@@ -104,13 +104,17 @@ const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "schemes
 
 /// Whether a file name is one a sweep writes (so `--force` may replace it).
 pub fn is_output(name: &str) -> bool {
-    OUTPUTS.contains(&name) || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg")) || is_image(name)
+    OUTPUTS.contains(&name)
+        || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg"))
+        || is_image(name)
 }
 
 /// Whether a file name is one of the images a sweep renders from its traces (the shaded
 /// render, per-layout heat maps and diff masks), not from its rows.
 pub fn is_image(name: &str) -> bool {
-    name == "render.png" || (name.starts_with("heat_") && name.ends_with(".png")) || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
+    name == "render.png"
+        || (name.starts_with("heat_") && name.ends_with(".png"))
+        || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
 }
 
 /// Rows in the report's order, whatever order they were run or merged in: by device, scene,
@@ -120,8 +124,32 @@ pub fn sorted(rows: &[Row]) -> Vec<Row> {
     let mut v = rows.to_vec();
     let layout = |r: &Row| LayoutId::all().position(|l| l.name() == r.layout).unwrap_or(usize::MAX);
     v.sort_by(|a, b| {
-        (&a.device, &a.driver, &a.scene, &a.rays, layout(a), &a.layout, &a.math, a.branching, a.packet, &a.float_controls, &a.kernel)
-            .cmp(&(&b.device, &b.driver, &b.scene, &b.rays, layout(b), &b.layout, &b.math, b.branching, b.packet, &b.float_controls, &b.kernel))
+        (
+            &a.device,
+            &a.driver,
+            &a.scene,
+            &a.rays,
+            layout(a),
+            &a.layout,
+            &a.math,
+            a.branching,
+            a.packet,
+            &a.float_controls,
+            &a.kernel,
+        )
+            .cmp(&(
+                &b.device,
+                &b.driver,
+                &b.scene,
+                &b.rays,
+                layout(b),
+                &b.layout,
+                &b.math,
+                b.branching,
+                b.packet,
+                &b.float_controls,
+                &b.kernel,
+            ))
     });
     v
 }
@@ -167,7 +195,14 @@ pub fn ratios(rows: &[Row]) -> Vec<Ratio> {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status == "ok").collect();
     let mut out = Vec::new();
     for h in ok.iter().filter(|r| r.layout == "f16h" && r.math == "f16") {
-        if let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching && f.packet == h.packet) {
+        if let Some(f) = ok.iter().find(|f| {
+            f.layout == "f32"
+                && f.device == h.device
+                && f.scene == h.scene
+                && f.rays == h.rays
+                && f.branching == h.branching
+                && f.packet == h.packet
+        }) {
             let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
             out.push(Ratio {
                 device: h.device.clone(),
@@ -195,12 +230,28 @@ fn separated_effects(rows: &[Row]) -> String {
     let mut bytes: BTreeMap<(String, usize, usize, String), (f64, usize)> = BTreeMap::new();
     let mut raw: BTreeMap<String, f64> = BTreeMap::new();
     for h in ok.iter().filter(|r| r.layout == "f16h") {
-        if let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching && f.packet == h.packet) {
-            let e = acc.entry((h.device.clone(), h.branching, h.packet)).or_default().entry(h.math.clone()).or_insert((0.0, 0));
+        if let Some(f) = ok.iter().find(|f| {
+            f.layout == "f32"
+                && f.device == h.device
+                && f.scene == h.scene
+                && f.rays == h.rays
+                && f.branching == h.branching
+                && f.packet == h.packet
+        }) {
+            let e = acc
+                .entry((h.device.clone(), h.branching, h.packet))
+                .or_default()
+                .entry(h.math.clone())
+                .or_insert((0.0, 0));
             e.0 += h.mrays_median / f.mrays_median;
             e.1 += 1;
             for r in [h, f] {
-                let k = (r.device.clone(), r.branching, r.packet, if r.layout == "f32" { "f32".to_string() } else { format!("f16h/{}", r.math) });
+                let k = (
+                    r.device.clone(),
+                    r.branching,
+                    r.packet,
+                    if r.layout == "f32" { "f32".to_string() } else { format!("f16h/{}", r.math) },
+                );
                 let b = bytes.entry(k).or_insert((0.0, 0));
                 b.0 += r.node_bytes_per_ray;
                 b.1 += 1;
@@ -214,8 +265,22 @@ fn separated_effects(rows: &[Row]) -> String {
     let mut md = String::from("## Storage vs arithmetic: f16h math modes ÷ f32 (Mrays/s)\n\nf16 = the seed (fp16 box tests and origin moves); f32 = the same fp16 nodes widened on load, fp32 arithmetic; mixed = fp16 differences and products, fp32 min/max/compare. Above 1: faster than f32. Node bytes per ray = nodes visited × node bytes. Raw fp16:fp32 = the device's own arithmetic ratio (`halftrace devices --bench`).\n\n| device | B | P | f16 ÷ f32 | f32 ÷ f32 | mixed ÷ f32 | node bytes/ray f32 | f16h/f16 | f16h/f32 | raw fp16:fp32 |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for ((d, b, p), m) in &acc {
         let get = |k: &str| m.get(k).map(|(s, n)| fmt(s / *n as f64)).unwrap_or_else(|| "–".into());
-        let by = |k: &str| bytes.get(&(d.clone(), *b, *p, k.to_string())).map(|(s, n)| format!("{:.0}", s / *n as f64)).unwrap_or_else(|| "–".into());
-        md += &format!("| {d} | {b} | {p} | {} | {} | {} | {} | {} | {} | {} |\n", get("f16"), get("f32"), get("mixed"), by("f32"), by("f16h/f16"), by("f16h/f32"), fmt(raw[d]));
+        let by = |k: &str| {
+            bytes
+                .get(&(d.clone(), *b, *p, k.to_string()))
+                .map(|(s, n)| format!("{:.0}", s / *n as f64))
+                .unwrap_or_else(|| "–".into())
+        };
+        md += &format!(
+            "| {d} | {b} | {p} | {} | {} | {} | {} | {} | {} | {} |\n",
+            get("f16"),
+            get("f32"),
+            get("mixed"),
+            by("f32"),
+            by("f16h/f16"),
+            by("f16h/f32"),
+            fmt(raw[d])
+        );
     }
     md + "\n"
 }
@@ -251,11 +316,29 @@ fn scheme_points(rows: &[Row]) -> BTreeMap<(String, usize, String, usize), Schem
     let order = |l: &str| LayoutId::layouts().position(|x| x.name() == l).unwrap_or(usize::MAX);
     let mut acc: BTreeMap<(String, usize, String, usize), SchemePoint> = BTreeMap::new();
     for h in ok.iter().filter(|r| LayoutId::parse(&r.layout).is_ok_and(|l| l.bvh().is_some()) && !r.kernel.is_empty()) {
-        let Some(f) = ok.iter().find(|f| f.layout == "f32" && f.float_controls == h.float_controls && f.device == h.device && f.scene == h.scene && f.rays == h.rays && f.branching == h.branching) else { continue };
+        let Some(f) = ok.iter().find(|f| {
+            f.layout == "f32"
+                && f.float_controls == h.float_controls
+                && f.device == h.device
+                && f.scene == h.scene
+                && f.rays == h.rays
+                && f.branching == h.branching
+        }) else {
+            continue;
+        };
         let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
         let e = acc.entry((h.device.clone(), order(&h.layout), scheme_label(h), h.branching)).or_default();
         e.n += 1;
-        for (i, v) in [div(h.mrays_median, f.mrays_median), div(h.bvh_bytes as f64, f.bvh_bytes as f64), div(h.nodes_per_ray, f.nodes_per_ray), div(h.box_tests_per_ray, f.box_tests_per_ray), div(h.tri_tests_per_ray, f.tri_tests_per_ray)].into_iter().enumerate() {
+        for (i, v) in [
+            div(h.mrays_median, f.mrays_median),
+            div(h.bvh_bytes as f64, f.bvh_bytes as f64),
+            div(h.nodes_per_ray, f.nodes_per_ray),
+            div(h.box_tests_per_ray, f.box_tests_per_ray),
+            div(h.tri_tests_per_ray, f.tri_tests_per_ray),
+        ]
+        .into_iter()
+        .enumerate()
+        {
             e.ratio[i] += v;
         }
         e.node_bytes_per_ray += h.node_bytes_per_ray;
@@ -277,7 +360,16 @@ fn schemes_table(points: &BTreeMap<(String, usize, String, usize), SchemePoint>)
         let m = |v: f64| fmt(v / p.n as f64);
         md += &format!(
             "| {d} | {label} | {b} | {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {:.3e} |\n",
-            m(p.ratio[0]), m(p.ratio[1]), p.node_bytes_per_ray / p.n as f64, m(p.ratio[2]), m(p.ratio[3]), m(p.ratio[4]), p.stack_bytes, p.differs, p.false_misses, p.max_dt
+            m(p.ratio[0]),
+            m(p.ratio[1]),
+            p.node_bytes_per_ray / p.n as f64,
+            m(p.ratio[2]),
+            m(p.ratio[3]),
+            m(p.ratio[4]),
+            p.stack_bytes,
+            p.differs,
+            p.false_misses,
+            p.max_dt
         );
     }
     md + "\n![schemes](schemes.png)\n\n"
@@ -314,7 +406,11 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     let by_p = series(&r, false);
     let mut md = String::new();
     md += "# halftrace sweep report\n\n";
-    md += &format!("Rendered from {} result row(s) in: {}.\n\n", rows.len(), sources.iter().map(|p| format!("`{}`", p.display())).collect::<Vec<_>>().join(", "));
+    md += &format!(
+        "Rendered from {} result row(s) in: {}.\n\n",
+        rows.len(),
+        sources.iter().map(|p| format!("`{}`", p.display())).collect::<Vec<_>>().join(", ")
+    );
     let mut devices: Vec<(String, String)> = rows.iter().map(|r| (r.device.clone(), r.driver.clone())).collect();
     devices.sort();
     devices.dedup();
@@ -327,11 +423,19 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     md += &format!("- halftrace {}\n", versions.join(", "));
     let failed: Vec<&Row> = rows.iter().filter(|r| r.status.starts_with("FAILED")).collect();
     let skipped: Vec<&Row> = rows.iter().filter(|r| r.status.starts_with("skipped")).collect();
-    md += &format!("- variants: {} ok, {} failed validation, {} skipped\n\n", rows.len() - failed.len() - skipped.len(), failed.len(), skipped.len());
+    md += &format!(
+        "- variants: {} ok, {} failed validation, {} skipped\n\n",
+        rows.len() - failed.len() - skipped.len(),
+        failed.len(),
+        skipped.len()
+    );
     for f in &failed {
         md += &format!("**FAILED**: {} {} {}: {}\n\n", f.scene, f.rays, f.kernel, f.status);
     }
-    let mut skip_lines: Vec<String> = skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status.trim_start_matches("skipped: "))).collect();
+    let mut skip_lines: Vec<String> = skipped
+        .iter()
+        .map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status.trim_start_matches("skipped: ")))
+        .collect();
     skip_lines.dedup();
     for l in skip_lines {
         md += &format!("Skipped: {l}\n\n");
@@ -341,11 +445,13 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     md += "Means over scenes and ray kinds of the per-variant ratios; time is the median GPU time, work the per-ray counters, bytes the node arrays. Below 1: f16h is faster / does less / is smaller.\n\n";
     md += "### By branching factor (single rays, P = 1)\n\n| device | B | time | nodes visited | box tests | triangle tests | node bytes |\n|---|---:|---:|---:|---:|---:|---:|\n";
     for ((d, b), v) in &by_b {
-        md += &format!("| {d} | {b} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
+        md +=
+            &format!("| {d} | {b} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
     }
     md += "\n### By packet size (MBVH4, B = 4)\n\n| device | P | time | nodes visited | box tests | triangle tests | node bytes |\n|---|---:|---:|---:|---:|---:|---:|\n";
     for ((d, p), v) in &by_p {
-        md += &format!("| {d} | {p} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
+        md +=
+            &format!("| {d} | {p} | {} | {} | {} | {} | {} |\n", fmt(v[0]), fmt(v[1]), fmt(v[2]), fmt(v[3]), fmt(v[4]));
     }
     md += "\n![ratio vs B](ratio_vs_b.png) ![ratio vs P](ratio_vs_p.png)\n\n";
     md += &separated_effects(rows);
@@ -359,7 +465,15 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
         md += &format!("## Against `{b}` on the same device\n\n`{b}`: {}. Mrays/s of each variant ÷ Mrays/s of `{b}` for the same scene and rays (above 1: faster). Its structures' size and build time are in its row.\n\n| device | scene | rays | kernel | Mrays/s | ÷ {b} |\n|---|---|---|---|---:|---:|\n", b.summary());
         for x in rows.iter().filter(|r| r.status == "ok") {
             if let Some(q) = base.iter().find(|q| q.device == x.device && q.scene == x.scene && q.rays == x.rays) {
-                md += &format!("| {} | {} | {} | {} | {:.2} | {:.3} |\n", x.device, x.scene, x.rays, x.kernel, x.mrays_median, x.mrays_median / q.mrays_median);
+                md += &format!(
+                    "| {} | {} | {} | {} | {:.2} | {:.3} |\n",
+                    x.device,
+                    x.scene,
+                    x.rays,
+                    x.kernel,
+                    x.mrays_median,
+                    x.mrays_median / q.mrays_median
+                );
             }
         }
         md += "\n";
@@ -408,18 +522,30 @@ fn scheme_plot(points: &BTreeMap<(String, usize, String, usize), SchemePoint>, o
             None => lines.push((name, vec![(*b, p.ratio[0] / p.n as f64)])),
         }
     }
-    line_chart(out, "schemes", "Mrays/s of each scheme / f32 by branching factor (P = 1)", "branching factor B", "Mrays/s / f32", &lines)
+    line_chart(
+        out,
+        "schemes",
+        "Mrays/s of each scheme / f32 by branching factor (P = 1)",
+        "branching factor B",
+        "Mrays/s / f32",
+        &lines,
+    )
 }
 
 fn font() -> anyhow::Result<()> {
     use std::sync::OnceLock;
     static DONE: OnceLock<Result<(), String>> = OnceLock::new();
     DONE.get_or_init(|| {
-        let candidates = ["/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", "/usr/share/fonts/TTF/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"];
+        let candidates = [
+            "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+            "/usr/share/fonts/TTF/DejaVuSans.ttf",
+            "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+        ];
         for c in candidates {
             if let Ok(b) = std::fs::read(c) {
                 let leaked: &'static [u8] = Box::leak(b.into_boxed_slice());
-                return plotters::style::register_font("sans-serif", FontStyle::Normal, leaked).map_err(|_| format!("{c}: not a usable font"));
+                return plotters::style::register_font("sans-serif", FontStyle::Normal, leaked)
+                    .map_err(|_| format!("{c}: not a usable font"));
             }
         }
         Err("no DejaVuSans.ttf found for plot labels (install fonts-dejavu-core: scripts/install-deps.sh)".into())
@@ -447,8 +573,16 @@ struct Panel {
 }
 
 const COLOURS: [RGBColor; 10] = [
-    RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(148, 103, 189), RGBColor(255, 127, 14),
-    RGBColor(23, 190, 207), RGBColor(140, 86, 75), RGBColor(227, 119, 194), RGBColor(127, 127, 127), RGBColor(188, 189, 34),
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(23, 190, 207),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
 ];
 
 /// The colour and marker shape of a label: fixed by its position among every label of the
@@ -496,7 +630,8 @@ fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) ->
                     .fold(0.0f64, f64::max)
                     .max(1e-9)
                     * 1.12;
-                let caption = if xs.is_empty() { format!("{} (no data)", panel.caption) } else { panel.caption.clone() };
+                let caption =
+                    if xs.is_empty() { format!("{} (no data)", panel.caption) } else { panel.caption.clone() };
                 let mut ch = ChartBuilder::on(area)
                     .caption(caption, ("sans-serif", 16))
                     .margin(10)
@@ -510,14 +645,21 @@ fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) ->
                     .draw()?;
                 for line in &panel.lines {
                     let (c, m) = look(&line.label, &labels);
-                    let pts: Vec<(i32, f64)> = line.pts.iter().filter(|p| p.1.is_finite()).map(|&(x, y)| (lx(x), y)).collect();
+                    let pts: Vec<(i32, f64)> =
+                        line.pts.iter().filter(|p| p.1.is_finite()).map(|&(x, y)| (lx(x), y)).collect();
                     for &(x, lo, hi) in line.bars.iter().filter(|b| b.1.is_finite() && b.2.is_finite()) {
                         let xm = lx(x);
                         let y = pts.iter().find(|p| p.0 == xm).map(|p| p.1).unwrap_or((lo + hi) / 2.0);
                         ch.draw_series(std::iter::once(ErrorBar::new_vertical(xm, lo, y, hi, c.stroke_width(1), 8)))?;
                     }
-                    let lg = move |(x, y): (i32, i32)| EmptyElement::at((x, y)) + PathElement::new(vec![(0, 0), (18, 0)], c.stroke_width(2)) + Circle::new((9, 0), 3, c.filled());
-                    ch.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?.label(line.label.clone()).legend(lg);
+                    let lg = move |(x, y): (i32, i32)| {
+                        EmptyElement::at((x, y))
+                            + PathElement::new(vec![(0, 0), (18, 0)], c.stroke_width(2))
+                            + Circle::new((9, 0), 3, c.filled())
+                    };
+                    ch.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
+                        .label(line.label.clone())
+                        .legend(lg);
                     match m {
                         0 => {
                             ch.draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
@@ -529,12 +671,20 @@ fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) ->
                             ch.draw_series(pts.iter().map(|&p| Cross::new(p, 5, c.stroke_width(2))))?;
                         }
                         _ => {
-                            ch.draw_series(pts.iter().map(|&p| EmptyElement::at(p) + Rectangle::new([(-4, -4), (4, 4)], c.filled())))?;
+                            ch.draw_series(
+                                pts.iter()
+                                    .map(|&p| EmptyElement::at(p) + Rectangle::new([(-4, -4), (4, 4)], c.filled())),
+                            )?;
                         }
                     }
                 }
                 if panel.lines.iter().any(|l| !l.pts.is_empty()) {
-                    ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font(("sans-serif", 12)).position(SeriesLabelPosition::UpperRight).draw()?;
+                    ch.configure_series_labels()
+                        .background_style(WHITE.mix(0.85))
+                        .border_style(BLACK)
+                        .label_font(("sans-serif", 12))
+                        .position(SeriesLabelPosition::UpperRight)
+                        .draw()?;
                 }
             }
             root.present()?;
@@ -551,8 +701,19 @@ fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) ->
 }
 
 /// One panel of plain lines.
-fn line_chart(out: &Path, name: &str, title: &str, xlabel: &str, ylabel: &str, lines: &[(String, Vec<(usize, f64)>)]) -> anyhow::Result<()> {
-    let panel = Panel { caption: String::new(), xlabel: xlabel.into(), lines: lines.iter().map(|(l, p)| Line { label: l.clone(), pts: p.clone(), bars: Vec::new() }).collect() };
+fn line_chart(
+    out: &Path,
+    name: &str,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    lines: &[(String, Vec<(usize, f64)>)],
+) -> anyhow::Result<()> {
+    let panel = Panel {
+        caption: String::new(),
+        xlabel: xlabel.into(),
+        lines: lines.iter().map(|(l, p)| Line { label: l.clone(), pts: p.clone(), bars: Vec::new() }).collect(),
+    };
     chart(out, name, title, ylabel, &[panel])
 }
 
@@ -571,8 +732,22 @@ fn ratio_lines(s: &Series) -> Vec<(String, Vec<(usize, f64)>)> {
 }
 
 fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Result<()> {
-    line_chart(out, "ratio_vs_b", "f16h / f32 by branching factor (P = 1)", "branching factor B", "f16h / f32", &ratio_lines(by_b))?;
-    line_chart(out, "ratio_vs_p", "f16h / f32 by packet size (B = 4)", "packet size P", "f16h / f32", &ratio_lines(by_p))?;
+    line_chart(
+        out,
+        "ratio_vs_b",
+        "f16h / f32 by branching factor (P = 1)",
+        "branching factor B",
+        "f16h / f32",
+        &ratio_lines(by_b),
+    )?;
+    line_chart(
+        out,
+        "ratio_vs_p",
+        "f16h / f32 by packet size (B = 4)",
+        "packet size P",
+        "f16h / f32",
+        &ratio_lines(by_p),
+    )?;
     // Mrays/s per variant: one panel per series (by B at P = 1, by P at the packet B), one
     // line per layout/math (mean over scenes and ray kinds), min–max bars over the timed
     // dispatches (means of the per-row minima and maxima).
@@ -609,11 +784,25 @@ fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Resu
             by_p_lines.push(p);
         }
     }
-    let mut panels = vec![Panel { caption: "by branching factor (P = 1)".into(), xlabel: "branching factor B".into(), lines: by_b_lines }];
+    let mut panels = vec![Panel {
+        caption: "by branching factor (P = 1)".into(),
+        xlabel: "branching factor B".into(),
+        lines: by_b_lines,
+    }];
     if !by_p_lines.is_empty() {
-        panels.push(Panel { caption: format!("by packet size (B = {pb})"), xlabel: "packet size P".into(), lines: by_p_lines });
+        panels.push(Panel {
+            caption: format!("by packet size (B = {pb})"),
+            xlabel: "packet size P".into(),
+            lines: by_p_lines,
+        });
     }
-    chart(out, "mrays", "Mrays/s per variant (mean over scenes and ray kinds; bars: min–max over timed dispatches)", "Mrays/s", &panels)?;
+    chart(
+        out,
+        "mrays",
+        "Mrays/s per variant (mean over scenes and ray kinds; bars: min–max over timed dispatches)",
+        "Mrays/s",
+        &panels,
+    )?;
     // Memory per layout and B.
     let mut lines = Vec::new();
     let mut xs = Vec::new();
@@ -631,5 +820,12 @@ fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Resu
     xs.sort();
     xs.dedup();
     let _ = xs;
-    line_chart(out, "memory", "BVH node memory per layout and B (mean over scenes)", "branching factor B", "KiB", &lines)
+    line_chart(
+        out,
+        "memory",
+        "BVH node memory per layout and B (mean over scenes)",
+        "branching factor B",
+        "KiB",
+        &lines,
+    )
 }

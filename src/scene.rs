@@ -142,7 +142,10 @@ fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
     // Only regular files: a FIFO would block and a device such as /dev/zero never ends.
     let meta = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
     if !meta.is_file() {
-        return Err(SceneError::Io { path: path.into(), source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file") });
+        return Err(SceneError::Io {
+            path: path.into(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"),
+        });
     }
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
     let bytes = if path.extension().is_some_and(|e| e == "gz") {
@@ -182,7 +185,11 @@ fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
         let f = dir.join(p);
         if !f.is_file() {
             let what = if f.exists() { "is not a regular file" } else { "was not found" };
-            mtl_warnings.borrow_mut().push(format!("{}: mtllib {} {what} (materials are not used; geometry is unaffected)", path.display(), f.display()));
+            mtl_warnings.borrow_mut().push(format!(
+                "{}: mtllib {} {what} (materials are not used; geometry is unaffected)",
+                path.display(),
+                f.display()
+            ));
         }
         Err(tobj::LoadError::OpenFileFailed)
     })
@@ -196,7 +203,10 @@ fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
         let vert = |i: u32| -> Result<Vec3, SceneError> {
             let i = i as usize * 3;
             if i + 2 >= p.len() {
-                return Err(SceneError::Parse { path: path.into(), msg: format!("model '{}': vertex index out of range", m.name) });
+                return Err(SceneError::Parse {
+                    path: path.into(),
+                    msg: format!("model '{}': vertex index out of range", m.name),
+                });
             }
             Ok(Vec3::new(p[i], p[i + 1], p[i + 2]))
         };
@@ -218,7 +228,11 @@ fn finish(path: &Path, tris: Vec<[Vec3; 3]>, warnings: Vec<String>) -> Result<Sc
     scene.path = path.into();
     scene.warnings = warnings;
     if scene.degenerate > 0 {
-        scene.warnings.push(format!("{}: {} zero-area triangles (kept; they are never hit)", path.display(), scene.degenerate));
+        scene.warnings.push(format!(
+            "{}: {} zero-area triangles (kept; they are never hit)",
+            path.display(),
+            scene.degenerate
+        ));
     }
     Ok(scene)
 }
@@ -242,7 +256,9 @@ fn prescan(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
                 for c in &coords[..3] {
                     match c.parse::<f32>() {
                         Ok(x) if x.is_finite() => {}
-                        Ok(_) => return Err(SceneError::NonFinite { path: path.into(), line, text: raw.trim().to_string() }),
+                        Ok(_) => {
+                            return Err(SceneError::NonFinite { path: path.into(), line, text: raw.trim().to_string() })
+                        }
                         Err(_) => return Err(malformed(line, format!("'{c}' is not a number"))),
                     }
                 }
@@ -255,10 +271,14 @@ fn prescan(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
                 }
                 for r in refs {
                     let first = r.split('/').next().unwrap_or("");
-                    let i: i64 = first.parse().map_err(|_| malformed(line, format!("'{r}' is not a vertex reference")))?;
+                    let i: i64 =
+                        first.parse().map_err(|_| malformed(line, format!("'{r}' is not a vertex reference")))?;
                     let ok = if i > 0 { i <= nverts } else { i < 0 && -i <= nverts };
                     if !ok {
-                        return Err(malformed(line, format!("vertex reference {i} is out of range ({nverts} vertices so far)")));
+                        return Err(malformed(
+                            line,
+                            format!("vertex reference {i} is out of range ({nverts} vertices so far)"),
+                        ));
                     }
                 }
             }

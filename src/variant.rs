@@ -114,7 +114,14 @@ pub fn stack_entries(b: usize) -> usize {
 impl Variant {
     /// A variant in its layout's default math. `layout` must be a BVH layout.
     pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
-        Variant { layout, branching, packet, math: layout.caps().maths[0], fc: FloatControls::On, buffers: Buffers::Bound }
+        Variant {
+            layout,
+            branching,
+            packet,
+            math: layout.caps().maths[0],
+            fc: FloatControls::On,
+            buffers: Buffers::Bound,
+        }
     }
 
     /// The same variant with float controls `fc`.
@@ -292,8 +299,14 @@ mod tests {
     fn kernel_names_spell_the_variant() {
         let f16h = LayoutId::parse("f16h").unwrap();
         assert_eq!(Variant::new(LayoutId::f32(), 8, 1).name(false), "trav_f32_b8_p1");
-        assert_eq!(Variant::new(f16h, 4, 16).with_math(Math::F32).kernel_name(PacketImpl::Subgroup, true), "trav_f16h_m32_b4_p16_subgroup_stats");
-        assert_eq!(Variant::new(LayoutId::f32(), 4, 64).kernel_name(PacketImpl::Hybrid, false), "trav_f32_b4_p64_hybrid");
+        assert_eq!(
+            Variant::new(f16h, 4, 16).with_math(Math::F32).kernel_name(PacketImpl::Subgroup, true),
+            "trav_f16h_m32_b4_p16_subgroup_stats"
+        );
+        assert_eq!(
+            Variant::new(LayoutId::f32(), 4, 64).kernel_name(PacketImpl::Hybrid, false),
+            "trav_f32_b4_p64_hybrid"
+        );
         assert_eq!(Variant::new(LayoutId::f32(), 4, 1).with_math(Math::F16).math, Math::F32, "f32 has one math mode");
     }
 }

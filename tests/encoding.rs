@@ -27,14 +27,24 @@ fn check<const B: usize>(name: &str, w: &WideBvh) -> usize {
             for a in 0..3 {
                 let (lo, hi) = (lo[a], hi[a]);
                 assert!(lo.is_finite() && hi.is_finite(), "{name} B={B} node {i} slot {s}: non-finite");
-                assert!(lo.to_f32().abs() <= 16384.0 && hi.to_f32().abs() <= 16384.0, "{name} B={B} node {i} slot {s}: out of range {lo} {hi}");
+                assert!(
+                    lo.to_f32().abs() <= 16384.0 && hi.to_f32().abs() <= 16384.0,
+                    "{name} B={B} node {i} slot {s}: out of range {lo} {hi}"
+                );
                 // Exact containment in the parent frame (fp32 inputs, power-of-two scale).
                 let tl = (bx.min[a] as f64 - f.w[a] as f64) * f.k as f64;
                 let th = (bx.max[a] as f64 - f.w[a] as f64) * f.k as f64;
-                assert!(lo.to_f64() <= tl && hi.to_f64() >= th, "{name} B={B} node {i} slot {s} axis {a}: [{lo}, {hi}] does not contain [{tl}, {th}]");
+                assert!(
+                    lo.to_f64() <= tl && hi.to_f64() >= th,
+                    "{name} B={B} node {i} slot {s} axis {a}: [{lo}, {hi}] does not contain [{tl}, {th}]"
+                );
             }
             if let ChildRef::Inner(j) = c {
-                assert_eq!(derive_child(f, lo, hi).frame, frames[*j as usize], "{name} B={B}: derived frame of node {j}");
+                assert_eq!(
+                    derive_child(f, lo, hi).frame,
+                    frames[*j as usize],
+                    "{name} B={B}: derived frame of node {j}"
+                );
             }
             checked += 1;
         }

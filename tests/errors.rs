@@ -76,7 +76,19 @@ fn degenerate_triangles_load_and_never_hit() {
     // Zero-area triangles are kept (warning) and never hit.
     let p = obj("degen.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 4 5 6\n");
     let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["trace", "--scene", p.to_str().unwrap(), "--layout", "f32", "--width", "16", "--height", "16", "--out", tmp("degen_hits.npy").to_str().unwrap()])
+        .args([
+            "trace",
+            "--scene",
+            p.to_str().unwrap(),
+            "--layout",
+            "f32",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--out",
+            tmp("degen_hits.npy").to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -168,8 +180,34 @@ fn ray_file_round_trip_and_hits_file() {
         let o = Command::new(bin).args(args).output().unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     };
-    ok(&["trace", "--scene", t.to_str().unwrap(), "--rays", "ao", "--width", "32", "--height", "32", "--save-rays", rays.to_str().unwrap(), "--out", hits.to_str().unwrap()]);
-    ok(&["trace", "--scene", t.to_str().unwrap(), "--layout", "f32", "--branching", "16", "--rays", rays.to_str().unwrap(), "--out", hits2.to_str().unwrap()]);
+    ok(&[
+        "trace",
+        "--scene",
+        t.to_str().unwrap(),
+        "--rays",
+        "ao",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--save-rays",
+        rays.to_str().unwrap(),
+        "--out",
+        hits.to_str().unwrap(),
+    ]);
+    ok(&[
+        "trace",
+        "--scene",
+        t.to_str().unwrap(),
+        "--layout",
+        "f32",
+        "--branching",
+        "16",
+        "--rays",
+        rays.to_str().unwrap(),
+        "--out",
+        hits2.to_str().unwrap(),
+    ]);
     let a = npy::read_hits(&hits).unwrap();
     let b = npy::read_hits(&hits2).unwrap();
     assert_eq!(a.len(), npy::read_rays(&rays).unwrap().len());
@@ -188,9 +226,29 @@ fn generated_rays_and_sizes_are_checked() {
     let t = t.to_str().unwrap();
     // An eye 1e20 from its target: the direction is normalised without overflow now, so the
     // rays are finite (and, the teapot being 1e-20 of the view, all miss).
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["trace", "--scene", t, "--width", "8", "--height", "8", "--backend", "cpu", "--camera", "0.1,0.1,1e20,0.1,0.1,0,45", "--save-rays", tmp("far_rays.npy").to_str().unwrap()]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args([
+            "trace",
+            "--scene",
+            t,
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--backend",
+            "cpu",
+            "--camera",
+            "0.1,0.1,1e20,0.1,0.1,0,45",
+            "--save-rays",
+            tmp("far_rays.npy").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(npy::read_rays(&tmp("far_rays.npy")).unwrap().iter().all(|r| r.dir.iter().all(|x| x.is_finite()) && r.dir[2] < 0.0));
+    assert!(npy::read_rays(&tmp("far_rays.npy"))
+        .unwrap()
+        .iter()
+        .all(|r| r.dir.iter().all(|x| x.is_finite()) && r.dir[2] < 0.0));
     for cam in ["1,1,1,1,1,1,45", "inf,0,0,0,0,0,45", "0,0,5,0,0,0,180"] {
         let e = fails(&["trace", "--scene", t, "--width", "8", "--height", "8", "--camera", cam]);
         assert!(e.contains("camera"), "{cam}: {e}");
@@ -204,7 +262,11 @@ fn generated_rays_and_sizes_are_checked() {
         let e = fails(&["sweep", "--scene", t, "--width", w, "--height", h, "--out", tmp("never").to_str().unwrap()]);
         assert!(e.contains("2^26"), "{e}");
     }
-    let p = write_raw_npy("overflow.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (576460752303423490, 8), }", &[0u8; 64]);
+    let p = write_raw_npy(
+        "overflow.npy",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (576460752303423490, 8), }",
+        &[0u8; 64],
+    );
     let e = fails(&["trace", "--scene", t, "--rays", p.to_str().unwrap()]);
     assert!(e.contains("overflow.npy") && e.contains("576460752303423490"), "{e}");
 }
@@ -217,7 +279,8 @@ fn outputs_are_checked_before_tracing_and_baselines_refuse_what_does_not_apply()
     let t = teapot();
     let t = t.to_str().unwrap();
     let rays = tmp("inputs.npy");
-    npy::write_rays(&rays, &[Ray { origin: [0.0, 0.0, 10.0], tmin: 0.0, dir: [0.0, 0.0, -1.0], tmax: f32::INFINITY }]).unwrap();
+    npy::write_rays(&rays, &[Ray { origin: [0.0, 0.0, 10.0], tmin: 0.0, dir: [0.0, 0.0, -1.0], tmax: f32::INFINITY }])
+        .unwrap();
     let before = std::fs::read(&rays).unwrap();
     let r = rays.to_str().unwrap();
     let e = fails(&["trace", "--scene", t, "--rays", r, "--out", r]);
@@ -234,11 +297,21 @@ fn outputs_are_checked_before_tracing_and_baselines_refuse_what_does_not_apply()
     assert_eq!(std::fs::read(&photo).unwrap(), b"my holiday");
     let e = fails(&["trace", "--scene", t, "--rays", "ao", "--image", tmp("ao.png").to_str().unwrap()]);
     assert!(e.contains("--rays primary"), "{e}");
-    for flag in [&["--stats"][..], &["--branching", "7"], &["--packet", "8"], &["--math", "f16"], &["--kernel", "x.comp"], &["--float-controls", "off"]] {
+    for flag in [
+        &["--stats"][..],
+        &["--branching", "7"],
+        &["--packet", "8"],
+        &["--math", "f16"],
+        &["--kernel", "x.comp"],
+        &["--float-controls", "off"],
+    ] {
         let mut args = vec!["trace", "--scene", t, "--layout", "rq"];
         args.extend_from_slice(flag);
         let e = fails(&args);
-        assert!(e.contains(flag[0]) && (e.contains("does not apply") || e.contains("branching factor 7")), "{flag:?}: {e}");
+        assert!(
+            e.contains(flag[0]) && (e.contains("does not apply") || e.contains("branching factor 7")),
+            "{flag:?}: {e}"
+        );
     }
 }
 
@@ -258,7 +331,10 @@ fn special_files_never_stall_a_load() {
     let e = trace_scene(Path::new("/nonexistent/scene.obj"));
     assert_eq!(e.matches("No such file or directory").count(), 1, "{e}");
     let p = obj("mtl_zero.obj", "mtllib /dev/zero\nmtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["trace", "--scene", p.to_str().unwrap(), "--backend", "cpu", "--width", "4", "--height", "4"]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["trace", "--scene", p.to_str().unwrap(), "--backend", "cpu", "--width", "4", "--height", "4"])
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("/dev/zero is not a regular file") && err.contains("nowhere.mtl was not found"), "{err}");
@@ -271,7 +347,10 @@ fn special_files_never_stall_a_load() {
 fn small_input_mistakes_get_clear_answers() {
     let p = tmp("latin1.obj");
     std::fs::write(&p, b"# caf\xe9 comment\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["trace", "--scene", p.to_str().unwrap(), "--backend", "cpu", "--width", "4", "--height", "4"]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["trace", "--scene", p.to_str().unwrap(), "--backend", "cpu", "--width", "4", "--height", "4"])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let p = tmp("latin1_vertex.obj");
     std::fs::write(&p, b"v 0 0 0\nv 1 0 0\nv 0 1 \xff\nf 1 2 3\n").unwrap();

@@ -104,7 +104,8 @@ fn gltf_node_transforms_strips_and_fans() {
     }
     std::fs::write(d.join("quad pos.bin"), &pos).unwrap();
     let idx: Vec<u8> = [0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
-    let idx_uri = format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&idx));
+    let idx_uri =
+        format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&idx));
     let json = format!(
         r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
         "nodes":[{{"children":[1],"matrix":[2,0,0,0, 0,2,0,0, 0,0,2,0, 10,0,0,1]}},
@@ -122,17 +123,30 @@ fn gltf_node_transforms_strips_and_fans() {
     std::fs::write(&p, json).unwrap();
     let s = scene::load(&p).unwrap_or_else(|e| panic!("{e}"));
     assert!(s.warnings.iter().any(|w| w.contains("Lines skipped")), "{:?}", s.warnings);
-    let world = Mat4::from_cols_array(&[2., 0., 0., 0., 0., 2., 0., 0., 0., 0., 2., 0., 10., 0., 0., 1.]) * Mat4::from_scale_rotation_translation(Vec3::new(1., 1., 3.), Quat::from_xyzw(0., 0., 0.70710677, 0.70710677), Vec3::new(0., 0., 5.));
+    let world = Mat4::from_cols_array(&[2., 0., 0., 0., 0., 2., 0., 0., 0., 0., 2., 0., 10., 0., 0., 1.])
+        * Mat4::from_scale_rotation_translation(
+            Vec3::new(1., 1., 3.),
+            Quat::from_xyzw(0., 0., 0.70710677, 0.70710677),
+            Vec3::new(0., 0., 5.),
+        );
     let w = |i: usize| world.transform_point3(Vec3::from(pts[i]));
     let want = [
-        [w(0), w(1), w(2)], [w(0), w(2), w(3)], // list
-        [w(0), w(1), w(2)], [w(2), w(1), w(3)], // strip (winding kept)
-        [w(0), w(1), w(2)], [w(0), w(2), w(3)], // fan
+        [w(0), w(1), w(2)],
+        [w(0), w(2), w(3)], // list
+        [w(0), w(1), w(2)],
+        [w(2), w(1), w(3)], // strip (winding kept)
+        [w(0), w(1), w(2)],
+        [w(0), w(2), w(3)], // fan
     ];
     assert_eq!(s.tris.len(), want.len());
     for (k, (a, b)) in s.tris.iter().zip(want.iter()).enumerate() {
         for j in 0..3 {
-            assert!((a[j] - b[j]).length() <= 1e-5 * (1.0 + b[j].length()), "triangle {k} vertex {j}: {:?} vs {:?}", a[j], b[j]);
+            assert!(
+                (a[j] - b[j]).length() <= 1e-5 * (1.0 + b[j].length()),
+                "triangle {k} vertex {j}: {:?} vs {:?}",
+                a[j],
+                b[j]
+            );
         }
     }
 }
@@ -157,7 +171,10 @@ fn instanced_glb_loads_every_copy() {
             for (j, &v) in tri.iter().enumerate() {
                 let want = m.transform_point3(v);
                 let got = s.tris[k * src.len() + i][j];
-                assert!((got - want).length() <= 1e-5 * (1.0 + want.length()), "copy {k} triangle {i}: {got:?} vs {want:?}");
+                assert!(
+                    (got - want).length() <= 1e-5 * (1.0 + want.length()),
+                    "copy {k} triangle {i}: {got:?} vs {want:?}"
+                );
             }
         }
     }

@@ -22,9 +22,13 @@ use std::process::Command;
 /// Opens the default device with validation. A machine without Vulkan fails here, loudly:
 /// CI always has lavapipe (scripts/install-deps.sh).
 fn gpu() -> Gpu {
-    let g = Gpu::new(&ContextOptions { validation: true, ..Default::default() })
-        .unwrap_or_else(|e| panic!("GPU TESTS CANNOT RUN: no usable Vulkan device ({e}). Run scripts/install-deps.sh (Mesa lavapipe)."));
-    assert!(g.validation_enabled, "VK_LAYER_KHRONOS_validation is not installed (package vulkan-validationlayers); GPU tests require it");
+    let g = Gpu::new(&ContextOptions { validation: true, ..Default::default() }).unwrap_or_else(|e| {
+        panic!("GPU TESTS CANNOT RUN: no usable Vulkan device ({e}). Run scripts/install-deps.sh (Mesa lavapipe).")
+    });
+    assert!(
+        g.validation_enabled,
+        "VK_LAYER_KHRONOS_validation is not installed (package vulkan-validationlayers); GPU tests require it"
+    );
     g
 }
 
@@ -53,11 +57,21 @@ fn quick_conformance_covers_every_value_on_every_scene() {
     let md = conformance::markdown(&o, true);
     assert!(o.validation.is_empty(), "validation messages:\n{}", o.validation.join("\n"));
     let fails = o.failures();
-    assert!(fails.is_empty(), "{}", fails.iter().map(|c| format!("{}: {}", c.variant.kernel_name(c.imp, false), c.status.label())).collect::<Vec<_>>().join("\n"));
+    assert!(
+        fails.is_empty(),
+        "{}",
+        fails
+            .iter()
+            .map(|c| format!("{}: {}", c.variant.kernel_name(c.imp, false), c.status.label()))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
     let passed: Vec<_> = o.checks.iter().filter(|c| c.status == Status::Pass).collect();
     assert!(passed.iter().all(|c| c.rays > 1000), "every kernel traced every scene:\n{md}");
     for layout in LayoutId::layouts() {
-        let of = |f: &dyn Fn(&&&conformance::Check) -> bool| passed.iter().filter(|c| c.variant.layout == layout).any(|c| f(&c));
+        let of = |f: &dyn Fn(&&&conformance::Check) -> bool| {
+            passed.iter().filter(|c| c.variant.layout == layout).any(|c| f(&c))
+        };
         for b in BRANCHINGS {
             assert!(of(&|c| c.variant.branching == b), "{layout}: B={b} not covered\n{md}");
         }
@@ -72,8 +86,14 @@ fn quick_conformance_covers_every_value_on_every_scene() {
             assert!(of(&|c| c.imp == imp), "{layout}: {imp:?} packets not covered\n{md}");
         }
         if layout.bvh().unwrap().float_controls_off() {
-            assert!(of(&|c| c.variant.fc == FloatControls::Off && c.variant.packet == 1), "{layout}: no kernel without float controls covered\n{md}");
-            assert!(of(&|c| c.variant.fc == FloatControls::Off && c.imp == PacketImpl::Subgroup), "{layout}: no packet kernel without float controls covered\n{md}");
+            assert!(
+                of(&|c| c.variant.fc == FloatControls::Off && c.variant.packet == 1),
+                "{layout}: no kernel without float controls covered\n{md}"
+            );
+            assert!(
+                of(&|c| c.variant.fc == FloatControls::Off && c.imp == PacketImpl::Subgroup),
+                "{layout}: no packet kernel without float controls covered\n{md}"
+            );
         }
     }
     // Both packet implementations at every P the device's subgroup holds.
@@ -103,7 +123,9 @@ fn odd_ray_counts_and_all_miss_batches() {
             assert_same_hits(&format!("{layout} n={n}"), r, &enc.trace_default(r).0, &a.hits);
         }
         // Rays pointing away from the scene: all misses.
-        let away: Vec<Ray> = (0..100).map(|i| Ray { origin: [100.0, i as f32, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY }).collect();
+        let away: Vec<Ray> = (0..100)
+            .map(|i| Ray { origin: [100.0, i as f32, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY })
+            .collect();
         let a = k.run(&g, &gb, &away, 0, 1).unwrap();
         assert!(a.hits.iter().all(|h| h.prim == -1 && h.t == f32::INFINITY));
     }
@@ -141,8 +163,22 @@ void main() {
         for b in BRANCHINGS {
             let enc = encode(&p, layout, b);
             let v = Variant::new(layout, b, 1);
-            let code = shader::compile_source("node round trip", "roundtrip.comp", src, &v.defines(PacketImpl::Single, false, false), &Includes::variant(&v)).unwrap();
-            let pipe = ComputePipeline::new(&g, "round trip", &code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32).unwrap();
+            let code = shader::compile_source(
+                "node round trip",
+                "roundtrip.comp",
+                src,
+                &v.defines(PacketImpl::Single, false, false),
+                &Includes::variant(&v),
+            )
+            .unwrap();
+            let pipe = ComputePipeline::new(
+                &g,
+                "round trip",
+                &code,
+                binding::COUNT,
+                std::mem::size_of::<PushConstants>() as u32,
+            )
+            .unwrap();
             let n = enc.node_count();
             let mut expect = vec![0u32; n * 7 * b];
             for node in 0..n {
@@ -157,7 +193,8 @@ void main() {
             }
             let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER | ash::vk::BufferUsageFlags::TRANSFER_SRC;
             let nodes = Buffer::upload(&g, "nodes", &enc.nodes.to_bytes()).unwrap();
-            let out = Buffer::new(&g, "out", (n * 7 * b * 4) as u64, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
+            let out =
+                Buffer::new(&g, "out", (n * 7 * b * 4) as u64, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
             let dummy = Buffer::new(&g, "unused", 16, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
             pipe.bind(&[&nodes, &dummy, &dummy, &dummy, &dummy, &out]);
             let push = PushConstants { node_count: n as u32, root: enc.push_root, ..Default::default() };
@@ -169,7 +206,12 @@ void main() {
             let got: Vec<u32> = bytemuck::pod_collect_to_vec(&out.download(n * 7 * b * 4).unwrap());
             assert_eq!(got.len(), expect.len());
             if let Some(i) = (0..got.len()).find(|&i| got[i] != expect[i]) {
-                panic!("{layout} B={b}: word {i} of node {} read as {:#x}, written as {:#x}", i / (7 * b), got[i], expect[i]);
+                panic!(
+                    "{layout} B={b}: word {i} of node {} read as {:#x}, written as {:#x}",
+                    i / (7 * b),
+                    got[i],
+                    expect[i]
+                );
             }
         }
     }
@@ -187,32 +229,82 @@ fn missing_features_fall_back_to_what_stays_exact() {
     let rays = &ray_sets(&p, 24, 200)[3].1;
     let f16h = layout("f16h");
     let cases: [(&str, Vec<Variant>, Vec<Variant>); 4] = [
-        ("shaderFloat16", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(f16h, 4, 1).with_math(Math::F32), Variant::new(f16h, 8, 8).with_math(Math::F32)], vec![Variant::new(f16h, 4, 1).with_math(Math::F16), Variant::new(f16h, 4, 1).with_math(Math::Mixed)]),
-        ("storageBuffer16BitAccess", vec![Variant::new(LayoutId::f32(), 4, 1)], vec![Variant::new(f16h, 4, 1).with_math(Math::F32)]),
-        ("floatControls", vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 1).with_math(Math::F16), Variant::new(f16h, 8, 8).with_math(Math::F32)], vec![]),
-        ("subgroupSizeControl", vec![Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 8).with_math(Math::F16)], vec![]),
+        (
+            "shaderFloat16",
+            vec![
+                Variant::new(LayoutId::f32(), 4, 1),
+                Variant::new(f16h, 4, 1).with_math(Math::F32),
+                Variant::new(f16h, 8, 8).with_math(Math::F32),
+            ],
+            vec![Variant::new(f16h, 4, 1).with_math(Math::F16), Variant::new(f16h, 4, 1).with_math(Math::Mixed)],
+        ),
+        (
+            "storageBuffer16BitAccess",
+            vec![Variant::new(LayoutId::f32(), 4, 1)],
+            vec![Variant::new(f16h, 4, 1).with_math(Math::F32)],
+        ),
+        (
+            "floatControls",
+            vec![
+                Variant::new(LayoutId::f32(), 4, 1),
+                Variant::new(LayoutId::f32(), 4, 4),
+                Variant::new(f16h, 4, 1).with_math(Math::F16),
+                Variant::new(f16h, 8, 8).with_math(Math::F32),
+            ],
+            vec![],
+        ),
+        (
+            "subgroupSizeControl",
+            vec![Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 8).with_math(Math::F16)],
+            vec![],
+        ),
     ];
     for (feature, runs, skips) in cases {
-        let g = Gpu::new(&ContextOptions { mask_features: vec![feature.into()], validation: true, ..Default::default() }).unwrap_or_else(|e| panic!("masking {feature}: the device must still open: {e}"));
+        let g =
+            Gpu::new(&ContextOptions { mask_features: vec![feature.into()], validation: true, ..Default::default() })
+                .unwrap_or_else(|e| panic!("masking {feature}: the device must still open: {e}"));
         for v in runs {
-            let v = support::resolve(&g.info, v, FcChoice::Auto).unwrap_or_else(|e| panic!("{feature} masked: {v} must run: {e}"));
-            assert_eq!(v.fc == FloatControls::Off, feature == "floatControls", "{v}: float controls chosen {}", v.fc.name());
+            let v = support::resolve(&g.info, v, FcChoice::Auto)
+                .unwrap_or_else(|e| panic!("{feature} masked: {v} must run: {e}"));
+            assert_eq!(
+                v.fc == FloatControls::Off,
+                feature == "floatControls",
+                "{v}: float controls chosen {}",
+                v.fc.name()
+            );
             let enc = encode(&p, v.layout, v.branching);
             let gb = GpuBvh::upload(&g, &enc).unwrap();
             let imp = halftrace::gpu::kernel::choose_impl(&g, &v, None);
             let k = builtin(&g, &v, imp, true);
-            assert_eq!(k.subgroup.is_some(), imp == PacketImpl::Subgroup && feature != "subgroupSizeControl", "{v}: subgroup size pinned only with subgroupSizeControl");
+            assert_eq!(
+                k.subgroup.is_some(),
+                imp == PacketImpl::Subgroup && feature != "subgroupSizeControl",
+                "{v}: subgroup size pinned only with subgroupSizeControl"
+            );
             let out = k.run(&g, &gb, rays, 0, 1).unwrap();
             let (want, counters) = enc.trace_fc(rays, v.packet, v.math, v.fc);
             assert_same_hits(&format!("{feature} masked: {}", k.name()), rays, &want, &out.hits);
-            assert_same_hits(&format!("{feature} masked: {} vs f32", k.name()), rays, &encode(&p, LayoutId::f32(), 4).trace_default(rays).0, &out.hits);
+            assert_same_hits(
+                &format!("{feature} masked: {} vs f32", k.name()),
+                rays,
+                &encode(&p, LayoutId::f32(), 4).trace_default(rays).0,
+                &out.hits,
+            );
             assert_eq!(out.counters.unwrap(), counters, "{feature} masked: {} counters", k.name());
         }
         for v in skips {
-            let why = support::resolve(&g.info, v, FcChoice::Auto).err().unwrap_or_else(|| panic!("{feature} masked: {v} must be skipped"));
-            let named = if feature == "floatControls" { "shaderRoundingModeRTEFloat32".to_string() } else { feature.to_string() };
+            let why = support::resolve(&g.info, v, FcChoice::Auto)
+                .err()
+                .unwrap_or_else(|| panic!("{feature} masked: {v} must be skipped"));
+            let named = if feature == "floatControls" {
+                "shaderRoundingModeRTEFloat32".to_string()
+            } else {
+                feature.to_string()
+            };
             assert!(why.contains(&named) && why.contains("lacks"), "{why}");
-            let e = Kernel::build(&g, &v, PacketImpl::Single, false, &Source::Builtin).err().expect("an unsupported kernel is not built");
+            let e = Kernel::build(&g, &v, PacketImpl::Single, false, &Source::Builtin)
+                .err()
+                .expect("an unsupported kernel is not built");
             assert!(matches!(e, GpuError::Unsupported(_)), "{e}");
         }
         clean(&g);
@@ -222,13 +314,45 @@ fn missing_features_fall_back_to_what_stays_exact() {
     assert!(layout("rq").baseline().unwrap().unavailable(&g.info).is_some());
     // Through the CLI: shaderFloat16 masked, f16h with fp32 math is validated and traced.
     let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--layout", "f16h", "--math", "f32", "--width", "32", "--height", "32", "--mask-feature", "shaderFloat16"])
+        .args([
+            "trace",
+            "--scene",
+            scenes_dir().join("teapot.obj").to_str().unwrap(),
+            "--backend",
+            "gpu",
+            "--layout",
+            "f16h",
+            "--math",
+            "f32",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--mask-feature",
+            "shaderFloat16",
+        ])
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success() && text.contains("validated against the CPU reference"), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success() && text.contains("validated against the CPU reference"),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let out = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["trace", "--scene", scenes_dir().join("teapot.obj").to_str().unwrap(), "--backend", "gpu", "--layout", "f16h", "--math", "f16", "--mask-feature", "shaderFloat16"])
+        .args([
+            "trace",
+            "--scene",
+            scenes_dir().join("teapot.obj").to_str().unwrap(),
+            "--backend",
+            "gpu",
+            "--layout",
+            "f16h",
+            "--math",
+            "f16",
+            "--mask-feature",
+            "shaderFloat16",
+        ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
@@ -252,7 +376,11 @@ fn scenes_beyond_one_storage_buffer_are_read_by_address() {
         assert_eq!(gb.buffers, Buffers::Addressed, "{layout}: {} bytes do not fit 16 KiB bindings", gb.bytes);
         // A kernel built for bound buffers is refused, not run over the wrong bindings.
         let bound = builtin(&g, &Variant::new(layout, 8, 1), PacketImpl::Single, false);
-        let e = bound.run(&g, &gb, &sets[0].1, 0, 1).err().expect("a bound kernel on an addressed BVH is refused").to_string();
+        let e = bound
+            .run(&g, &gb, &sets[0].1, 0, 1)
+            .err()
+            .expect("a bound kernel on an addressed BVH is refused")
+            .to_string();
         assert!(e.contains("Addressed") && e.contains("Bound"), "{e}");
         for &math in layout.caps().maths {
             for (pk, imp) in [(1, PacketImpl::Single), (8, PacketImpl::Subgroup)] {
@@ -275,13 +403,24 @@ fn scenes_beyond_one_storage_buffer_are_read_by_address() {
 /// the limit, the buffer, the variant's layout and B, and the size named.
 #[test]
 fn scene_too_big_for_the_device_is_a_clear_error() {
-    let g = Gpu::new(&ContextOptions { max_buffer: Some(4096), mask_features: vec!["bufferDeviceAddress".into()], ..Default::default() }).unwrap();
+    let g = Gpu::new(&ContextOptions {
+        max_buffer: Some(4096),
+        mask_features: vec!["bufferDeviceAddress".into()],
+        ..Default::default()
+    })
+    .unwrap();
     let p = prepare(&scenes_dir().join("teapot.obj"));
     let enc = encode(&p, layout("f16h"), 4);
     let e = GpuBvh::upload(&g, &enc).err().expect("upload must fail");
     let msg = e.to_string();
     let bytes = enc.node_bytes().to_string();
-    assert!(msg.contains("nodes (f16h, B=4)") && msg.contains(&bytes) && msg.contains("maxStorageBufferRange of 4096 bytes") && msg.contains("bufferDeviceAddress"), "{msg}");
+    assert!(
+        msg.contains("nodes (f16h, B=4)")
+            && msg.contains(&bytes)
+            && msg.contains("maxStorageBufferRange of 4096 bytes")
+            && msg.contains("bufferDeviceAddress"),
+        "{msg}"
+    );
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -307,23 +446,48 @@ fn cli_env(env: &[(&str, &str)], args: &[&str]) -> (bool, String, String) {
 fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
     let sc = scenes_dir().join("teapot.obj");
     let trace = |env: (&str, &str), extra: &[&str]| {
-        let mut a = vec!["trace", "--scene", sc.to_str().unwrap(), "--layout", "f32", "--width", "16", "--height", "16", "--repeat", "1"];
+        let mut a = vec![
+            "trace",
+            "--scene",
+            sc.to_str().unwrap(),
+            "--layout",
+            "f32",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--repeat",
+            "1",
+        ];
         a.extend_from_slice(extra);
         cli_env(&[env], &a)
     };
     let run = |extra: &[&str]| trace(("HALFTRACE_MAX_STORAGE_BUFFER", "16384"), extra);
     let (ok, out, err) = run(&[]);
-    assert!(ok && out.contains("read by address") && out.contains("trav_f32_b4_p1_addr: validated against the CPU reference"), "{out}{err}");
+    assert!(
+        ok && out.contains("read by address")
+            && out.contains("trav_f32_b4_p1_addr: validated against the CPU reference"),
+        "{out}{err}"
+    );
     let user = repo("docs/examples/unordered.comp");
     let (ok, out, err) = run(&["--kernel", user.to_str().unwrap()]);
     assert!(ok && out.contains("read by address") && out.contains("validated against the CPU reference"), "{out}{err}");
     let spv = repo("spirv/trav_f32_b4_p1.spv");
     let (ok, out, err) = run(&["--kernel", spv.to_str().unwrap()]);
-    assert!(!ok && err.contains("reads binding 1") && err.contains("read by address") && !err.contains("panicked"), "{out}{err}");
+    assert!(
+        !ok && err.contains("reads binding 1") && err.contains("read by address") && !err.contains("panicked"),
+        "{out}{err}"
+    );
     // A buffer over maxMemoryAllocationSize (pretended 64 KiB) is refused, naming the limit,
     // the variant, the buffer and its size.
     let (ok, _, err) = trace(("HALFTRACE_MAX_ALLOCATION", "65536"), &[]);
-    assert!(!ok && err.contains("trav_f32_b4_p1") && err.contains("(f32, B=4) needs") && err.contains("maxMemoryAllocationSize of 65536 bytes") && !err.contains("panicked"), "{err}");
+    assert!(
+        !ok && err.contains("trav_f32_b4_p1")
+            && err.contains("(f32, B=4) needs")
+            && err.contains("maxMemoryAllocationSize of 65536 bytes")
+            && !err.contains("panicked"),
+        "{err}"
+    );
 }
 
 fn repo(path: &str) -> PathBuf {
@@ -348,9 +512,13 @@ fn user_kernels_are_checked_then_validated_and_timed() {
     assert!(ok, "{err}");
     // A module emitted by `shaders --emit` (the copy in spirv/) gives the built-in's hits.
     let spv = repo("spirv/trav_f16h_m16_b4_p1.spv");
-    let (ok, out, err) = run(&["--layout", "f16h", "--branching", "4", "--kernel", spv.to_str().unwrap(), "--out", &out_of("spv.npy")]);
+    let (ok, out, err) =
+        run(&["--layout", "f16h", "--branching", "4", "--kernel", spv.to_str().unwrap(), "--out", &out_of("spv.npy")]);
     assert!(ok, "{err}");
-    assert!(out.contains("validated against the CPU reference") && out.contains("Mrays/s") && out.contains("user kernel"), "{out}");
+    assert!(
+        out.contains("validated against the CPU reference") && out.contains("Mrays/s") && out.contains("user kernel"),
+        "{out}"
+    );
     assert_eq!(hits("spv.npy"), hits("builtin.npy"));
     // `--spirv` stays an alias.
     let (ok, _, err) = run(&["--layout", "f16h", "--branching", "4", "--spirv", spv.to_str().unwrap()]);
@@ -358,12 +526,29 @@ fn user_kernels_are_checked_then_validated_and_timed() {
     // A GLSL kernel: the documented minimal example, for every layout, gives the built-in's hits.
     let example = repo("docs/examples/unordered.comp");
     for l in LayoutId::layouts() {
-        let (ok, out, err) = run(&["--layout", l.name(), "--branching", "8", "--kernel", example.to_str().unwrap(), "--out", &out_of("example.npy"), "--stats"]);
+        let (ok, out, err) = run(&[
+            "--layout",
+            l.name(),
+            "--branching",
+            "8",
+            "--kernel",
+            example.to_str().unwrap(),
+            "--out",
+            &out_of("example.npy"),
+            "--stats",
+        ]);
         assert!(ok, "{l}: {err}");
-        assert!(out.contains("validated against the CPU reference") && out.contains("writes no counters"), "{l}: {out}");
+        assert!(
+            out.contains("validated against the CPU reference") && out.contains("writes no counters"),
+            "{l}: {out}"
+        );
         let (ok, _, err) = run(&["--layout", l.name(), "--branching", "8", "--out", &out_of("example_builtin.npy")]);
         assert!(ok, "{err}");
-        assert_eq!(hits("example.npy"), hits("example_builtin.npy"), "{l}: the example kernel's hits differ from the built-in's");
+        assert_eq!(
+            hits("example.npy"),
+            hits("example_builtin.npy"),
+            "{l}: the example kernel's hits differ from the built-in's"
+        );
     }
     // A module of another layout fits the interface but returns other hits: validation fails,
     // naming the variant and the user's file, exit non-zero, no hits file.
@@ -372,8 +557,22 @@ fn user_kernels_are_checked_then_validated_and_timed() {
     let _ = std::fs::remove_file(&no_hits);
     // (f16h's fp32 math, like the f32 module, computes without fp16 arithmetic, so only the
     // hits can tell them apart.)
-    let (ok, _, err) = run(&["--layout", "f16h", "--math", "f32", "--branching", "4", "--kernel", other.to_str().unwrap(), "--out", no_hits.to_str().unwrap()]);
-    assert!(!ok && err.contains("trav_f16h_m32_b4_p1 (user kernel") && err.contains("differ from the CPU reference"), "{err}");
+    let (ok, _, err) = run(&[
+        "--layout",
+        "f16h",
+        "--math",
+        "f32",
+        "--branching",
+        "4",
+        "--kernel",
+        other.to_str().unwrap(),
+        "--out",
+        no_hits.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("trav_f16h_m32_b4_p1 (user kernel") && err.contains("differ from the CPU reference"),
+        "{err}"
+    );
     assert!(!no_hits.exists(), "a failed validation wrote a hits file");
     // Interfaces that do not fit the variant are refused before dispatch, naming what differs.
     let counting = repo("spirv/trav_f16h_m16_b4_p1_stats.spv");
@@ -454,10 +653,19 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
         for stats in [false, true] {
             let name = v.kernel_name(*imp, stats);
             let p = dir.join(format!("{name}.spv"));
-            let on_disk = std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}; run `halftrace shaders --emit spirv/`", p.display()));
+            let on_disk = std::fs::read(&p)
+                .unwrap_or_else(|e| panic!("{}: {e}; run `halftrace shaders --emit spirv/`", p.display()));
             let fresh = shader::compile(v, *imp, stats, true).unwrap();
-            assert!(on_disk == bytemuck::cast_slice::<u32, u8>(&fresh), "{} is stale against glsl/; run `halftrace shaders --emit spirv/`", p.display());
-            let val = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&p).output().expect("spirv-val (package spirv-tools) is required");
+            assert!(
+                on_disk == bytemuck::cast_slice::<u32, u8>(&fresh),
+                "{} is stale against glsl/; run `halftrace shaders --emit spirv/`",
+                p.display()
+            );
+            let val = Command::new("spirv-val")
+                .args(["--target-env", "vulkan1.2"])
+                .arg(&p)
+                .output()
+                .expect("spirv-val (package spirv-tools) is required");
             assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
             // The fp16 math modes must really compute in float16_t; fp32 math and the f32
             // layout must not need fp16 arithmetic (they run on devices without shaderFloat16).
@@ -466,20 +674,31 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             assert_eq!(f16_cap, v.layout.bvh().unwrap().needs(v.math).float16, "{name}: Float16 capability");
             // Every float-control mode the kernel relies on is declared, per width.
             for (mode, width) in halftrace::gpu::support::float_modes(v) {
-                assert!(ins.iter().any(|(op, o)| *op == 16 && o.len() >= 3 && o[1] == mode && o[2] == width), "{name}: execution mode {mode} for fp{width} missing");
+                assert!(
+                    ins.iter().any(|(op, o)| *op == 16 && o.len() >= 3 && o[1] == mode && o[2] == width),
+                    "{name}: execution mode {mode} for fp{width} missing"
+                );
             }
             if v.math != Math::F32 {
-                let mut f16: Vec<u32> = ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
-                let vecs: Vec<u32> = ins.iter().filter(|(op, o)| *op == 23 && f16.contains(&o[1])).map(|(_, o)| o[0]).collect();
+                let mut f16: Vec<u32> =
+                    ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
+                let vecs: Vec<u32> =
+                    ins.iter().filter(|(op, o)| *op == 23 && f16.contains(&o[1])).map(|(_, o)| o[0]).collect();
                 f16.extend(vecs);
                 let count = |opc: u32| ins.iter().filter(|(op, o)| *op == opc && f16.contains(&o[0])).count();
                 let (add, sub, mul) = (count(129), count(131), count(133));
-                assert!(add > 0 && sub > 0 && mul > 0, "{name}: fp16 OpFAdd {add}, OpFSub {sub}, OpFMul {mul}: box test / origin move not in float16_t");
+                assert!(
+                    add > 0 && sub > 0 && mul > 0,
+                    "{name}: fp16 OpFAdd {add}, OpFSub {sub}, OpFMul {mul}: box test / origin move not in float16_t"
+                );
             }
             n += 1;
         }
     }
-    let files = std::fs::read_dir(&dir).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "spv")).count();
+    let files = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "spv"))
+        .count();
     assert_eq!(files, n, "spirv/ holds files that are not in the default matrix");
     assert_eq!(n, 2 * expected.len());
 }
@@ -490,7 +709,9 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
     let p = prepare(&scenes_dir().join("stanford-bunny.obj"));
     let rays = &ray_sets(&p, 40, 10)[0].1;
     let r1000 = &rays[..1000];
-    let away: Vec<Ray> = (0..130).map(|i| Ray { origin: [1.0, i as f32 * 0.01, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY }).collect();
+    let away: Vec<Ray> = (0..130)
+        .map(|i| Ray { origin: [1.0, i as f32 * 0.01, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY })
+        .collect();
     for layout in LayoutId::layouts() {
         let enc = encode(&p, layout, 4);
         let gb = GpuBvh::upload(&g, &enc).unwrap();
@@ -502,7 +723,10 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
         let m = k.run(&g, &gb, &away, 0, 1).unwrap();
         assert!(m.hits.iter().all(|h| h.prim == -1));
         let c = m.counters.unwrap();
-        assert!(c.iter().all(|c| c.nodes == 0 && c.tri_tests == 0 && c.packet_nodes == 0), "all-miss packets visit nothing");
+        assert!(
+            c.iter().all(|c| c.nodes == 0 && c.tri_tests == 0 && c.packet_nodes == 0),
+            "all-miss packets visit nothing"
+        );
     }
     clean(&g);
 }
@@ -516,7 +740,11 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
 fn ray_query_baseline_agrees_with_f32_on_every_scene() {
     let g = gpu();
     let rq = layout("rq").baseline().expect("rq is a baseline");
-    assert!(rq.unavailable(&g.info).is_none(), "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)", g.info.name);
+    assert!(
+        rq.unavailable(&g.info).is_none(),
+        "{} has no ray queries; lavapipe from Mesa >= 24 has them (scripts/install-deps.sh)",
+        g.info.name
+    );
     let dev = rq.prepare(&g).unwrap();
     baseline_agrees_with_f32("rq", dev.as_ref(), 0);
     drop(dev);
@@ -528,7 +756,23 @@ fn ray_query_baseline_agrees_with_f32_on_every_scene() {
 fn ray_query_baseline_writes_its_outputs() {
     let (img, rays, hits) = (tmp("rq.png"), tmp("rq_rays.npy"), tmp("rq_hits.npy"));
     let scene = scenes_dir().join("teapot.obj");
-    let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "rq", "--width", "24", "--height", "24", "--image", img.to_str().unwrap(), "--save-rays", rays.to_str().unwrap(), "--out", hits.to_str().unwrap()]);
+    let (ok, out, err) = cli(&[
+        "trace",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--layout",
+        "rq",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--image",
+        img.to_str().unwrap(),
+        "--save-rays",
+        rays.to_str().unwrap(),
+        "--out",
+        hits.to_str().unwrap(),
+    ]);
     assert!(ok, "{out}{err}");
     assert_eq!(image::open(&img).unwrap().width(), 24);
     assert_eq!(halftrace::npy::read_rays(&rays).unwrap().len(), 576);
@@ -553,7 +797,8 @@ fn huge_coordinates_trace_on_the_gpu() {
     let p = tmp("teapot_1e20.obj");
     std::fs::write(&p, obj).unwrap();
     for layout in ["f32", "f16h", "q8"] {
-        let (ok, out, err) = cli(&["trace", "--scene", p.to_str().unwrap(), "--layout", layout, "--width", "32", "--height", "32"]);
+        let (ok, out, err) =
+            cli(&["trace", "--scene", p.to_str().unwrap(), "--layout", layout, "--width", "32", "--height", "32"]);
         assert!(ok, "{layout}: {out}{err}");
         let hits: usize = out.lines().find_map(|l| l.strip_suffix(" hits")?.parse().ok()).unwrap_or(0);
         assert!(hits > 100, "{layout}: {hits} hits\n{out}");
@@ -568,11 +813,41 @@ fn user_modules_of_another_variant_are_refused() {
     let scene = scenes_dir().join("teapot.obj");
     let s = scene.to_str().unwrap();
     let spv = |n: &str| repo(&format!("spirv/{n}.spv")).display().to_string();
-    for (module, want) in [("trav_f16h_m32_b4_p1", "another math mode"), ("trav_f16h_m16_b4_p8_subgroup", "packet kernel")] {
-        let (ok, out, err) = cli(&["trace", "--scene", s, "--layout", "f16h", "--math", "f16", "--kernel", &spv(module), "--width", "8", "--height", "8"]);
+    for (module, want) in
+        [("trav_f16h_m32_b4_p1", "another math mode"), ("trav_f16h_m16_b4_p8_subgroup", "packet kernel")]
+    {
+        let (ok, out, err) = cli(&[
+            "trace",
+            "--scene",
+            s,
+            "--layout",
+            "f16h",
+            "--math",
+            "f16",
+            "--kernel",
+            &spv(module),
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ]);
         assert!(!ok && err.contains(module) && err.contains(want), "{module}: {out}{err}");
     }
-    let (ok, out, err) = cli(&["trace", "--scene", s, "--layout", "f16h", "--math", "f16", "--kernel", &spv("trav_f16h_m16_b4_p1"), "--width", "8", "--height", "8"]);
+    let (ok, out, err) = cli(&[
+        "trace",
+        "--scene",
+        s,
+        "--layout",
+        "f16h",
+        "--math",
+        "f16",
+        "--kernel",
+        &spv("trav_f16h_m16_b4_p1"),
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
     assert!(ok && out.contains("the user's, in place of trav_f16h_m16_b4_p1"), "{out}{err}");
 }
 
@@ -589,7 +864,19 @@ fn invalid_spirv_gets_the_validators_message() {
     let cut = tmp("cut.spv");
     std::fs::write(&cut, bytemuck::cast_slice::<u32, u8>(&words)).unwrap();
     let scene = scenes_dir().join("teapot.obj");
-    let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "f32", "--kernel", cut.to_str().unwrap(), "--width", "8", "--height", "8"]);
+    let (ok, out, err) = cli(&[
+        "trace",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--layout",
+        "f32",
+        "--kernel",
+        cut.to_str().unwrap(),
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
     assert!(!ok && err.contains("cut.spv") && err.contains("spirv-val"), "{out}{err}");
 }
 
@@ -602,19 +889,38 @@ fn a_kernel_that_never_ends_is_reported_hung() {
     std::fs::write(&k, "#version 460\n#include \"interface.glsl\"\n#include \"ray.glsl\"\nvoid main() {\n    uint i = ray_index();\n    if (i >= pc.ray_count) return;\n    float t = ray_f[8u * i];\n    while (t == t) { t += 1.0; hits[i] = Hit(t, 0, 0.0, 0.0); }\n}\n").unwrap();
     let scene = scenes_dir().join("teapot.obj");
     let t0 = std::time::Instant::now();
-    let (ok, out, err) = cli(&["trace", "--scene", scene.to_str().unwrap(), "--layout", "f32", "--kernel", k.to_str().unwrap(), "--kernel-timeout", "2", "--width", "8", "--height", "8"]);
+    let (ok, out, err) = cli(&[
+        "trace",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--layout",
+        "f32",
+        "--kernel",
+        k.to_str().unwrap(),
+        "--kernel-timeout",
+        "2",
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
     assert!(!ok && err.contains("within 2 s"), "{out}{err}");
     assert!(t0.elapsed().as_secs() < 60, "took {:?}", t0.elapsed());
     let cfg = tmp("hang.toml");
     std::fs::write(&cfg, format!("scenes = [{:?}]\nrays = [\"primary\"]\nlayouts = [\"f32\"]\nbranchings = [4]\npackets = [1]\nscheme_branchings = [4]\nwidth = 8\nheight = 8\nrepeat = 1\nwarmup = 0\nkernel_timeout = 2.0\n\n[[kernel]]\nname = \"hang\"\nlayout = \"f32\"\nfile = {:?}\n", scene.display().to_string(), k.display().to_string())).unwrap();
     let out_dir = tmp("hang-sweep");
     let _ = std::fs::remove_dir_all(&out_dir);
-    let (ok, _, err) = cli(&["sweep", "--quiet", "--config", cfg.to_str().unwrap(), "--out", out_dir.to_str().unwrap()]);
+    let (ok, _, err) =
+        cli(&["sweep", "--quiet", "--config", cfg.to_str().unwrap(), "--out", out_dir.to_str().unwrap()]);
     assert!(!ok && err.contains("hang") && err.contains("--resume"), "{err}");
     let rows = halftrace::report::read_rows(&out_dir).unwrap();
     assert_eq!(rows.len(), 2, "{rows:?}");
-    assert!(rows[0].status == "ok" && rows[1].kernel == "hang" && rows[1].status.starts_with("FAILED: hung"), "{rows:?}");
-    let (ok, _, err) = cli(&["sweep", "--quiet", "--config", cfg.to_str().unwrap(), "--out", out_dir.to_str().unwrap(), "--resume"]);
+    assert!(
+        rows[0].status == "ok" && rows[1].kernel == "hang" && rows[1].status.starts_with("FAILED: hung"),
+        "{rows:?}"
+    );
+    let (ok, _, err) =
+        cli(&["sweep", "--quiet", "--config", cfg.to_str().unwrap(), "--out", out_dir.to_str().unwrap(), "--resume"]);
     assert!(ok, "{err}");
     assert_eq!(halftrace::report::read_rows(&out_dir).unwrap().len(), 2);
 }
@@ -626,15 +932,41 @@ fn a_kernel_that_never_ends_is_reported_hung() {
 fn bench_prints_every_ratio_with_medians_and_ranges() {
     let md = tmp("bench.md");
     let scene = repo("scenes/teapot.obj");
-    let (ok, out, err) = cli(&["bench", "--scene", scene.to_str().unwrap(), "--width", "16", "--height", "16", "--rounds", "2", "--repeat", "1", "--out", md.to_str().unwrap()]);
+    let (ok, out, err) = cli(&[
+        "bench",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--rounds",
+        "2",
+        "--repeat",
+        "1",
+        "--out",
+        md.to_str().unwrap(),
+    ]);
     assert!(ok, "{err}");
     assert!(err.contains("targets validated"), "{err}");
     let text = std::fs::read_to_string(&md).unwrap();
     assert!(out.contains(&text), "--out differs from what was printed");
-    for what in ["f16h fp32-math ÷ f32, B = 8, P = 1", "f16h fp16-math ÷ f32, B = 8, P = 1", "best reduced-precision ÷ f32 (same B), largest scene", "best halftrace variant ÷ embree (host CPU)", "P = 8 ÷ P = 1, f32, B = 4", "P = 64 ÷ P = 1, f32, B = 4", "f32 ÷ rq (driver ray queries)"] {
-        let line = text.lines().find(|l| l.starts_with(&format!("| {what} |"))).unwrap_or_else(|| panic!("no ratio '{what}' in\n{text}"));
+    for what in [
+        "f16h fp32-math ÷ f32, B = 8, P = 1",
+        "f16h fp16-math ÷ f32, B = 8, P = 1",
+        "best reduced-precision ÷ f32 (same B), largest scene",
+        "best halftrace variant ÷ embree (host CPU)",
+        "P = 8 ÷ P = 1, f32, B = 4",
+        "P = 64 ÷ P = 1, f32, B = 4",
+        "f32 ÷ rq (driver ray queries)",
+    ] {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("| {what} |")))
+            .unwrap_or_else(|| panic!("no ratio '{what}' in\n{text}"));
         let cells: Vec<&str> = line.split('|').map(str::trim).collect();
-        let (med, lo, hi): (f64, f64, f64) = (cells[5].parse().unwrap(), cells[6].parse().unwrap(), cells[7].parse().unwrap());
+        let (med, lo, hi): (f64, f64, f64) =
+            (cells[5].parse().unwrap(), cells[6].parse().unwrap(), cells[7].parse().unwrap());
         assert!(lo > 0.0 && lo <= med && med <= hi, "{line}");
     }
     for t in ["trav_f32_b8_p1", "trav_f16h_m16_b8_p1", "trav_q8_m32_b4_p1", "rq", "embree"] {

@@ -28,7 +28,8 @@ fn f32_traversal_equals_brute_force() {
 fn every_layout_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
     // Every conservative layout (f16h-seed, the poster's literal algorithm, is not: its
     // disagreements are counted by the sweep and the test below).
-    let layouts: Vec<LayoutId> = LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
+    let layouts: Vec<LayoutId> =
+        LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
     assert!(!layouts.is_empty());
     let mut total = 0usize;
     // per (layout, math): re-anchors, box tests; and f32's box tests
@@ -61,7 +62,11 @@ fn every_layout_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
         }
     }
     for (what, reanchors, boxes) in stats {
-        eprintln!("{what} == f32 on {total} rays; box tests vs f32 {:.3}; re-anchors per ray {:.3}", boxes as f64 / f32_boxes as f64, reanchors as f64 / total as f64);
+        eprintln!(
+            "{what} == f32 on {total} rays; box tests vs f32 {:.3}; re-anchors per ray {:.3}",
+            boxes as f64 / f32_boxes as f64,
+            reanchors as f64 / total as f64
+        );
     }
 }
 
@@ -92,9 +97,15 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
     use halftrace::scene::Scene;
     use proptest::prelude::*;
     use proptest::test_runner::{Config, TestRunner};
-    let layouts: Vec<LayoutId> = LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
+    let layouts: Vec<LayoutId> =
+        LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
     let mut runner = TestRunner::new(Config { cases: 48, ..Config::default() });
-    let cluster = (prop::array::uniform3(-1.0f32..1.0), prop_oneof![Just(1e-3f32), Just(1.0f32), Just(1e3f32), Just(1e6f32)], prop_oneof![Just(1e-4f32), Just(1e-2f32), Just(1.0f32)], 1usize..40);
+    let cluster = (
+        prop::array::uniform3(-1.0f32..1.0),
+        prop_oneof![Just(1e-3f32), Just(1.0f32), Just(1e3f32), Just(1e6f32)],
+        prop_oneof![Just(1e-4f32), Just(1e-2f32), Just(1.0f32)],
+        1usize..40,
+    );
     let strat = (prop::collection::vec(cluster, 1..5), any::<u64>());
     let rays_total = std::sync::atomic::AtomicUsize::new(0);
     runner
@@ -106,7 +117,8 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
                 let centre = Vec3::from(*c) * *dist;
                 for _ in 0..*n {
                     let p = centre + Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * *size * 20.0;
-                    let mut v = [p, p + Vec3::new(u(), u(), u() * 0.1) * *size, p + Vec3::new(u() * 0.1, u(), u()) * *size];
+                    let mut v =
+                        [p, p + Vec3::new(u(), u(), u() * 0.1) * *size, p + Vec3::new(u() * 0.1, u(), u()) * *size];
                     if u() < 0.3 {
                         // axis-aligned: a face in a box plane
                         let z = v[0].z;
@@ -124,7 +136,11 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
             let diag = (hi - lo).length();
             let mut rays = Vec::new();
             for t in tris.iter().take(60) {
-                for (k, target) in [t[0], t[1], t[2], (t[0] + t[1]) * 0.5, (t[1] + t[2]) * 0.5, (t[0] + t[1] + t[2]) / 3.0].into_iter().enumerate() {
+                for (k, target) in
+                    [t[0], t[1], t[2], (t[0] + t[1]) * 0.5, (t[1] + t[2]) * 0.5, (t[0] + t[1] + t[2]) / 3.0]
+                        .into_iter()
+                        .enumerate()
+                {
                     let d = match k % 3 {
                         0 => Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5),
                         1 => Vec3::new(0.0, 0.0, if u() < 0.5 { 1.0 } else { -1.0 }),
@@ -150,7 +166,14 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
                     for &math in l.caps().maths {
                         let (h, _) = enc.trace(&rays, 1, math);
                         let bad = (0..rays.len()).find(|&i| !hf[i].same_bits(&h[i]));
-                        prop_assert!(bad.is_none(), "{l}/{} B={b}: ray {:?}: f32 {:?}, got {:?}", math.name(), rays[bad.unwrap()], hf[bad.unwrap()], h[bad.unwrap()]);
+                        prop_assert!(
+                            bad.is_none(),
+                            "{l}/{} B={b}: ray {:?}: f32 {:?}, got {:?}",
+                            math.name(),
+                            rays[bad.unwrap()],
+                            hf[bad.unwrap()],
+                            h[bad.unwrap()]
+                        );
                     }
                 }
             }
@@ -170,7 +193,8 @@ fn huge_coordinates_keep_every_hit() {
     use halftrace::scene::Scene;
     let p = prepare(&scenes_dir().join("teapot.obj"));
     let k = 2f32.powi(66);
-    let big = Scene::from_triangles("teapot_2e66", p.scene.tris.iter().map(|t| t.map(|v: Vec3| v * k)).collect()).unwrap();
+    let big =
+        Scene::from_triangles("teapot_2e66", p.scene.tris.iter().map(|t| t.map(|v: Vec3| v * k)).collect()).unwrap();
     let q = Prepared { bin: halftrace::bvh::build_binary(&big), scene: big };
     let rays = &ray_sets(&p, 32, 0)[0].1;
     let big_rays = &ray_sets(&q, 32, 0)[0].1;
@@ -182,7 +206,12 @@ fn huge_coordinates_keep_every_hit() {
             for &math in l.caps().maths {
                 let got = enc.trace(big_rays, 1, math).0;
                 for (i, (g, e)) in got.iter().zip(&base).enumerate() {
-                    assert!(g.prim == e.prim && (g.prim < 0 || g.t == e.t * k), "{l}/{} B={b} ray {i}: {g:?} vs unscaled {e:?} (t × 2^66 = {})", math.name(), e.t * k);
+                    assert!(
+                        g.prim == e.prim && (g.prim < 0 || g.t == e.t * k),
+                        "{l}/{} B={b} ray {i}: {g:?} vs unscaled {e:?} (t × 2^66 = {})",
+                        math.name(),
+                        e.t * k
+                    );
                 }
             }
         }

@@ -23,7 +23,22 @@ fn sweep(out: &Path, extra: &[&str]) -> std::process::Output {
 /// The small sweep's command, to run with extra environment.
 fn sweep_cmd(out: &Path, extra: &[&str]) -> Command {
     let scene = teapot();
-    let mut args = vec!["sweep", "--quiet", "--scene", &scene, "--width", "24", "--height", "24", "--repeat", "3", "--warmup", "1", "--out", out.to_str().unwrap()];
+    let mut args = vec![
+        "sweep",
+        "--quiet",
+        "--scene",
+        &scene,
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--repeat",
+        "3",
+        "--warmup",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
     args.extend_from_slice(extra);
     let mut c = Command::new(env!("CARGO_BIN_EXE_halftrace"));
     c.args(&args);
@@ -33,9 +48,40 @@ fn sweep_cmd(out: &Path, extra: &[&str]) -> Command {
 #[test]
 fn small_sweep_writes_consistent_outputs() {
     let out = tmp("small");
-    let o = sweep(&out, &["--rays", "primary,ao", "--layouts", "f32,f16h,rq,embree", "--maths", "f16,f32,mixed", "--branchings", "2,8", "--packets", "1,4,16"]);
+    let o = sweep(
+        &out,
+        &[
+            "--rays",
+            "primary,ao",
+            "--layouts",
+            "f32,f16h,rq,embree",
+            "--maths",
+            "f16,f32,mixed",
+            "--branchings",
+            "2,8",
+            "--packets",
+            "1,4,16",
+        ],
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for f in ["results.csv", "results.json", "device_bench.json", "report.md", "ratio_vs_b.png", "ratio_vs_b.svg", "ratio_vs_p.png", "ratio_vs_p.svg", "mrays.png", "mrays.svg", "memory.png", "memory.svg", "render.png", "heat_f32.png", "heat_f16h.png", "diff_f16h_vs_f32.png"] {
+    for f in [
+        "results.csv",
+        "results.json",
+        "device_bench.json",
+        "report.md",
+        "ratio_vs_b.png",
+        "ratio_vs_b.svg",
+        "ratio_vs_p.png",
+        "ratio_vs_p.svg",
+        "mrays.png",
+        "mrays.svg",
+        "memory.png",
+        "memory.svg",
+        "render.png",
+        "heat_f32.png",
+        "heat_f16h.png",
+        "diff_f16h_vs_f32.png",
+    ] {
         let p = out.join(f);
         assert!(p.is_file() && std::fs::metadata(&p).unwrap().len() > 0, "{} missing or empty", p.display());
         if f.ends_with(".png") {
@@ -46,7 +92,8 @@ fn small_sweep_writes_consistent_outputs() {
     // modes, plus rq and embree: 22, × 2 ray kinds
     let rows = read_rows(&out).unwrap();
     assert_eq!(rows.len(), 44);
-    let bench: halftrace::gpu::bench::DeviceBench = serde_json::from_str(&std::fs::read_to_string(out.join("device_bench.json")).unwrap()).unwrap();
+    let bench: halftrace::gpu::bench::DeviceBench =
+        serde_json::from_str(&std::fs::read_to_string(out.join("device_bench.json")).unwrap()).unwrap();
     assert_eq!(bench.ops.len(), 5);
     assert!(bench.fp16_ratio > 0.0 && rows.iter().all(|r| r.device_fp16_ratio == bench.fp16_ratio));
     let json: Vec<Row> = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
@@ -59,19 +106,33 @@ fn small_sweep_writes_consistent_outputs() {
         assert!(rec.iter().all(|f| !f.is_empty()), "empty field in {rec:?}");
     }
     let mut keys: Vec<_> = rows.iter().map(|r| (r.rays.clone(), r.kernel.clone())).collect();
-    assert!(rows.iter().any(|r| r.kernel == "trav_f16h_m32_b8_p1") && rows.iter().any(|r| r.kernel.starts_with("trav_f16h_mix_b4_p16")));
+    assert!(
+        rows.iter().any(|r| r.kernel == "trav_f16h_m32_b8_p1")
+            && rows.iter().any(|r| r.kernel.starts_with("trav_f16h_mix_b4_p16"))
+    );
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), rows.len(), "duplicate variant rows");
     for r in &rows {
         assert_eq!(r.status, "ok", "{}: {}", r.kernel, r.status);
         let mrays = r.ray_count as f64 / r.ms_median / 1e3;
-        assert!((r.mrays_median - mrays).abs() <= 1e-9 * mrays, "{}: Mrays/s {} != rays / median time {}", r.kernel, r.mrays_median, mrays);
+        assert!(
+            (r.mrays_median - mrays).abs() <= 1e-9 * mrays,
+            "{}: Mrays/s {} != rays / median time {}",
+            r.kernel,
+            r.mrays_median,
+            mrays
+        );
         assert!(r.mrays_min <= r.mrays_median && r.mrays_median <= r.mrays_max, "{}", r.kernel);
         assert_eq!(r.timed_dispatches, 3);
         assert!(r.build_ms > 0.0 && r.bvh_bytes > 0);
         let baseline = r.layout == "rq" || r.layout == "embree";
-        assert_eq!(r.float_controls, if baseline { "n/a" } else { "on" }, "{}: float controls on where lavapipe has them", r.kernel);
+        assert_eq!(
+            r.float_controls,
+            if baseline { "n/a" } else { "on" },
+            "{}: float controls on where lavapipe has them",
+            r.kernel
+        );
         if baseline {
             assert_eq!((r.branching, r.packet), (0, 0), "B and P do not apply to {}", r.layout);
             assert!(r.differs_from_f32 == 0 && r.false_misses == 0, "{} disagrees with f32 on the teapot", r.layout);
@@ -87,7 +148,12 @@ fn small_sweep_writes_consistent_outputs() {
             ("f16h", "f32") => 44,
             _ => 38,
         };
-        assert_eq!(r.stack_bytes_per_ray as usize, halftrace::variant::stack_entries(r.branching) * entry, "{}", r.kernel);
+        assert_eq!(
+            r.stack_bytes_per_ray as usize,
+            halftrace::variant::stack_entries(r.branching) * entry,
+            "{}",
+            r.kernel
+        );
         assert!(!r.commit.is_empty() && r.device.contains("llvmpipe") || !r.device.is_empty());
     }
     // The headline table is computed from the rows it shows (f16h in the seed's fp16 math).
@@ -95,28 +161,55 @@ fn small_sweep_writes_consistent_outputs() {
     assert!(md.contains("Storage vs arithmetic"), "separated-effects table missing");
     for b in [2usize, 8] {
         for (math, col) in [("f16", 0usize), ("f32", 1), ("mixed", 2)] {
-            let xs: Vec<f64> = ["primary", "ao"].iter().map(|k| {
-                let h = rows.iter().find(|r| r.layout == "f16h" && r.math == math && r.rays == *k && r.branching == b && r.packet == 1).unwrap();
-                let f = rows.iter().find(|r| r.layout == "f32" && r.rays == *k && r.branching == b && r.packet == 1).unwrap();
-                h.mrays_median / f.mrays_median
-            }).collect();
+            let xs: Vec<f64> = ["primary", "ao"]
+                .iter()
+                .map(|k| {
+                    let h = rows
+                        .iter()
+                        .find(|r| {
+                            r.layout == "f16h" && r.math == math && r.rays == *k && r.branching == b && r.packet == 1
+                        })
+                        .unwrap();
+                    let f = rows
+                        .iter()
+                        .find(|r| r.layout == "f32" && r.rays == *k && r.branching == b && r.packet == 1)
+                        .unwrap();
+                    h.mrays_median / f.mrays_median
+                })
+                .collect();
             let mean = (xs[0] + xs[1]) / 2.0;
-            let line = md.lines().find(|l| l.starts_with("| llvmpipe") && l.contains(&format!(" | {b} | 1 | "))).expect("separated-effects row");
+            let line = md
+                .lines()
+                .find(|l| l.starts_with("| llvmpipe") && l.contains(&format!(" | {b} | 1 | ")))
+                .expect("separated-effects row");
             let cells: Vec<&str> = line.split('|').map(str::trim).collect();
             assert_eq!(cells[4 + col], format!("{mean:.3}"), "B={b} {math}: {line}");
         }
     }
     let rat = ratios(&rows);
     assert_eq!(rat.len(), 10);
-    assert!(rat.iter().all(|x| rows.iter().any(|r| r.layout == "f16h" && r.math == "f16" && r.branching == x.branching && r.packet == x.packet)));
+    assert!(rat.iter().all(|x| rows
+        .iter()
+        .any(|r| r.layout == "f16h" && r.math == "f16" && r.branching == x.branching && r.packet == x.packet)));
     for b in [2usize, 4, 8] {
         let xs: Vec<f64> = rat.iter().filter(|x| x.packet == 1 && x.branching == b).map(|x| x.time).collect();
         assert_eq!(xs.len(), 2, "B={b}: one ratio per ray kind");
         let mean = xs.iter().sum::<f64>() / 2.0;
-        let line = md.lines().find(|l| l.contains(&format!("| {b} | {mean:.3} |"))).unwrap_or_else(|| panic!("report.md has no B={b} row with time ratio {mean:.3}"));
+        let line = md
+            .lines()
+            .find(|l| l.contains(&format!("| {b} | {mean:.3} |")))
+            .unwrap_or_else(|| panic!("report.md has no B={b} row with time ratio {mean:.3}"));
         for x in rat.iter().filter(|x| x.packet == 1 && x.branching == b) {
-            let f = rows.iter().find(|r| r.layout == "f32" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
-            let h = rows.iter().find(|r| r.layout == "f16h" && r.math == "f16" && r.rays == x.rays && r.branching == b && r.packet == 1).unwrap();
+            let f = rows
+                .iter()
+                .find(|r| r.layout == "f32" && r.rays == x.rays && r.branching == b && r.packet == 1)
+                .unwrap();
+            let h = rows
+                .iter()
+                .find(|r| {
+                    r.layout == "f16h" && r.math == "f16" && r.rays == x.rays && r.branching == b && r.packet == 1
+                })
+                .unwrap();
             assert_eq!(x.time, h.ms_median / f.ms_median);
         }
         let _ = line;
@@ -132,7 +225,20 @@ fn small_sweep_writes_consistent_outputs() {
 fn interrupted_sweep_keeps_finished_rows() {
     let out = tmp("interrupt");
     let mut child = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["sweep", "--quiet", "--scene", &teapot(), "--width", "128", "--height", "128", "--repeat", "10", "--out", out.to_str().unwrap()])
+        .args([
+            "sweep",
+            "--quiet",
+            "--scene",
+            &teapot(),
+            "--width",
+            "128",
+            "--height",
+            "128",
+            "--repeat",
+            "10",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .spawn()
         .unwrap();
     let csv = out.join("results.csv");
@@ -165,7 +271,10 @@ fn report_merges_folders() {
     assert!(sweep(&a, &[&["--rays", "primary"][..], &only].concat()).status.success());
     assert!(sweep(&b, &[&["--rays", "ao"][..], &only].concat()).status.success());
     let merged = tmp("merged");
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", a.to_str().unwrap(), b.to_str().unwrap(), "--out", merged.to_str().unwrap()]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["report", a.to_str().unwrap(), b.to_str().unwrap(), "--out", merged.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(merged.join("report.md")).unwrap();
     assert!(md.contains("Rendered from 8 result row(s)"), "{md}");
@@ -179,14 +288,32 @@ fn report_merges_folders() {
 #[test]
 fn bad_sweep_configs_are_clear_errors() {
     let bad = std::env::temp_dir().join(format!("halftrace-bad-{}.toml", std::process::id()));
-    for (text, want) in [("layouts = [\"f8\"]\n", "unknown layout 'f8'"), ("packets = [3]\n", "packets: 3"), ("colour = 1\n", "unknown field `colour`"), ("branchings = [5]\n", "branching factor 5")] {
+    for (text, want) in [
+        ("layouts = [\"f8\"]\n", "unknown layout 'f8'"),
+        ("packets = [3]\n", "packets: 3"),
+        ("colour = 1\n", "unknown field `colour`"),
+        ("branchings = [5]\n", "branching factor 5"),
+    ] {
         std::fs::write(&bad, text).unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--config", bad.to_str().unwrap(), "--out", tmp("bad").to_str().unwrap()]).output().unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+            .args(["sweep", "--config", bad.to_str().unwrap(), "--out", tmp("bad").to_str().unwrap()])
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success() && err.contains(want) && err.contains(bad.to_str().unwrap()) && !err.contains("panicked"), "{text}: {err}");
+        assert!(
+            !o.status.success()
+                && err.contains(want)
+                && err.contains(bad.to_str().unwrap())
+                && !err.contains("panicked"),
+            "{text}: {err}"
+        );
     }
     let example = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("sweep.example.toml");
-    assert_eq!(halftrace::sweep::Config::load(&example).unwrap(), halftrace::sweep::Config::default(), "sweep.example.toml documents the defaults");
+    assert_eq!(
+        halftrace::sweep::Config::load(&example).unwrap(),
+        halftrace::sweep::Config::default(),
+        "sweep.example.toml documents the defaults"
+    );
 }
 
 /// `[[kernel]]` tables run as their own rows, validated against the layout's CPU reference
@@ -211,7 +338,10 @@ fn user_kernels_run_as_their_own_rows() {
         emitted.display().to_string()
     );
     let out = tmp("kernels");
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--quiet", "--config", cfg(&good).to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["sweep", "--quiet", "--config", cfg(&good).to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rows = read_rows(&out).unwrap();
     let unordered: Vec<&Row> = rows.iter().filter(|r| r.kernel == "unordered").collect();
@@ -228,9 +358,15 @@ fn user_kernels_run_as_their_own_rows() {
 
     // The f32 layout's kernel over an f16h BVH: it runs, and returns other hits.
     let f32_module = root.join("spirv/trav_f32_b4_p1.spv");
-    let bad = format!("[[kernel]]\nname = \"wrong-layout\"\nlayout = \"f16h\"\nmath = \"f32\"\nfile = {:?}\nrays = [\"primary\"]\n", f32_module.display().to_string());
+    let bad = format!(
+        "[[kernel]]\nname = \"wrong-layout\"\nlayout = \"f16h\"\nmath = \"f32\"\nfile = {:?}\nrays = [\"primary\"]\n",
+        f32_module.display().to_string()
+    );
     let out = tmp("kernels-bad");
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["sweep", "--quiet", "--config", cfg(&bad).to_str().unwrap(), "--out", out.to_str().unwrap()]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["sweep", "--quiet", "--config", cfg(&bad).to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("wrong-layout") && err.contains("failed validation"), "{err}");
     let rows = read_rows(&out).unwrap();
@@ -244,7 +380,27 @@ fn user_kernels_run_as_their_own_rows() {
 #[test]
 fn schemes_table_sets_every_layout_beside_f32() {
     let out = tmp("schemes");
-    let o = sweep(&out, &["--rays", "primary,grazing", "--layouts", "f32,f16h,f16w,f16a,q8,f16h-seed", "--maths", "f16,f32", "--series", "f32", "--branchings", "8", "--packets", "1", "--packet-branching", "8", "--scheme-branchings", "8"]);
+    let o = sweep(
+        &out,
+        &[
+            "--rays",
+            "primary,grazing",
+            "--layouts",
+            "f32,f16h,f16w,f16a,q8,f16h-seed",
+            "--maths",
+            "f16,f32",
+            "--series",
+            "f32",
+            "--branchings",
+            "8",
+            "--packets",
+            "1",
+            "--packet-branching",
+            "8",
+            "--scheme-branchings",
+            "8",
+        ],
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rows = read_rows(&out).unwrap();
     // f32, f16h ×2, f16w ×2, f16a ×2, q8 ×2, f16h-seed: 10 variants × 2 ray kinds
@@ -254,7 +410,13 @@ fn schemes_table_sets_every_layout_beside_f32() {
         assert_eq!(r.status, "ok", "{}: {}", r.kernel, r.status);
         assert_eq!(r.branching, 8);
         if r.layout != "f16h-seed" {
-            assert_eq!((r.differs_from_f32, r.false_misses), (0, 0), "{} {}: a conservative layout differs from f32", r.kernel, r.rays);
+            assert_eq!(
+                (r.differs_from_f32, r.false_misses),
+                (0, 0),
+                "{} {}: a conservative layout differs from f32",
+                r.kernel,
+                r.rays
+            );
         }
         if r.layout == "q8" {
             assert!(r.bvh_bytes as f64 <= 0.4 * f32_bytes, "q8 {} bytes vs f32 {f32_bytes}", r.bvh_bytes);
@@ -263,7 +425,18 @@ fn schemes_table_sets_every_layout_beside_f32() {
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     let table = &md[md.find("## Schemes").expect("schemes table")..];
     let table = &table[..table.find("\n\n![schemes]").unwrap()];
-    for label in ["| f32 | 8 |", "| f16h/f16 | 8 |", "| f16h/f32 | 8 |", "| f16w/f32 | 8 |", "| f16w/f16 | 8 |", "| f16a/f16 | 8 |", "| f16a/f32 | 8 |", "| q8/f32 | 8 |", "| q8/f16 | 8 |", "| f16h-seed | 8 |"] {
+    for label in [
+        "| f32 | 8 |",
+        "| f16h/f16 | 8 |",
+        "| f16h/f32 | 8 |",
+        "| f16w/f32 | 8 |",
+        "| f16w/f16 | 8 |",
+        "| f16a/f16 | 8 |",
+        "| f16a/f32 | 8 |",
+        "| q8/f32 | 8 |",
+        "| q8/f16 | 8 |",
+        "| f16h-seed | 8 |",
+    ] {
         assert!(table.contains(label), "no schemes row {label}:\n{table}");
     }
     // f32 against itself is 1 in every ratio.
@@ -280,7 +453,18 @@ fn schemes_table_sets_every_layout_beside_f32() {
 #[test]
 fn existing_out_folder_is_refused_resumed_or_replaced() {
     let out = tmp("resume");
-    let args = ["--rays", "primary,ao", "--layouts", "f32,rq", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4"];
+    let args = [
+        "--rays",
+        "primary,ao",
+        "--layouts",
+        "f32,rq",
+        "--branchings",
+        "4",
+        "--packets",
+        "1",
+        "--scheme-branchings",
+        "4",
+    ];
     let o = sweep(&out, &args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let full = read_rows(&out).unwrap();
@@ -302,13 +486,20 @@ fn existing_out_folder_is_refused_resumed_or_replaced() {
     let resumed = read_rows(&out).unwrap();
     assert_eq!(resumed.len(), 4, "resume ran the missing job once");
     assert_eq!(&resumed[..3], &full[..3], "resume kept the recorded rows as they were");
-    assert_eq!((resumed[3].scene.as_str(), resumed[3].rays.as_str(), resumed[3].layout.as_str()), (full[3].scene.as_str(), full[3].rays.as_str(), full[3].layout.as_str()));
+    assert_eq!(
+        (resumed[3].scene.as_str(), resumed[3].rays.as_str(), resumed[3].layout.as_str()),
+        (full[3].scene.as_str(), full[3].rays.as_str(), full[3].layout.as_str())
+    );
     let mut force = args.to_vec();
     force.push("--force");
     let o = sweep(&out, &force);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(read_rows(&out).unwrap().len(), 4);
-    assert_eq!(std::fs::read_to_string(out.join("notes.txt")).unwrap(), "mine", "--force touched a file that is not the sweep's");
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine",
+        "--force touched a file that is not the sweep's"
+    );
     let both: Vec<&str> = args.iter().copied().chain(["--resume", "--force"]).collect();
     assert!(!sweep(&out, &both).status.success());
 }
@@ -318,11 +509,23 @@ fn existing_out_folder_is_refused_resumed_or_replaced() {
 #[test]
 fn report_refuses_duplicate_rows() {
     let a = tmp("dup-a");
-    assert!(sweep(&a, &["--rays", "primary", "--layouts", "f32", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4"]).status.success());
+    assert!(sweep(
+        &a,
+        &["--rays", "primary", "--layouts", "f32", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4"]
+    )
+    .status
+    .success());
     let b = tmp("dup-b");
     std::fs::create_dir_all(&b).unwrap();
     std::fs::copy(a.join("results.csv"), b.join("results.csv")).unwrap();
-    let run = |dirs: &[&Path]| Command::new(env!("CARGO_BIN_EXE_halftrace")).arg("report").args(dirs).args(["--out", tmp("dup-out").to_str().unwrap()]).output().unwrap();
+    let run = |dirs: &[&Path]| {
+        Command::new(env!("CARGO_BIN_EXE_halftrace"))
+            .arg("report")
+            .args(dirs)
+            .args(["--out", tmp("dup-out").to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
     let o = run(&[&a, &a]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("named twice"), "{e}");
@@ -337,7 +540,31 @@ fn report_refuses_duplicate_rows() {
 fn progress_lines_when_not_a_terminal() {
     let out = tmp("lines");
     let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
-        .args(["sweep", "--scene", &teapot(), "--width", "16", "--height", "16", "--repeat", "1", "--warmup", "0", "--rays", "primary", "--layouts", "f32,q8", "--branchings", "4", "--packets", "1", "--scheme-branchings", "4", "--out", out.to_str().unwrap()])
+        .args([
+            "sweep",
+            "--scene",
+            &teapot(),
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--repeat",
+            "1",
+            "--warmup",
+            "0",
+            "--rays",
+            "primary",
+            "--layouts",
+            "f32,q8",
+            "--branchings",
+            "4",
+            "--packets",
+            "1",
+            "--scheme-branchings",
+            "4",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
@@ -352,23 +579,45 @@ fn progress_lines_when_not_a_terminal() {
 /// sweep (timings aside) and the same report, numbers aside (images included).
 #[test]
 fn shards_merge_into_the_unsplit_sweep() {
-    let only = ["--rays", "primary,ao", "--layouts", "f32,f16h,q8,rq", "--maths", "f32", "--branchings", "4,8", "--packets", "1,4", "--scheme-branchings", "4"];
+    let only = [
+        "--rays",
+        "primary,ao",
+        "--layouts",
+        "f32,f16h,q8,rq",
+        "--maths",
+        "f32",
+        "--branchings",
+        "4,8",
+        "--packets",
+        "1,4",
+        "--scheme-branchings",
+        "4",
+    ];
     let whole = tmp("shard-whole");
     assert!(sweep(&whole, &only).status.success());
     let split = tmp("shard-split");
     let first = sweep(&split, &[&only[..], &["--shard", "1/2"]].concat());
     assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
-    let second = sweep_cmd(&split, &only).env("SLURM_ARRAY_TASK_COUNT", "2").env("SLURM_ARRAY_TASK_ID", "1").env("SLURM_ARRAY_TASK_MIN", "0").output().unwrap();
+    let second = sweep_cmd(&split, &only)
+        .env("SLURM_ARRAY_TASK_COUNT", "2")
+        .env("SLURM_ARRAY_TASK_ID", "1")
+        .env("SLURM_ARRAY_TASK_MIN", "0")
+        .output()
+        .unwrap();
     assert!(second.status.success(), "{}", String::from_utf8_lossy(&second.stderr));
     let (s1, s2) = (split.join("shard-1-of-2"), split.join("shard-2-of-2"));
     let (r1, r2) = (read_rows(&s1).unwrap(), read_rows(&s2).unwrap());
     assert!(!r1.is_empty() && !r2.is_empty(), "an empty shard");
     let merged = tmp("shard-merged");
-    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(["report", s1.to_str().unwrap(), s2.to_str().unwrap(), "--out", merged.to_str().unwrap()]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["report", s1.to_str().unwrap(), s2.to_str().unwrap(), "--out", merged.to_str().unwrap()])
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // Rows: the same set, every field but the timings (and what is derived from them) equal.
     let untimed = |mut r: Row| {
-        (r.mrays_median, r.mrays_min, r.mrays_max, r.ms_median, r.ms_min, r.ms_max, r.build_ms, r.device_fp16_ratio) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        (r.mrays_median, r.mrays_min, r.mrays_max, r.ms_median, r.ms_min, r.ms_max, r.build_ms, r.device_fp16_ratio) =
+            (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         format!("{r:?}")
     };
     let mut want: Vec<String> = read_rows(&whole).unwrap().into_iter().map(untimed).collect();

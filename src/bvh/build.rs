@@ -88,7 +88,9 @@ const SAMPLES: usize = 1 << 13;
 
 /// Builds the binary BVH of a scene (a progress line when it takes over a second).
 pub fn build_binary(scene: &Scene) -> BinaryBvh {
-    crate::progress::step(&format!("building the BVH of {} ({} triangles)", scene.name, scene.tris.len()), || build_binary_quiet(scene))
+    crate::progress::step(&format!("building the BVH of {} ({} triangles)", scene.name, scene.tris.len()), || {
+        build_binary_quiet(scene)
+    })
 }
 
 fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
@@ -121,7 +123,14 @@ enum Sub<'a> {
     Block(&'a [BinaryNode]),
 }
 
-fn build_top<'a>(refs: &mut [Ref], prims: &mut [u32], base: u32, slots: &'a mut [BinaryNode], bounds: Bx, cb: Bx) -> Sub<'a> {
+fn build_top<'a>(
+    refs: &mut [Ref],
+    prims: &mut [u32],
+    base: u32,
+    slots: &'a mut [BinaryNode],
+    bounds: Bx,
+    cb: Bx,
+) -> Sub<'a> {
     let n = refs.len();
     if n < PAR_SUBTREE {
         let mut used = 1;
@@ -134,14 +143,26 @@ fn build_top<'a>(refs: &mut [Ref], prims: &mut [u32], base: u32, slots: &'a mut 
     let (lrefs, rrefs) = refs.split_at_mut(m);
     let (lprims, rprims) = prims.split_at_mut(m);
     let (lslots, rslots) = slots.split_at_mut(2 * m - 1);
-    let kids = rayon::join(|| build_top(lrefs, lprims, base, lslots, sp.lb, sp.lcb), || build_top(rrefs, rprims, base + m as u32, rslots, sp.rb, sp.rcb));
+    let kids = rayon::join(
+        || build_top(lrefs, lprims, base, lslots, sp.lb, sp.lcb),
+        || build_top(rrefs, rprims, base + m as u32, rslots, sp.rb, sp.rcb),
+    );
     Sub::Inner(bounds, Box::new(kids))
 }
 
 /// Builds the subtree over `refs`/`prims` (at `base` in the global triangle order) into
 /// `block`, its root at `block[me]`; children go to the next free pair (`used`).
 #[allow(clippy::too_many_arguments)]
-fn build_seq(refs: &mut [Ref], prims: &mut [u32], base: u32, block: &mut [BinaryNode], used: &mut usize, me: usize, bounds: Bx, cb: Bx) {
+fn build_seq(
+    refs: &mut [Ref],
+    prims: &mut [u32],
+    base: u32,
+    block: &mut [BinaryNode],
+    used: &mut usize,
+    me: usize,
+    bounds: Bx,
+    cb: Bx,
+) {
     let n = refs.len();
     let Some(sp) = split(refs, prims, &bounds, &cb) else {
         block[me] = BinaryNode { bounds: bounds.aabb(), first: base, count: n as u32 };
@@ -220,7 +241,9 @@ fn range_bounds(refs: &[Ref]) -> (Bx, Bx) {
         (b.union(r), c)
     };
     let (b, c2) = if refs.len() >= PAR_BOUNDS {
-        refs.par_chunks(PAR_CHUNK).map(|ch| ch.iter().fold((Bx::EMPTY, Bx::EMPTY), f)).reduce(|| (Bx::EMPTY, Bx::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
+        refs.par_chunks(PAR_CHUNK)
+            .map(|ch| ch.iter().fold((Bx::EMPTY, Bx::EMPTY), f))
+            .reduce(|| (Bx::EMPTY, Bx::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
     } else {
         refs.iter().fold((Bx::EMPTY, Bx::EMPTY), f)
     };
@@ -415,7 +438,11 @@ fn sweep_small_any(refs: &[Ref], origin2: Vec3A, scale2: Vec3A, ext: Vec3A, best
 /// Splits `refs`/`prims` in place into the triangles `left` accepts and the rest; returns the
 /// split position and the left and right boxes (gathered only if `BOXES`) and centroid
 /// bounds.
-fn partition<const BOXES: bool>(refs: &mut [Ref], prims: &mut [u32], left: impl Fn(&Ref) -> bool) -> (usize, Bx, Bx, Bx, Bx) {
+fn partition<const BOXES: bool>(
+    refs: &mut [Ref],
+    prims: &mut [u32],
+    left: impl Fn(&Ref) -> bool,
+) -> (usize, Bx, Bx, Bx, Bx) {
     let (mut lb, mut lcb, mut rb, mut rcb) = (Bx::EMPTY, Bx::EMPTY, Bx::EMPTY, Bx::EMPTY);
     let (mut lo, mut hi) = (0usize, refs.len());
     while lo < hi {
@@ -568,13 +595,24 @@ mod tests {
                 .collect();
             let (_, cb) = range_bounds(&refs);
             let ext = cb.max - cb.min;
-            let scale2 = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat((BINS - 1) as f32 * 0.5) / ext, Vec3A::ZERO);
+            let scale2 =
+                Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat((BINS - 1) as f32 * 0.5) / ext, Vec3A::ZERO);
             let origin2 = cb.min * 2.0;
             let empty: Best = (f32::INFINITY, 0, 0, Bx::EMPTY, Bx::EMPTY);
             let (mut small, mut binned) = (empty, empty);
             sweep_small_any(&refs, origin2, scale2, ext, &mut small);
             sweep_bins(&bin_chunk(refs.iter(), origin2, scale2), ext, &mut binned);
-            let key = |b: &Best| (b.0.to_bits(), b.1, b.2, (b.3.min + 0.0).to_array(), (b.3.max + 0.0).to_array(), (b.4.min + 0.0).to_array(), (b.4.max + 0.0).to_array());
+            let key = |b: &Best| {
+                (
+                    b.0.to_bits(),
+                    b.1,
+                    b.2,
+                    (b.3.min + 0.0).to_array(),
+                    (b.3.max + 0.0).to_array(),
+                    (b.4.min + 0.0).to_array(),
+                    (b.4.max + 0.0).to_array(),
+                )
+            };
             assert_eq!(key(&small), key(&binned), "trial {trial}, {n} triangles");
         }
     }

@@ -37,7 +37,10 @@ pub fn collapse(bin: &BinaryBvh, b: usize) -> WideBvh {
     let mut out = WideBvh { branching: b, nodes: Vec::new(), prims: bin.prims.clone() };
     let root = bin.nodes[0];
     if root.is_leaf() {
-        out.nodes.push(WideNode { bounds: root.bounds, children: vec![(root.bounds, ChildRef::Leaf { first: root.first, count: root.count })] });
+        out.nodes.push(WideNode {
+            bounds: root.bounds,
+            children: vec![(root.bounds, ChildRef::Leaf { first: root.first, count: root.count })],
+        });
         return out;
     }
     collapse_rec(bin, 0, b, &mut out.nodes);
@@ -78,7 +81,12 @@ impl WideBvh {
     /// Depth in inner nodes (the root alone has depth 1).
     pub fn depth(&self) -> usize {
         fn rec(t: &WideBvh, i: usize) -> usize {
-            1 + t.nodes[i].children.iter().filter_map(|c| if let ChildRef::Inner(j) = c.1 { Some(rec(t, j as usize)) } else { None }).max().unwrap_or(0)
+            1 + t.nodes[i]
+                .children
+                .iter()
+                .filter_map(|c| if let ChildRef::Inner(j) = c.1 { Some(rec(t, j as usize)) } else { None })
+                .max()
+                .unwrap_or(0)
         }
         rec(self, 0)
     }

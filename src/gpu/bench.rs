@@ -33,7 +33,13 @@ pub struct DeviceBench {
 
 /// Runs the micro-benchmark: `threads` invocations × `iters` iterations × 16 operations.
 pub fn run(gpu: &Gpu, threads: u32, iters: u32, repeat: usize) -> Result<DeviceBench, GpuError> {
-    let out = Buffer::new(gpu, "bench output", threads as u64 * 4, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly)?;
+    let out = Buffer::new(
+        gpu,
+        "bench output",
+        threads as u64 * 4,
+        vk::BufferUsageFlags::STORAGE_BUFFER,
+        MemoryLocation::GpuOnly,
+    )?;
     let timer = Timer::new(gpu)?;
     let mut ops = Vec::new();
     for (k, op) in OPS.iter().enumerate() {
@@ -43,7 +49,11 @@ pub fn run(gpu: &Gpu, threads: u32, iters: u32, repeat: usize) -> Result<DeviceB
             if f16 {
                 defs.push(("F16".into(), "1".into()));
             }
-            let code = shader::compile_plain(&format!("bench {op} {}", if f16 { "fp16" } else { "fp32" }), "bench.comp", &defs)?;
+            let code = shader::compile_plain(
+                &format!("bench {op} {}", if f16 { "fp16" } else { "fp32" }),
+                "bench.comp",
+                &defs,
+            )?;
             let pipe = ComputePipeline::new(gpu, "bench", &code, 1, 8)?;
             pipe.bind(&[&out]);
             let mut push = [0u8; 8];

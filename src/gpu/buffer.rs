@@ -20,20 +20,50 @@ impl<'g> Buffer<'g> {
     /// Creates a buffer of `size` bytes (at least 16) in `location`. A storage buffer larger
     /// than `maxStorageBufferRange`, or any buffer larger than `maxMemoryAllocationSize`, is
     /// refused with the limit named (rather than left to the driver).
-    pub fn new(gpu: &'g Gpu, name: &str, size: u64, usage: vk::BufferUsageFlags, location: MemoryLocation) -> Result<Buffer<'g>, GpuError> {
+    pub fn new(
+        gpu: &'g Gpu,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+    ) -> Result<Buffer<'g>, GpuError> {
         let size = size.max(16);
         if usage.contains(vk::BufferUsageFlags::STORAGE_BUFFER) && size > gpu.info.max_storage_buffer {
-            return Err(GpuError::TooBig { what: name.into(), bytes: size, limit: gpu.info.max_storage_buffer, limit_name: "maxStorageBufferRange", hint: String::new() });
+            return Err(GpuError::TooBig {
+                what: name.into(),
+                bytes: size,
+                limit: gpu.info.max_storage_buffer,
+                limit_name: "maxStorageBufferRange",
+                hint: String::new(),
+            });
         }
         if size > gpu.info.max_allocation {
-            return Err(GpuError::TooBig { what: name.into(), bytes: size, limit: gpu.info.max_allocation, limit_name: "maxMemoryAllocationSize", hint: String::new() });
+            return Err(GpuError::TooBig {
+                what: name.into(),
+                bytes: size,
+                limit: gpu.info.max_allocation,
+                limit_name: "maxMemoryAllocationSize",
+                hint: String::new(),
+            });
         }
         let d = &gpu.device;
-        let raw = unsafe { d.create_buffer(&vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE), None) }.vk("vkCreateBuffer")?;
+        let raw = unsafe {
+            d.create_buffer(
+                &vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE),
+                None,
+            )
+        }
+        .vk("vkCreateBuffer")?;
         let mut req = unsafe { d.get_buffer_memory_requirements(raw) };
         // Kernels that read a buffer by address assume 16-byte alignment (buffer_reference_align).
         req.alignment = req.alignment.max(16);
-        let alloc = gpu.allocator.lock().unwrap().allocate(&AllocationCreateDesc { name, requirements: req, location, linear: true, allocation_scheme: AllocationScheme::GpuAllocatorManaged });
+        let alloc = gpu.allocator.lock().unwrap().allocate(&AllocationCreateDesc {
+            name,
+            requirements: req,
+            location,
+            linear: true,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        });
         let alloc = match alloc {
             Ok(a) => a,
             Err(source) => {
@@ -60,27 +90,54 @@ impl<'g> Buffer<'g> {
     }
 
     /// A device-local buffer with `usage` (plus transfer destination) filled through a staging copy.
-    pub fn upload_with(gpu: &'g Gpu, name: &str, data: &[u8], usage: vk::BufferUsageFlags) -> Result<Buffer<'g>, GpuError> {
-        Buffer::upload_from(gpu, name, data.len() as u64, 1, usage, |off, dst| dst.copy_from_slice(&data[off as usize..off as usize + dst.len()]))
+    pub fn upload_with(
+        gpu: &'g Gpu,
+        name: &str,
+        data: &[u8],
+        usage: vk::BufferUsageFlags,
+    ) -> Result<Buffer<'g>, GpuError> {
+        Buffer::upload_from(gpu, name, data.len() as u64, 1, usage, |off, dst| {
+            dst.copy_from_slice(&data[off as usize..off as usize + dst.len()])
+        })
     }
 
     /// A device-local buffer of `len` bytes with `usage` (plus transfer destination), filled
     /// through a staging buffer of at most [`STAGING_CHUNK`] bytes: `fill(offset, dst)` writes
     /// the bytes at `offset`, `dst.len()` of them, a multiple of `granule` (e.g. a node's size)
     /// unless it is the end. The host never holds a second full copy of the data.
-    pub fn upload_from(gpu: &'g Gpu, name: &str, len: u64, granule: u64, usage: vk::BufferUsageFlags, mut fill: impl FnMut(u64, &mut [u8])) -> Result<Buffer<'g>, GpuError> {
+    pub fn upload_from(
+        gpu: &'g Gpu,
+        name: &str,
+        len: u64,
+        granule: u64,
+        usage: vk::BufferUsageFlags,
+        mut fill: impl FnMut(u64, &mut [u8]),
+    ) -> Result<Buffer<'g>, GpuError> {
         let dst = Buffer::new(gpu, name, len, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly)?;
         if len == 0 {
             return Ok(dst);
         }
         let granule = granule.max(1);
         let chunk = (STAGING_CHUNK / granule).max(1) * granule;
-        let mut staging = Buffer::new(gpu, &format!("{name} (staging)"), chunk.min(len), vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        let mut staging = Buffer::new(
+            gpu,
+            &format!("{name} (staging)"),
+            chunk.min(len),
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+        )?;
         let mut off = 0u64;
         while off < len {
             let n = chunk.min(len - off);
             fill(off, &mut staging.mapped_mut()?[..n as usize]);
-            gpu.submit_and_wait(|cmd| unsafe { gpu.device.cmd_copy_buffer(cmd, staging.raw, dst.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: off, size: n }]) })?;
+            gpu.submit_and_wait(|cmd| unsafe {
+                gpu.device.cmd_copy_buffer(
+                    cmd,
+                    staging.raw,
+                    dst.raw,
+                    &[vk::BufferCopy { src_offset: 0, dst_offset: off, size: n }],
+                )
+            })?;
             off += n;
         }
         Ok(dst)
@@ -89,12 +146,19 @@ impl<'g> Buffer<'g> {
     /// The bytes of a host-visible buffer, writable.
     fn mapped_mut(&mut self) -> Result<&mut [u8], GpuError> {
         let name = &self.name;
-        self.alloc.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(|| GpuError::Other(format!("buffer {name} is not host-visible")))
+        self.alloc
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or_else(|| GpuError::Other(format!("buffer {name} is not host-visible")))
     }
 
     /// Reads bytes from a host-visible buffer.
     pub fn read(&self, len: usize) -> Result<Vec<u8>, GpuError> {
-        let m = self.alloc.as_ref().and_then(|a| a.mapped_slice()).ok_or_else(|| GpuError::Other(format!("buffer {} is not host-visible", self.name)))?;
+        let m = self
+            .alloc
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .ok_or_else(|| GpuError::Other(format!("buffer {} is not host-visible", self.name)))?;
         Ok(m[..len].to_vec())
     }
 
@@ -103,9 +167,22 @@ impl<'g> Buffer<'g> {
         if len == 0 {
             return Ok(Vec::new());
         }
-        let rb = Buffer::new(self.gpu, &format!("{} (readback)", self.name), len as u64, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
+        let rb = Buffer::new(
+            self.gpu,
+            &format!("{} (readback)", self.name),
+            len as u64,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
         let (src, dst) = (self.raw, rb.raw);
-        self.gpu.submit_and_wait(|cmd| unsafe { self.gpu.device.cmd_copy_buffer(cmd, src, dst, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: len as u64 }]) })?;
+        self.gpu.submit_and_wait(|cmd| unsafe {
+            self.gpu.device.cmd_copy_buffer(
+                cmd,
+                src,
+                dst,
+                &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: len as u64 }],
+            )
+        })?;
         rb.read(len)
     }
 }

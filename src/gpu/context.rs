@@ -68,7 +68,9 @@ impl DeviceInfo {
             "shaderRoundingModeRTEFloat32" => self.fp32_rte = false,
             "shaderSignedZeroInfNanPreserveFloat16" => self.preserve_16 = false,
             "shaderSignedZeroInfNanPreserveFloat32" => self.preserve_32 = false,
-            "floatControls" => (self.fp16_rte, self.fp32_rte, self.preserve_16, self.preserve_32) = (false, false, false, false),
+            "floatControls" => {
+                (self.fp16_rte, self.fp32_rte, self.preserve_16, self.preserve_32) = (false, false, false, false)
+            }
             other => return Err(format!("unknown feature to mask: '{other}' (use one of {})", MASKABLE.join(", "))),
         }
         Ok(())
@@ -163,7 +165,10 @@ fn make_instance(entry: &ash::Entry, validation: bool) -> Result<(ash::Instance,
     let use_layer = validation && have_layer;
     let layer_ptrs = if use_layer { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
     let ext_ptrs = if use_layer { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
-    let info = vk::InstanceCreateInfo::default().application_info(&app).enabled_layer_names(&layer_ptrs).enabled_extension_names(&ext_ptrs);
+    let info = vk::InstanceCreateInfo::default()
+        .application_info(&app)
+        .enabled_layer_names(&layer_ptrs)
+        .enabled_extension_names(&ext_ptrs);
     let inst = unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?;
     Ok((inst, use_layer))
 }
@@ -177,7 +182,9 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
         let exts0 = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
         let has0 = |n: &CStr| exts0.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|x| x == n));
-        let rq_exts = has0(ash::khr::ray_query::NAME) && has0(ash::khr::acceleration_structure::NAME) && has0(ash::khr::deferred_host_operations::NAME);
+        let rq_exts = has0(ash::khr::ray_query::NAME)
+            && has0(ash::khr::acceleration_structure::NAME)
+            && has0(ash::khr::deferred_host_operations::NAME);
         let f64ok = {
             let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11).push_next(&mut v12);
             if rq_exts {
@@ -186,14 +193,21 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
             instance.get_physical_device_features2(pd, &mut f2);
             f2.features.shader_float64 == vk::TRUE
         };
-        let rq_ok = rq_exts && asf.acceleration_structure == vk::TRUE && rqf.ray_query == vk::TRUE && v12.buffer_device_address == vk::TRUE;
+        let rq_ok = rq_exts
+            && asf.acceleration_structure == vk::TRUE
+            && rqf.ray_query == vk::TRUE
+            && v12.buffer_device_address == vk::TRUE;
         let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
         let mut drv = vk::PhysicalDeviceDriverProperties::default();
         let mut p11 = vk::PhysicalDeviceMaintenance3Properties::default();
         let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
         let mut ssc = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
         let ssc_ext = has0(ash::ext::subgroup_size_control::NAME);
-        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut sub).push_next(&mut drv).push_next(&mut fc).push_next(&mut p11);
+        let mut p2 = vk::PhysicalDeviceProperties2::default()
+            .push_next(&mut sub)
+            .push_next(&mut drv)
+            .push_next(&mut fc)
+            .push_next(&mut p11);
         if ssc_ext {
             p2 = p2.push_next(&mut ssc);
         }
@@ -202,10 +216,12 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
             let mut sf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
             let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut sf);
             instance.get_physical_device_features2(pd, &mut f2);
-            sf.subgroup_size_control == vk::TRUE && ssc.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE)
+            sf.subgroup_size_control == vk::TRUE
+                && ssc.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE)
         };
         let qf = instance.get_physical_device_queue_family_properties(pd);
-        let timestamps = qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
+        let timestamps =
+            qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
         let v = props.api_version;
         DeviceInfo {
             index,
@@ -216,7 +232,12 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> D
                 drv.driver_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default(),
                 drv.driver_info_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
             ),
-            api_version: format!("{}.{}.{}", vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v)),
+            api_version: format!(
+                "{}.{}.{}",
+                vk::api_version_major(v),
+                vk::api_version_minor(v),
+                vk::api_version_patch(v)
+            ),
             shader_float16: v12.shader_float16 == vk::TRUE,
             storage_16bit: v11.storage_buffer16_bit_access == vk::TRUE,
             shader_float64: f64ok,
@@ -244,7 +265,9 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>, GpuError> {
     let entry = load_entry()?;
     let (instance, _) = make_instance(&entry, false)?;
     let pds = unsafe { instance.enumerate_physical_devices() };
-    let out = pds.map(|v| v.into_iter().enumerate().map(|(i, pd)| describe(&instance, pd, i)).collect()).vk("vkEnumeratePhysicalDevices");
+    let out = pds
+        .map(|v| v.into_iter().enumerate().map(|(i, pd)| describe(&instance, pd, i)).collect())
+        .vk("vkEnumeratePhysicalDevices");
     unsafe { instance.destroy_instance(None) };
     out
 }
@@ -260,7 +283,10 @@ pub fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError>
             return if i < infos.len() { Ok(i) } else { Err(GpuError::DeviceNotFound(w.into())) };
         }
         let wl = w.to_lowercase();
-        return infos.iter().position(|d| d.name.to_lowercase().contains(&wl)).ok_or_else(|| GpuError::DeviceNotFound(w.into()));
+        return infos
+            .iter()
+            .position(|d| d.name.to_lowercase().contains(&wl))
+            .ok_or_else(|| GpuError::DeviceNotFound(w.into()));
     }
     for kind in ["discrete_gpu", "integrated_gpu", "virtual_gpu", "cpu"] {
         if let Some(i) = infos.iter().position(|d| d.kind == kind) {
@@ -297,14 +323,23 @@ impl Gpu {
         instance: ash::Instance,
         use_layer: bool,
         opts: &ContextOptions,
-    ) -> Result<Gpu, (GpuError, Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *mut Mutex<Vec<String>>)>)> {
+    ) -> Result<
+        Gpu,
+        (GpuError, Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *mut Mutex<Vec<String>>)>),
+    > {
         let mut debug = None;
         if use_layer {
             let du = ash::ext::debug_utils::Instance::new(&entry, &instance);
             let store = Box::into_raw(Box::new(Mutex::new(Vec::<String>::new())));
             let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-                .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
-                .message_type(vk::DebugUtilsMessageTypeFlagsEXT::GENERAL | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE)
+                .message_severity(
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                )
+                .message_type(
+                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+                )
                 .pfn_user_callback(Some(debug_callback))
                 .user_data(store as *mut c_void);
             match unsafe { du.create_debug_utils_messenger(&info, None) } {
@@ -330,7 +365,11 @@ impl Gpu {
         let physical = pds[idx];
         // Pretended lower limits (tests of the addressed path and of the refusals).
         let env_limit = |var: &str| match std::env::var(var) {
-            Ok(v) => v.trim().parse::<u64>().map(Some).map_err(|_| GpuError::Other(format!("{var}='{v}': give a number of bytes"))),
+            Ok(v) => v
+                .trim()
+                .parse::<u64>()
+                .map(Some)
+                .map_err(|_| GpuError::Other(format!("{var}='{v}': give a number of bytes"))),
             Err(_) => Ok(None),
         };
         if let Some(m) = opts.max_buffer.or(tryd!(env_limit("HALFTRACE_MAX_STORAGE_BUFFER"))) {
@@ -347,21 +386,36 @@ impl Gpu {
         // No feature is required up front: each variant needs what its layout and math use
         // (gpu::support), and what a device lacks becomes one skipped line per variant.
         if !info.timestamps {
-            return Err((GpuError::MissingFeature { device: info.name.clone(), feature: "timestamp queries on a compute queue".into() }, debug));
+            return Err((
+                GpuError::MissingFeature {
+                    device: info.name.clone(),
+                    feature: "timestamp queries on a compute queue".into(),
+                },
+                debug,
+            ));
         }
         let qfs = unsafe { instance.get_physical_device_queue_family_properties(physical) };
-        let qfi = qfs.iter().position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0).unwrap() as u32;
+        let qfi = qfs
+            .iter()
+            .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0)
+            .unwrap() as u32;
         let prio = [1.0f32];
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
         let rq = info.ray_query;
         let bda = info.buffer_device_address;
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_float16).buffer_device_address(bda);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
+            .shader_float16(info.shader_float16)
+            .buffer_device_address(bda);
         let mut sscf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true);
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let base = vk::PhysicalDeviceFeatures::default().shader_float64(info.shader_float64);
-        let ext_names = [ash::khr::acceleration_structure::NAME.as_ptr(), ash::khr::ray_query::NAME.as_ptr(), ash::khr::deferred_host_operations::NAME.as_ptr()];
+        let ext_names = [
+            ash::khr::acceleration_structure::NAME.as_ptr(),
+            ash::khr::ray_query::NAME.as_ptr(),
+            ash::khr::deferred_host_operations::NAME.as_ptr(),
+        ];
         let mut exts: Vec<*const std::ffi::c_char> = Vec::new();
         if rq {
             exts.extend(ext_names);
@@ -369,7 +423,12 @@ impl Gpu {
         if info.subgroup_size_control {
             exts.push(ash::ext::subgroup_size_control::NAME.as_ptr());
         }
-        let mut dinfo = vk::DeviceCreateInfo::default().queue_create_infos(&qinfo).enabled_features(&base).push_next(&mut v11).push_next(&mut v12).enabled_extension_names(&exts);
+        let mut dinfo = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&qinfo)
+            .enabled_features(&base)
+            .push_next(&mut v11)
+            .push_next(&mut v12)
+            .enabled_extension_names(&exts);
         if rq {
             dinfo = dinfo.push_next(&mut asf).push_next(&mut rqf);
         }
@@ -378,7 +437,14 @@ impl Gpu {
         }
         let device = tryd!(unsafe { instance.create_device(physical, &dinfo, None) }.vk("vkCreateDevice"));
         let queue = unsafe { device.get_device_queue(qfi, 0) };
-        let pool = match unsafe { device.create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(qfi).flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER), None) } {
+        let pool = match unsafe {
+            device.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(qfi)
+                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
+                None,
+            )
+        } {
             Ok(p) => p,
             Err(r) => {
                 unsafe { device.destroy_device(None) };
@@ -402,9 +468,20 @@ impl Gpu {
                 return Err((GpuError::Other(format!("creating the allocator: {e}")), debug));
             }
         };
-        Ok(Gpu { _entry: entry, instance, physical, debug, device, queue, pool, allocator: ManuallyDrop::new(Mutex::new(allocator)), info,
+        Ok(Gpu {
+            _entry: entry,
+            instance,
+            physical,
+            debug,
+            device,
+            queue,
+            pool,
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            info,
             validation_enabled: use_layer,
-            kernel_timeout: std::time::Duration::from_secs_f64(opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).max(0.001)),
+            kernel_timeout: std::time::Duration::from_secs_f64(
+                opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).max(0.001),
+            ),
             hung: std::sync::atomic::AtomicBool::new(false),
         })
     }
@@ -434,10 +511,19 @@ impl Gpu {
         let d = &self.device;
         unsafe {
             let cmd = d
-                .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(self.pool).level(vk::CommandBufferLevel::PRIMARY).command_buffer_count(1))
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(self.pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
                 .vk("vkAllocateCommandBuffers")?[0];
             let result = (|| {
-                d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT)).vk("vkBeginCommandBuffer")?;
+                d.begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .vk("vkBeginCommandBuffer")?;
                 record(cmd);
                 d.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
                 let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;

@@ -81,28 +81,44 @@ impl UploadPlan {
     fn new(gpu: &Gpu, enc: &Encoded) -> Result<UploadPlan, GpuError> {
         let (layout, b) = (enc.layout, enc.branching);
         if enc.max_stack > stack_entries(b) {
-            return Err(GpuError::Other(format!("BVH needs {} stack entries, more than the {} the B={b} kernels have", enc.max_stack, stack_entries(b))));
+            return Err(GpuError::Other(format!(
+                "BVH needs {} stack entries, more than the {} the B={b} kernels have",
+                enc.max_stack,
+                stack_entries(b)
+            )));
         }
         let (lo, hi) = (enc.root_box.min, enc.root_box.max);
-        let push = PushConstants { node_count: enc.node_count() as u32, root: enc.push_root, box_lo: [lo.x, lo.y, lo.z, 0.0], box_hi: [hi.x, hi.y, hi.z, 0.0], ..Default::default() };
+        let push = PushConstants {
+            node_count: enc.node_count() as u32,
+            root: enc.push_root,
+            box_lo: [lo.x, lo.y, lo.z, 0.0],
+            box_hi: [hi.x, hi.y, hi.z, 0.0],
+            ..Default::default()
+        };
         let label = format!("{layout}, B={b}");
         let node_size = enc.node_size() as u64;
         let node_bytes = enc.node_count() as u64 * node_size;
-        let sizes = [("nodes", node_bytes), ("triangles", std::mem::size_of_val(&enc.tris.verts[..]) as u64), ("triangle ids", std::mem::size_of_val(&enc.tris.ids[..]) as u64)];
+        let sizes = [
+            ("nodes", node_bytes),
+            ("triangles", std::mem::size_of_val(&enc.tris.verts[..]) as u64),
+            ("triangle ids", std::mem::size_of_val(&enc.tris.ids[..]) as u64),
+        ];
         let limit = gpu.info.max_storage_buffer;
-        let buffers = match sizes.iter().find(|(_, n)| *n > limit) {
-            None => Buffers::Bound,
-            Some(_) if gpu.info.buffer_device_address => Buffers::Addressed,
-            Some((what, n)) => {
-                return Err(GpuError::TooBig {
+        let buffers =
+            match sizes.iter().find(|(_, n)| *n > limit) {
+                None => Buffers::Bound,
+                Some(_) if gpu.info.buffer_device_address => Buffers::Addressed,
+                Some((what, n)) => return Err(GpuError::TooBig {
                     what: format!("{what} ({label})"),
                     bytes: *n,
                     limit,
                     limit_name: "maxStorageBufferRange",
-                    hint: format!(" for one storage buffer, and {} has no bufferDeviceAddress to read a larger buffer by address", gpu.info.name),
-                })
-            }
-        };
+                    hint: format!(
+                        " for one storage buffer, and {} has no bufferDeviceAddress to read a larger buffer by address",
+                        gpu.info.name
+                    ),
+                }),
+            };
         Ok(UploadPlan { label, push, buffers, node_size, bytes: sizes.iter().map(|s| s.1).sum() })
     }
 
@@ -120,19 +136,38 @@ impl UploadPlan {
     /// The node bytes, produced one staging chunk at a time: no second copy of the nodes.
     fn nodes<'g>(&self, gpu: &'g Gpu, nodes: &dyn crate::layout::NodeArray) -> Result<Buffer<'g>, GpuError> {
         let ns = self.node_size;
-        Buffer::upload_from(gpu, &format!("nodes ({})", self.label), nodes.len() as u64 * ns, ns, self.usage(), |off, dst| {
-            let first = (off / ns) as usize;
-            dst.copy_from_slice(&nodes.bytes_of(first..first + dst.len() / ns as usize));
-        })
+        Buffer::upload_from(
+            gpu,
+            &format!("nodes ({})", self.label),
+            nodes.len() as u64 * ns,
+            ns,
+            self.usage(),
+            |off, dst| {
+                let first = (off / ns) as usize;
+                dst.copy_from_slice(&nodes.bytes_of(first..first + dst.len() / ns as usize));
+            },
+        )
     }
 
-    fn finish<'g>(self, gpu: &'g Gpu, nodes: Buffer<'g>, tris: Buffer<'g>, ids: Buffer<'g>) -> Result<GpuBvh<'g>, GpuError> {
+    fn finish<'g>(
+        self,
+        gpu: &'g Gpu,
+        nodes: Buffer<'g>,
+        tris: Buffer<'g>,
+        ids: Buffer<'g>,
+    ) -> Result<GpuBvh<'g>, GpuError> {
         let table = match self.buffers {
             Buffers::Bound => None,
             Buffers::Addressed => {
                 let addrs: [u64; 3] = [nodes.address(), tris.address(), ids.address()];
                 let t = Buffer::upload(gpu, &format!("address table ({})", self.label), bytemuck::cast_slice(&addrs))?;
-                let unused = Buffer::new(gpu, &format!("unused binding ({})", self.label), 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly)?;
+                let unused = Buffer::new(
+                    gpu,
+                    &format!("unused binding ({})", self.label),
+                    16,
+                    vk::BufferUsageFlags::STORAGE_BUFFER,
+                    MemoryLocation::GpuOnly,
+                )?;
                 Some((t, unused))
             }
         };
@@ -194,13 +229,21 @@ impl<'g> Kernel<'g> {
     /// Builds the pipeline of a variant from `source`. A user's module is checked against the
     /// variant's interface (entry point, workgroup, bindings, push constants, specialization
     /// constants, capabilities) before any pipeline is created.
-    pub fn build(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source) -> Result<Kernel<'g>, GpuError> {
+    pub fn build(
+        gpu: &'g Gpu,
+        v: &Variant,
+        imp: PacketImpl,
+        stats: bool,
+        source: &Source,
+    ) -> Result<Kernel<'g>, GpuError> {
         super::support::check(&gpu.info, v).map_err(GpuError::Unsupported)?;
         let pin = subgroup_pin(gpu, v, imp, stats)?;
         let f64 = gpu.info.shader_float64;
         let code = match source {
             Source::Builtin => shader::compile(v, imp, stats, f64)?,
-            Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, v, imp, stats, f64)?, v, imp, stats, gpu)?,
+            Source::Glsl(p) => {
+                shader::check_user(p, &shader::compile_user(p, v, imp, stats, f64)?, v, imp, stats, gpu)?
+            }
             Source::Spirv(p) => {
                 // The interface first (its messages say what a kernel must look like), then the
                 // SPIRV-Tools validator (its message instead of a driver's "unknown error").
@@ -212,17 +255,38 @@ impl<'g> Kernel<'g> {
         Self::with_code(gpu, v, imp, stats, source, &code, pin)
     }
 
-    fn with_code(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool, source: &Source, code: &[u32], pin: Option<u32>) -> Result<Kernel<'g>, GpuError> {
-        let pipe = ComputePipeline::with_subgroup(gpu, &v.kernel_name(imp, stats), code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32, pin)?;
+    fn with_code(
+        gpu: &'g Gpu,
+        v: &Variant,
+        imp: PacketImpl,
+        stats: bool,
+        source: &Source,
+        code: &[u32],
+        pin: Option<u32>,
+    ) -> Result<Kernel<'g>, GpuError> {
+        let pipe = ComputePipeline::with_subgroup(
+            gpu,
+            &v.kernel_name(imp, stats),
+            code,
+            binding::COUNT,
+            std::mem::size_of::<PushConstants>() as u32,
+            pin,
+        )?;
         Ok(Kernel { pipe, variant: *v, imp, stats, source: source.clone(), subgroup: pin })
     }
 
     /// The counting kernel of a user's module: its GLSL compiled with `STATS`, when that build
     /// writes counters; `None` for a SPIR-V module or a kernel that does not count.
-    pub fn user_counting(gpu: &'g Gpu, v: &Variant, imp: PacketImpl, source: &Source) -> Result<Option<Kernel<'g>>, GpuError> {
+    pub fn user_counting(
+        gpu: &'g Gpu,
+        v: &Variant,
+        imp: PacketImpl,
+        source: &Source,
+    ) -> Result<Option<Kernel<'g>>, GpuError> {
         let Source::Glsl(p) = source else { return Ok(None) };
         let code = shader::compile_user(p, v, imp, true, gpu.info.shader_float64)?;
-        let itf = shader::parse_interface(&code).map_err(|msg| GpuError::Spirv { path: p.display().to_string(), msg })?;
+        let itf =
+            shader::parse_interface(&code).map_err(|msg| GpuError::Spirv { path: p.display().to_string(), msg })?;
         if !itf.bindings.contains(&(0, binding::COUNTERS)) {
             return Ok(None);
         }
@@ -232,7 +296,14 @@ impl<'g> Kernel<'g> {
 
     /// Dispatches the kernel over `rays`: `warmup` untimed dispatches, then `repeat` timed
     /// ones (at least one dispatch in all). A counting kernel also reads back the counters.
-    pub fn run(&self, gpu: &Gpu, bvh: &GpuBvh, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError> {
+    pub fn run(
+        &self,
+        gpu: &Gpu,
+        bvh: &GpuBvh,
+        rays: &[Ray],
+        warmup: usize,
+        repeat: usize,
+    ) -> Result<RunOutput, GpuError> {
         if self.variant.buffers != bvh.buffers {
             return Err(GpuError::Other(format!(
                 "{}: built for {:?} scene buffers, but this BVH is {:?} (build the kernel with `Variant::with_buffers(bvh.buffers)`)",
@@ -249,7 +320,13 @@ impl<'g> Kernel<'g> {
         let hit_bytes = n * std::mem::size_of::<Hit>();
         let counter_bytes = n * std::mem::size_of::<Counters>();
         let hits = Buffer::new(gpu, "hits", hit_bytes as u64, out_usage, MemoryLocation::GpuOnly)?;
-        let counters = Buffer::new(gpu, "counters", if self.stats { counter_bytes as u64 } else { 16 }, out_usage, MemoryLocation::GpuOnly)?;
+        let counters = Buffer::new(
+            gpu,
+            "counters",
+            if self.stats { counter_bytes as u64 } else { 16 },
+            out_usage,
+            MemoryLocation::GpuOnly,
+        )?;
         let [b0, b1, b2] = bvh.bindings();
         pipe.bind(&[b0, b1, b2, &ray_buf, &hits, &counters]);
         let mut push = bvh.push;
@@ -267,7 +344,8 @@ impl<'g> Kernel<'g> {
                 ),
             }));
         }
-        let counters: Option<Vec<Counters>> = if self.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
+        let counters: Option<Vec<Counters>> =
+            if self.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
         crate::digest::record("gpu", &self.label(), rays, &hits, counters.as_deref());
         Ok(RunOutput { hits, counters, times_ms: times })
     }
@@ -275,7 +353,14 @@ impl<'g> Kernel<'g> {
 
 /// Records `warmup + repeat` (at least one) dispatches of `groups` workgroups, each in its own
 /// submission with timestamps around it; returns the times of the last `repeat`.
-pub(crate) fn dispatch_timed(gpu: &Gpu, pipe: &ComputePipeline, push: &[u8], groups: u32, warmup: usize, repeat: usize) -> Result<Vec<f64>, GpuError> {
+pub(crate) fn dispatch_timed(
+    gpu: &Gpu,
+    pipe: &ComputePipeline,
+    push: &[u8],
+    groups: u32,
+    warmup: usize,
+    repeat: usize,
+) -> Result<Vec<f64>, GpuError> {
     let timer = Timer::new(gpu)?;
     let mut times = Vec::with_capacity(repeat);
     for i in 0..(warmup + repeat).max(1) {
@@ -302,14 +387,24 @@ pub struct RunOutput {
 /// reported size must hold the packet.
 fn subgroup_pin(gpu: &Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Result<Option<u32>, GpuError> {
     if imp == PacketImpl::Hybrid && !super::support::has_subgroup_arithmetic(&gpu.info) {
-        return Err(GpuError::Unsupported(format!("{}: hybrid packets need subgroup arithmetic in compute shaders (device: {})", v.kernel_name(imp, stats), gpu.info.name)));
+        return Err(GpuError::Unsupported(format!(
+            "{}: hybrid packets need subgroup arithmetic in compute shaders (device: {})",
+            v.kernel_name(imp, stats),
+            gpu.info.name
+        )));
     }
     if imp != PacketImpl::Subgroup {
         return Ok(None);
     }
     let pin = super::support::packet_plan(&gpu.info, v.packet).1;
     if pin.is_none() && v.packet > gpu.info.subgroup_size as usize {
-        return Err(GpuError::Unsupported(format!("{}: packets of {} need a subgroup of at least {} (device: {})", v.kernel_name(imp, stats), v.packet, v.packet, gpu.info.subgroup_size)));
+        return Err(GpuError::Unsupported(format!(
+            "{}: packets of {} need a subgroup of at least {} (device: {})",
+            v.kernel_name(imp, stats),
+            v.packet,
+            v.packet,
+            gpu.info.subgroup_size
+        )));
     }
     Ok(pin)
 }

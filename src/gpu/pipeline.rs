@@ -18,18 +18,45 @@ pub struct ComputePipeline<'g> {
 
 impl<'g> ComputePipeline<'g> {
     /// A pipeline whose `bindings` are all storage buffers.
-    pub fn new(gpu: &'g Gpu, name: &str, spirv: &[u32], bindings: u32, push_size: u32) -> Result<ComputePipeline<'g>, GpuError> {
+    pub fn new(
+        gpu: &'g Gpu,
+        name: &str,
+        spirv: &[u32],
+        bindings: u32,
+        push_size: u32,
+    ) -> Result<ComputePipeline<'g>, GpuError> {
         Self::new_typed(gpu, name, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size, None)
     }
 
     /// A storage-buffer pipeline whose subgroup size is pinned to `subgroup` (needs
     /// `subgroupSizeControl`; `None`: the driver's choice).
-    pub fn with_subgroup(gpu: &'g Gpu, name: &str, spirv: &[u32], bindings: u32, push_size: u32, subgroup: Option<u32>) -> Result<ComputePipeline<'g>, GpuError> {
-        Self::new_typed(gpu, name, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size, subgroup)
+    pub fn with_subgroup(
+        gpu: &'g Gpu,
+        name: &str,
+        spirv: &[u32],
+        bindings: u32,
+        push_size: u32,
+        subgroup: Option<u32>,
+    ) -> Result<ComputePipeline<'g>, GpuError> {
+        Self::new_typed(
+            gpu,
+            name,
+            spirv,
+            &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize],
+            push_size,
+            subgroup,
+        )
     }
 
     /// A pipeline with one descriptor of the given type per binding.
-    pub fn new_typed(gpu: &'g Gpu, name: &str, spirv: &[u32], types: &[vk::DescriptorType], push_size: u32, subgroup: Option<u32>) -> Result<ComputePipeline<'g>, GpuError> {
+    pub fn new_typed(
+        gpu: &'g Gpu,
+        name: &str,
+        spirv: &[u32],
+        types: &[vk::DescriptorType],
+        push_size: u32,
+        subgroup: Option<u32>,
+    ) -> Result<ComputePipeline<'g>, GpuError> {
         let d = &gpu.device;
         let mut p = ComputePipeline {
             gpu,
@@ -44,23 +71,45 @@ impl<'g> ComputePipeline<'g> {
         };
         // Every object created is destroyed by Drop, even when a later step fails.
         unsafe {
-            p.module = d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(spirv), None).vk("vkCreateShaderModule")?;
+            p.module = d
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(spirv), None)
+                .vk("vkCreateShaderModule")?;
             let b: Vec<vk::DescriptorSetLayoutBinding> = types
                 .iter()
                 .enumerate()
-                .map(|(i, t)| vk::DescriptorSetLayoutBinding::default().binding(i as u32).descriptor_type(*t).descriptor_count(1).stage_flags(vk::ShaderStageFlags::COMPUTE))
+                .map(|(i, t)| {
+                    vk::DescriptorSetLayoutBinding::default()
+                        .binding(i as u32)
+                        .descriptor_type(*t)
+                        .descriptor_count(1)
+                        .stage_flags(vk::ShaderStageFlags::COMPUTE)
+                })
                 .collect();
-            p.dsl = d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&b), None).vk("vkCreateDescriptorSetLayout")?;
+            p.dsl = d
+                .create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&b), None)
+                .vk("vkCreateDescriptorSetLayout")?;
             let dsls = [p.dsl];
-            let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).offset(0).size(push_size)];
-            p.layout = d.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&dsls).push_constant_ranges(&ranges), None).vk("vkCreatePipelineLayout")?;
-            let mut size_info = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default().required_subgroup_size(subgroup.unwrap_or(0));
-            let mut stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(p.module).name(c"main");
+            let ranges =
+                [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).offset(0).size(push_size)];
+            p.layout = d
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default().set_layouts(&dsls).push_constant_ranges(&ranges),
+                    None,
+                )
+                .vk("vkCreatePipelineLayout")?;
+            let mut size_info = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default()
+                .required_subgroup_size(subgroup.unwrap_or(0));
+            let mut stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(p.module)
+                .name(c"main");
             if subgroup.is_some() {
                 stage = stage.push_next(&mut size_info);
             }
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout)];
-            p.pipeline = d.create_compute_pipelines(vk::PipelineCache::null(), &info, None).map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
+            p.pipeline = d
+                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+                .map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
             let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
             for t in types {
                 match sizes.iter_mut().find(|s| s.ty == *t) {
@@ -68,8 +117,14 @@ impl<'g> ComputePipeline<'g> {
                     None => sizes.push(vk::DescriptorPoolSize { ty: *t, descriptor_count: 1 }),
                 }
             }
-            p.pool = d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None).vk("vkCreateDescriptorPool")?;
-            p.set = d.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&dsls)).vk("vkAllocateDescriptorSets")?[0];
+            p.pool = d
+                .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
+                .vk("vkCreateDescriptorPool")?;
+            p.set = d
+                .allocate_descriptor_sets(
+                    &vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&dsls),
+                )
+                .vk("vkAllocateDescriptorSets")?[0];
         }
         Ok(p)
     }
@@ -82,11 +137,20 @@ impl<'g> ComputePipeline<'g> {
 
     /// Points each (binding, buffer) pair's storage-buffer binding at the buffer.
     pub fn bind_at(&self, buffers: &[(u32, &Buffer)]) {
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers.iter().map(|(_, b)| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }]).collect();
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+            .iter()
+            .map(|(_, b)| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }])
+            .collect();
         let writes: Vec<vk::WriteDescriptorSet> = infos
             .iter()
             .zip(buffers)
-            .map(|(info, (i, _))| vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(*i).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info))
+            .map(|(info, (i, _))| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(self.set)
+                    .dst_binding(*i)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
             .collect();
         unsafe { self.gpu.device.update_descriptor_sets(&writes, &[]) };
     }
@@ -95,7 +159,11 @@ impl<'g> ComputePipeline<'g> {
     pub fn bind_acceleration_structure(&self, binding: u32, tlas: vk::AccelerationStructureKHR) {
         let ases = [tlas];
         let mut asw = vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(&ases);
-        let mut w = vk::WriteDescriptorSet::default().dst_set(self.set).dst_binding(binding).descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR).push_next(&mut asw);
+        let mut w = vk::WriteDescriptorSet::default()
+            .dst_set(self.set)
+            .dst_binding(binding)
+            .descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
+            .push_next(&mut asw);
         w.descriptor_count = 1;
         unsafe { self.gpu.device.update_descriptor_sets(&[w], &[]) };
     }
@@ -116,9 +184,19 @@ impl<'g> ComputePipeline<'g> {
 
     /// A barrier making shader writes visible to transfers and later dispatches.
     pub fn barrier(&self, cmd: vk::CommandBuffer) {
-        let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+        let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(
+            vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+        )];
         unsafe {
-            self.gpu.device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &mb, &[], &[]);
+            self.gpu.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::DependencyFlags::empty(),
+                &mb,
+                &[],
+                &[],
+            );
         }
     }
 }

@@ -4,8 +4,8 @@
 //! the query reports is the public `prim` id; one TLAS instance with the identity transform.
 
 use super::buffer::Buffer;
-use super::pipeline::ComputePipeline;
 use super::kernel::{dispatch_timed, RunOutput};
+use super::pipeline::ComputePipeline;
 use super::{shader, Gpu, GpuError, VkResultExt};
 use crate::interface::{binding, PushConstants};
 use crate::layout::{Baseline, BaselineDevice, BaselineScene};
@@ -35,17 +35,29 @@ fn aligned(b: &Buffer, align: u64) -> vk::DeviceAddress {
 impl<'g> RqScene<'g> {
     pub fn build(gpu: &'g Gpu, scene: &Scene) -> Result<RqScene<'g>, GpuError> {
         if !gpu.info.ray_query {
-            return Err(GpuError::MissingFeature { device: gpu.info.name.clone(), feature: "VK_KHR_ray_query / VK_KHR_acceleration_structure".into() });
+            return Err(GpuError::MissingFeature {
+                device: gpu.info.name.clone(),
+                feature: "VK_KHR_ray_query / VK_KHR_acceleration_structure".into(),
+            });
         }
         let loader = ash::khr::acceleration_structure::Device::new(&gpu.instance, &gpu.device);
-        let mut rq = RqScene { gpu, loader, blas: vk::AccelerationStructureKHR::null(), tlas: vk::AccelerationStructureKHR::null(), _bufs: Vec::new(), bytes: 0, build_ms: 0.0 };
+        let mut rq = RqScene {
+            gpu,
+            loader,
+            blas: vk::AccelerationStructureKHR::null(),
+            tlas: vk::AccelerationStructureKHR::null(),
+            _bufs: Vec::new(),
+            bytes: 0,
+            build_ms: 0.0,
+        };
         let mut props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
         let align = {
             let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut props);
             unsafe { gpu.instance.get_physical_device_properties2(gpu.physical, &mut p2) };
             props.min_acceleration_structure_scratch_offset_alignment.max(256) as u64
         };
-        let input = vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
+        let input = vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
         let verts: Vec<f32> = scene.tris.iter().flat_map(|t| t.iter().flat_map(|v| [v.x, v.y, v.z])).collect();
         let vbuf = Buffer::upload_with(gpu, "rq vertices", bytemuck::cast_slice(&verts), input)?;
         let n = scene.tris.len() as u32;
@@ -59,23 +71,39 @@ impl<'g> RqScene<'g> {
             .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
             .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
             .flags(vk::GeometryFlagsKHR::OPAQUE)];
-        let (blas, blas_size, t_blas) = rq.build_one(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, &geom, n, align, "blas")?;
+        let (blas, blas_size, t_blas) =
+            rq.build_one(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, &geom, n, align, "blas")?;
         rq.blas = blas;
-        let blas_addr = unsafe { rq.loader.get_acceleration_structure_device_address(&vk::AccelerationStructureDeviceAddressInfoKHR::default().acceleration_structure(blas)) };
+        let blas_addr = unsafe {
+            rq.loader.get_acceleration_structure_device_address(
+                &vk::AccelerationStructureDeviceAddressInfoKHR::default().acceleration_structure(blas),
+            )
+        };
         let inst = vk::AccelerationStructureInstanceKHR {
             transform: vk::TransformMatrixKHR { matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0] },
             instance_custom_index_and_mask: vk::Packed24_8::new(0, 0xff),
-            instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(0, vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8),
+            instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(
+                0,
+                vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,
+            ),
             acceleration_structure_reference: vk::AccelerationStructureReferenceKHR { device_handle: blas_addr },
         };
-        let inst_bytes = unsafe { std::slice::from_raw_parts(&inst as *const _ as *const u8, std::mem::size_of::<vk::AccelerationStructureInstanceKHR>()) };
+        let inst_bytes = unsafe {
+            std::slice::from_raw_parts(
+                &inst as *const _ as *const u8,
+                std::mem::size_of::<vk::AccelerationStructureInstanceKHR>(),
+            )
+        };
         let ibuf = Buffer::upload_with(gpu, "rq instance", inst_bytes, input)?;
-        let inst_data = vk::AccelerationStructureGeometryInstancesDataKHR::default().array_of_pointers(false).data(vk::DeviceOrHostAddressConstKHR { device_address: ibuf.address() });
+        let inst_data = vk::AccelerationStructureGeometryInstancesDataKHR::default()
+            .array_of_pointers(false)
+            .data(vk::DeviceOrHostAddressConstKHR { device_address: ibuf.address() });
         let geom = [vk::AccelerationStructureGeometryKHR::default()
             .geometry_type(vk::GeometryTypeKHR::INSTANCES)
             .geometry(vk::AccelerationStructureGeometryDataKHR { instances: inst_data })
             .flags(vk::GeometryFlagsKHR::OPAQUE)];
-        let (tlas, tlas_size, t_tlas) = rq.build_one(vk::AccelerationStructureTypeKHR::TOP_LEVEL, &geom, 1, align, "tlas")?;
+        let (tlas, tlas_size, t_tlas) =
+            rq.build_one(vk::AccelerationStructureTypeKHR::TOP_LEVEL, &geom, 1, align, "tlas")?;
         rq.tlas = tlas;
         rq.bytes = blas_size + tlas_size;
         rq.build_ms = t_blas + t_tlas;
@@ -85,7 +113,14 @@ impl<'g> RqScene<'g> {
     }
 
     /// Creates and builds one acceleration structure; returns it, its size and build time (ms).
-    fn build_one(&mut self, ty: vk::AccelerationStructureTypeKHR, geom: &[vk::AccelerationStructureGeometryKHR], count: u32, align: u64, name: &str) -> Result<(vk::AccelerationStructureKHR, u64, f64), GpuError> {
+    fn build_one(
+        &mut self,
+        ty: vk::AccelerationStructureTypeKHR,
+        geom: &[vk::AccelerationStructureGeometryKHR],
+        count: u32,
+        align: u64,
+        name: &str,
+    ) -> Result<(vk::AccelerationStructureKHR, u64, f64), GpuError> {
         let gpu = self.gpu;
         let mut info = vk::AccelerationStructureBuildGeometryInfoKHR::default()
             .ty(ty)
@@ -93,12 +128,35 @@ impl<'g> RqScene<'g> {
             .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
             .geometries(geom);
         let mut sizes = vk::AccelerationStructureBuildSizesInfoKHR::default();
-        unsafe { self.loader.get_acceleration_structure_build_sizes(vk::AccelerationStructureBuildTypeKHR::DEVICE, &info, &[count], &mut sizes) };
-        let storage = Buffer::new(gpu, &format!("rq {name}"), sizes.acceleration_structure_size, vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS, MemoryLocation::GpuOnly)?;
-        let ci = vk::AccelerationStructureCreateInfoKHR::default().buffer(storage.raw).size(sizes.acceleration_structure_size).ty(ty);
-        let handle = unsafe { self.loader.create_acceleration_structure(&ci, None) }.vk("vkCreateAccelerationStructureKHR")?;
+        unsafe {
+            self.loader.get_acceleration_structure_build_sizes(
+                vk::AccelerationStructureBuildTypeKHR::DEVICE,
+                &info,
+                &[count],
+                &mut sizes,
+            )
+        };
+        let storage = Buffer::new(
+            gpu,
+            &format!("rq {name}"),
+            sizes.acceleration_structure_size,
+            vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            MemoryLocation::GpuOnly,
+        )?;
+        let ci = vk::AccelerationStructureCreateInfoKHR::default()
+            .buffer(storage.raw)
+            .size(sizes.acceleration_structure_size)
+            .ty(ty);
+        let handle =
+            unsafe { self.loader.create_acceleration_structure(&ci, None) }.vk("vkCreateAccelerationStructureKHR")?;
         self._bufs.push(storage);
-        let scratch = Buffer::new(gpu, &format!("rq {name} scratch"), sizes.build_scratch_size + align, vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS, MemoryLocation::GpuOnly);
+        let scratch = Buffer::new(
+            gpu,
+            &format!("rq {name} scratch"),
+            sizes.build_scratch_size + align,
+            vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            MemoryLocation::GpuOnly,
+        );
         let scratch = match scratch {
             Ok(s) => s,
             Err(e) => {
@@ -106,13 +164,25 @@ impl<'g> RqScene<'g> {
                 return Err(e);
             }
         };
-        info = info.dst_acceleration_structure(handle).scratch_data(vk::DeviceOrHostAddressKHR { device_address: aligned(&scratch, align) });
+        info = info
+            .dst_acceleration_structure(handle)
+            .scratch_data(vk::DeviceOrHostAddressKHR { device_address: aligned(&scratch, align) });
         let range = [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(count)];
         let t0 = std::time::Instant::now();
         let r = gpu.submit_and_wait(|cmd| unsafe {
             self.loader.cmd_build_acceleration_structures(cmd, std::slice::from_ref(&info), &[&range]);
-            let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR).dst_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR)];
-            gpu.device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR, vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR | vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &mb, &[], &[]);
+            let mb = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR)
+                .dst_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR)];
+            gpu.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
+                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR | vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::DependencyFlags::empty(),
+                &mb,
+                &[],
+                &[],
+            );
         });
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         if let Err(e) = r {
@@ -152,7 +222,14 @@ pub fn pipeline(gpu: &Gpu) -> Result<ComputePipeline<'_>, GpuError> {
 }
 
 /// Traces `rays` with ray queries: `warmup` untimed, `repeat` timed dispatches.
-pub fn run(gpu: &Gpu, scene: &RqScene, pipe: &ComputePipeline, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError> {
+pub fn run(
+    gpu: &Gpu,
+    scene: &RqScene,
+    pipe: &ComputePipeline,
+    rays: &[Ray],
+    warmup: usize,
+    repeat: usize,
+) -> Result<RunOutput, GpuError> {
     let n = rays.len();
     let ray_buf = Buffer::upload(gpu, "rays", bytemuck::cast_slice(rays))?;
     let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
@@ -160,7 +237,13 @@ pub fn run(gpu: &Gpu, scene: &RqScene, pipe: &ComputePipeline, rays: &[Ray], war
     let hits = Buffer::new(gpu, "hits", hit_bytes as u64, usage, MemoryLocation::GpuOnly)?;
     let unused = Buffer::new(gpu, "unused", 16, usage, MemoryLocation::GpuOnly)?;
     pipe.bind_acceleration_structure(binding::NODES, scene.tlas);
-    pipe.bind_at(&[(binding::TRI_VERTS, &unused), (binding::TRI_IDS, &unused), (binding::RAYS, &ray_buf), (binding::HITS, &hits), (binding::COUNTERS, &unused)]);
+    pipe.bind_at(&[
+        (binding::TRI_VERTS, &unused),
+        (binding::TRI_IDS, &unused),
+        (binding::RAYS, &ray_buf),
+        (binding::HITS, &hits),
+        (binding::COUNTERS, &unused),
+    ]);
     let push = PushConstants { ray_count: n as u32, ..Default::default() };
     let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(64), warmup, repeat)?;
     let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);

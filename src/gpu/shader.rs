@@ -43,7 +43,11 @@ pub struct Includes {
 impl Includes {
     /// The includes of a variant's kernel.
     pub fn variant(v: &Variant) -> Includes {
-        Includes { interface: v.interface_glsl(), layout: Some(v.layout.bvh().expect("a BVH layout").glsl()), user_dir: None }
+        Includes {
+            interface: v.interface_glsl(),
+            layout: Some(v.layout.bvh().expect("a BVH layout").glsl()),
+            user_dir: None,
+        }
     }
 
     /// The includes of a kernel without a layout (the baselines, the micro-benchmark).
@@ -80,7 +84,13 @@ impl Includes {
 /// exact-zero edge case (needs `shaderFloat64`; the CPU reference always does).
 pub fn compile(v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
     let src = source("trav.comp").expect("glsl/trav.comp is embedded");
-    let words = compile_source(&v.kernel_name(imp, stats), "trav.comp", src, &v.defines(imp, stats, f64_fallback), &Includes::variant(v))?;
+    let words = compile_source(
+        &v.kernel_name(imp, stats),
+        "trav.comp",
+        src,
+        &v.defines(imp, stats, f64_fallback),
+        &Includes::variant(v),
+    )?;
     Ok(add_float_modes(&words, &super::support::float_modes(v)))
 }
 
@@ -112,7 +122,10 @@ pub fn add_float_modes(words: &[u32], modes: &[super::support::FloatMode]) -> Ve
     }
     let new_modes: Vec<_> = modes.iter().filter(|&&(m, w)| !has_mode(m, w)).collect();
     let last_cap = insts.iter().rposition(|(_, op, _)| *op == 17);
-    let last_mode = insts.iter().rposition(|(_, op, _)| *op == 16 || *op == 331).or_else(|| insts.iter().rposition(|(_, op, _)| *op == 15));
+    let last_mode = insts
+        .iter()
+        .rposition(|(_, op, _)| *op == 16 || *op == 331)
+        .or_else(|| insts.iter().rposition(|(_, op, _)| *op == 15));
     let mut out = words[..5].to_vec();
     for (k, (start, _, o)) in insts.iter().enumerate() {
         out.push(words[*start]);
@@ -133,12 +146,25 @@ pub fn add_float_modes(words: &[u32], modes: &[super::support::FloatMode]) -> Ve
 
 /// Compiles a user's GLSL kernel file with the defines and includes of the built-in kernel of
 /// `v` (plus the file's own folder).
-pub fn compile_user(path: &Path, v: &Variant, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
-    let src = std::fs::read_to_string(path).map_err(|e| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot read: {e}") })?;
+pub fn compile_user(
+    path: &Path,
+    v: &Variant,
+    imp: PacketImpl,
+    stats: bool,
+    f64_fallback: bool,
+) -> Result<Vec<u32>, GpuError> {
+    let src = std::fs::read_to_string(path)
+        .map_err(|e| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot read: {e}") })?;
     let mut inc = Includes::variant(v);
     inc.user_dir = path.parent().map(Path::to_path_buf);
     let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-    let words = compile_source(&format!("{} ({})", v.kernel_name(imp, stats), path.display()), &file, &src, &v.defines(imp, stats, f64_fallback), &inc)?;
+    let words = compile_source(
+        &format!("{} ({})", v.kernel_name(imp, stats), path.display()),
+        &file,
+        &src,
+        &v.defines(imp, stats, f64_fallback),
+        &inc,
+    )?;
     Ok(add_float_modes(&words, &super::support::float_modes(v)))
 }
 
@@ -149,12 +175,19 @@ pub fn compile_baseline(name: &str, file: &str) -> Result<Vec<u32>, GpuError> {
 
 /// Compiles a shared kernel without a layout, with defines.
 pub fn compile_plain(name: &str, file: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
-    let src = source(file).ok_or_else(|| GpuError::Compile { variant: name.into(), log: format!("missing source {file}") })?;
+    let src = source(file)
+        .ok_or_else(|| GpuError::Compile { variant: name.into(), log: format!("missing source {file}") })?;
     compile_source(name, file, src, defines, &Includes::plain())
 }
 
 /// Compiles GLSL compute source with defines; `#include`s resolve through `inc`.
-pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, String)], inc: &Includes) -> Result<Vec<u32>, GpuError> {
+pub fn compile_source(
+    name: &str,
+    file: &str,
+    src: &str,
+    defines: &[(String, String)],
+    inc: &Includes,
+) -> Result<Vec<u32>, GpuError> {
     let compile_err = |log: String| GpuError::Compile { variant: name.to_string(), log };
     let compiler = shaderc::Compiler::new().map_err(|e| compile_err(format!("shaderc unavailable: {e}")))?;
     let mut opts = shaderc::CompileOptions::new().map_err(|e| compile_err(format!("shaderc options: {e}")))?;
@@ -164,8 +197,12 @@ pub fn compile_source(name: &str, file: &str, src: &str, defines: &[(String, Str
     for (k, val) in defines {
         opts.add_macro_definition(k, Some(val));
     }
-    opts.set_include_callback(|req, _ty, _from, _depth| inc.resolve(req).map(|content| shaderc::ResolvedInclude { resolved_name: req.to_string(), content }));
-    let art = compiler.compile_into_spirv(src, shaderc::ShaderKind::Compute, file, "main", Some(&opts)).map_err(|e| compile_err(e.to_string()))?;
+    opts.set_include_callback(|req, _ty, _from, _depth| {
+        inc.resolve(req).map(|content| shaderc::ResolvedInclude { resolved_name: req.to_string(), content })
+    });
+    let art = compiler
+        .compile_into_spirv(src, shaderc::ShaderKind::Compute, file, "main", Some(&opts))
+        .map_err(|e| compile_err(e.to_string()))?;
     Ok(art.as_binary().to_vec())
 }
 
@@ -215,7 +252,8 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
             17 if !ops.is_empty() => itf.capabilities.push(ops[0]),
             15 if ops.len() >= 3 => {
                 let bytes: Vec<u8> = ops[2..].iter().flat_map(|w| w.to_le_bytes()).collect();
-                let name = bytes.split(|&b| b == 0).next().map(|s| String::from_utf8_lossy(s).to_string()).unwrap_or_default();
+                let name =
+                    bytes.split(|&b| b == 0).next().map(|s| String::from_utf8_lossy(s).to_string()).unwrap_or_default();
                 itf.entry_points.push((ops[0], name));
             }
             16 if ops.len() >= 5 && ops[1] == 17 => itf.local_size = Some([ops[2], ops[3], ops[4]]),
@@ -248,7 +286,8 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
             }
             28 if ops.len() >= 3 => {
                 let n = consts.get(&ops[2]).copied().unwrap_or(0) as u64;
-                let stride = strides.get(&ops[0]).map(|&s| s as u64).unwrap_or_else(|| size.get(&ops[1]).copied().unwrap_or(0));
+                let stride =
+                    strides.get(&ops[0]).map(|&s| s as u64).unwrap_or_else(|| size.get(&ops[1]).copied().unwrap_or(0));
                 size.insert(ops[0], n * stride);
             }
             30 => {
@@ -262,7 +301,16 @@ pub fn parse_interface(words: &[u32]) -> Result<Interface, String> {
             }
             59 if ops.len() >= 3 && ops[2] == 9 => {
                 let st = pointee.get(&ops[0]).copied().unwrap_or(0);
-                let bytes = members.get(&st).map(|m| m.iter().enumerate().map(|(k, t)| offsets.get(&(st, k as u32)).copied().unwrap_or(0) as u64 + size.get(t).copied().unwrap_or(0)).max().unwrap_or(0));
+                let bytes = members.get(&st).map(|m| {
+                    m.iter()
+                        .enumerate()
+                        .map(|(k, t)| {
+                            offsets.get(&(st, k as u32)).copied().unwrap_or(0) as u64
+                                + size.get(t).copied().unwrap_or(0)
+                        })
+                        .max()
+                        .unwrap_or(0)
+                });
                 itf.push_constant_bytes = Some(bytes.unwrap_or(0) as u32);
             }
             _ => {}
@@ -320,7 +368,12 @@ mod spirv_tools {
     extern "C" {
         pub fn spvContextCreate(env: u32) -> *mut c_void;
         pub fn spvContextDestroy(ctx: *mut c_void);
-        pub fn spvValidateBinary(ctx: *const c_void, words: *const u32, num_words: usize, diagnostic: *mut *mut Diagnostic) -> i32;
+        pub fn spvValidateBinary(
+            ctx: *const c_void,
+            words: *const u32,
+            num_words: usize,
+            diagnostic: *mut *mut Diagnostic,
+        ) -> i32;
         pub fn spvDiagnosticDestroy(d: *mut Diagnostic);
     }
 }
@@ -387,9 +440,19 @@ fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
 /// Checks that a user's module can stand in for the kernel of variant `v` (implementation
 /// `imp`, counting or not) on `gpu`; returns the module, or an error that names the file and
 /// what differs.
-pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stats: bool, gpu: &Gpu) -> Result<Vec<u32>, GpuError> {
+pub fn check_user(
+    path: &Path,
+    words: &[u32],
+    v: &Variant,
+    imp: PacketImpl,
+    stats: bool,
+    gpu: &Gpu,
+) -> Result<Vec<u32>, GpuError> {
     let name = v.kernel_name(imp, stats);
-    let err = |msg: String| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot stand in for {name}: {msg}") };
+    let err = |msg: String| GpuError::Spirv {
+        path: path.display().to_string(),
+        msg: format!("cannot stand in for {name}: {msg}"),
+    };
     let itf = parse_interface(words).map_err(|m| GpuError::Spirv { path: path.display().to_string(), msg: m })?;
     if !itf.entry_points.iter().any(|(model, n)| *model == 5 && n == "main") {
         return Err(err(format!("no GLCompute entry point named 'main' (found {:?})", itf.entry_points)));
@@ -401,7 +464,10 @@ pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stat
     }
     for &(set, b) in &itf.bindings {
         if set != 0 || b >= binding::COUNT {
-            return Err(err(format!("it uses set {set}, binding {b}; the traversal interface is set 0, bindings 0..={}", binding::COUNT - 1)));
+            return Err(err(format!(
+                "it uses set {set}, binding {b}; the traversal interface is set 0, bindings 0..={}",
+                binding::COUNT - 1
+            )));
         }
     }
     for (need, what) in [(binding::RAYS, "rays"), (binding::HITS, "hits")] {
@@ -422,7 +488,10 @@ pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stat
     }
     let writes_counters = itf.bindings.contains(&(0, binding::COUNTERS));
     if writes_counters && !stats {
-        return Err(err(format!("it binds {} (counters): it is a counting kernel, and the timed kernel writes no counters", binding::COUNTERS)));
+        return Err(err(format!(
+            "it binds {} (counters): it is a counting kernel, and the timed kernel writes no counters",
+            binding::COUNTERS
+        )));
     }
     let push = std::mem::size_of::<PushConstants>() as u32;
     match itf.push_constant_bytes {
@@ -445,12 +514,16 @@ pub fn check_user(path: &Path, words: &[u32], v: &Variant, imp: PacketImpl, stat
         }));
     }
     if v.packet == 1 && itf.capabilities.iter().any(|c| (61..=68).contains(c)) {
-        return Err(err("it uses subgroup operations: it is a packet kernel, and the variant traces single rays (P = 1)".into()));
+        return Err(err(
+            "it uses subgroup operations: it is a packet kernel, and the variant traces single rays (P = 1)".into(),
+        ));
     }
     for &c in &itf.capabilities {
         match capability(gpu, c) {
             Some((_, true)) => {}
-            Some((n, false)) => return Err(err(format!("it requires capability {n}, which {} does not provide", gpu.info.name))),
+            Some((n, false)) => {
+                return Err(err(format!("it requires capability {n}, which {} does not provide", gpu.info.name)))
+            }
             None => return Err(err(format!("it requires SPIR-V capability {c}, which halftrace does not enable"))),
         }
     }

@@ -55,8 +55,11 @@ pub fn check(info: &DeviceInfo, v: &Variant) -> Result<(), String> {
         missing.push("bufferDeviceAddress");
     }
     match v.fc {
-        FloatControls::On => missing.extend(float_modes(v).into_iter().map(|m| mode_feature(info, m)).filter(|(_, ok)| !ok).map(|(n, _)| n)),
-        FloatControls::Off if !l.float_controls_off() => return Err(format!("{} has no kernel build without float controls", v.layout)),
+        FloatControls::On => missing
+            .extend(float_modes(v).into_iter().map(|m| mode_feature(info, m)).filter(|(_, ok)| !ok).map(|(n, _)| n)),
+        FloatControls::Off if !l.float_controls_off() => {
+            return Err(format!("{} has no kernel build without float controls", v.layout))
+        }
         FloatControls::Off => {}
     }
     if missing.is_empty() {
@@ -76,7 +79,9 @@ pub fn resolve(info: &DeviceInfo, v: Variant, choice: FcChoice) -> Result<Varian
             let on = v.with_fc(FloatControls::On);
             match check(info, &on) {
                 Ok(()) => Ok(on),
-                Err(why) => check(info, &v.with_fc(FloatControls::Off)).map(|_| v.with_fc(FloatControls::Off)).map_err(|_| why),
+                Err(why) => {
+                    check(info, &v.with_fc(FloatControls::Off)).map(|_| v.with_fc(FloatControls::Off)).map_err(|_| why)
+                }
             }
         }
     }

@@ -10,7 +10,13 @@ pub struct Timer<'g> {
 
 impl<'g> Timer<'g> {
     pub fn new(gpu: &'g Gpu) -> Result<Timer<'g>, GpuError> {
-        let pool = unsafe { gpu.device.create_query_pool(&vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2), None) }.vk("vkCreateQueryPool")?;
+        let pool = unsafe {
+            gpu.device.create_query_pool(
+                &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2),
+                None,
+            )
+        }
+        .vk("vkCreateQueryPool")?;
         Ok(Timer { gpu, pool })
     }
 
@@ -28,7 +34,15 @@ impl<'g> Timer<'g> {
     /// Milliseconds between the two timestamps of the last recorded submission.
     pub fn elapsed_ms(&self) -> Result<f64, GpuError> {
         let mut t = [0u64; 2];
-        unsafe { self.gpu.device.get_query_pool_results(self.pool, 0, &mut t, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }.vk("vkGetQueryPoolResults")?;
+        unsafe {
+            self.gpu.device.get_query_pool_results(
+                self.pool,
+                0,
+                &mut t,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+        }
+        .vk("vkGetQueryPoolResults")?;
         Ok(t[1].wrapping_sub(t[0]) as f64 * self.gpu.info.timestamp_period_ns as f64 * 1e-6)
     }
 }

@@ -43,7 +43,8 @@ pub struct Visit {
     pub h: hooks::Visit,
 }
 
-const NO_HALF_VISIT: hooks::Visit = hooks::Visit { mk: 0.0, s_lim: f16::ZERO, lower: f16::ZERO, precise: true, w: f16::ZERO };
+const NO_HALF_VISIT: hooks::Visit =
+    hooks::Visit { mk: 0.0, s_lim: f16::ZERO, lower: f16::ZERO, precise: true, w: f16::ZERO };
 
 /// 1/k for a power of two k, exactly, from the exponent bits (`inv_pow2` in the kernels).
 #[inline]
@@ -98,7 +99,12 @@ pub fn child_entry(v: &Visit, (tn, tn_lb): (f32, f32), r16: &Ray16) -> f32 {
 /// A wide node's children as fp16 boxes in frame `f`, rounded outward, with their child words
 /// (the fp16 part of the f16w and f16a nodes): `(lo[axis][slot], hi[axis][slot], child[slot])`.
 #[allow(clippy::type_complexity)]
-pub fn children16<const B: usize>(layout: &'static str, i: usize, n: &crate::bvh::WideNode, f: &Frame) -> Result<([[f16; B]; 3], [[f16; B]; 3], [u32; B]), super::EncodeError> {
+pub fn children16<const B: usize>(
+    layout: &'static str,
+    i: usize,
+    n: &crate::bvh::WideNode,
+    f: &Frame,
+) -> Result<([[f16; B]; 3], [[f16; B]; 3], [u32; B]), super::EncodeError> {
     let mut lo16 = [[f16::ZERO; B]; 3];
     let mut hi16 = [[f16::ZERO; B]; 3];
     let mut child = [super::CHILD_EMPTY; B];
@@ -157,12 +163,26 @@ macro_rules! anchored_hooks {
             *t
         }
 
-        fn visit<const B: usize>(n: &$node<B>, root: &$root, t: &f32, r: &RayPre, lr: &Ray16, best_t: f32) -> anchored::Visit {
+        fn visit<const B: usize>(
+            n: &$node<B>,
+            root: &$root,
+            t: &f32,
+            r: &RayPre,
+            lr: &Ray16,
+            best_t: f32,
+        ) -> anchored::Visit {
             anchored::visit(&anchored::AnchoredNode::frame(n, root), *t, r, lr, best_t)
         }
 
         #[inline]
-        fn test_child<const B: usize>(n: &$node<B>, s: usize, _: &f32, v: &anchored::Visit, r: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
+        fn test_child<const B: usize>(
+            n: &$node<B>,
+            s: usize,
+            _: &f32,
+            v: &anchored::Visit,
+            r: &RayPre,
+            lr: &Ray16,
+        ) -> Option<(f32, (f32, f32))> {
             if lr.math == Math::F32 {
                 let (lo, hi) = anchored::AnchoredNode::world_box(n, s, &v.frame);
                 anchored::test_world(lo, hi, v, r)
@@ -172,7 +192,16 @@ macro_rules! anchored_hooks {
             }
         }
 
-        fn child_entry<const B: usize>(_: &$node<B>, _: usize, _: &f32, v: &anchored::Visit, h: &(f32, f32), _: &RayPre, lr: &Ray16, _: &mut Counters) -> f32 {
+        fn child_entry<const B: usize>(
+            _: &$node<B>,
+            _: usize,
+            _: &f32,
+            v: &anchored::Visit,
+            h: &(f32, f32),
+            _: &RayPre,
+            lr: &Ray16,
+            _: &mut Counters,
+        ) -> f32 {
             anchored::child_entry(v, *h, lr)
         }
     };
@@ -189,17 +218,23 @@ mod tests {
     /// decoded plane is never on the inner side of v — including sums that cancel, tiny and
     /// huge values. (A decode whose product is off by 2⁻²⁰ fails it.)
     fn case() -> impl Strategy<Value = (f32, f32, f32, bool)> {
-        let w = prop_oneof![any::<f32>().prop_filter("finite", |x| x.is_finite() && x.abs() < 1e30), -1e4f32..1e4, -1.0f32..1.0];
-        (w, -16384.0f64..16384.0, -60i32..60, any::<bool>(), prop_oneof![Just(0.0f64), 0.0f64..1.0]).prop_map(|(w, local, e, lower, frac)| {
-            let k = 2f64.powi(e);
-            // the true plane: an fp32 value near w + local / k
-            let v = (w as f64 + local / k) as f32;
-            // the stored value: the true plane mapped to local units, rounded outward to fp16
-            let l = (v as f64 - w as f64) * k;
-            let l16 = if lower { crate::fp16::down_f64(l) } else { crate::fp16::up_f64(l) };
-            let _ = frac;
-            (w, v, l16.to_f32() * (1.0 / k as f32), lower)
-        })
+        let w = prop_oneof![
+            any::<f32>().prop_filter("finite", |x| x.is_finite() && x.abs() < 1e30),
+            -1e4f32..1e4,
+            -1.0f32..1.0
+        ];
+        (w, -16384.0f64..16384.0, -60i32..60, any::<bool>(), prop_oneof![Just(0.0f64), 0.0f64..1.0]).prop_map(
+            |(w, local, e, lower, frac)| {
+                let k = 2f64.powi(e);
+                // the true plane: an fp32 value near w + local / k
+                let v = (w as f64 + local / k) as f32;
+                // the stored value: the true plane mapped to local units, rounded outward to fp16
+                let l = (v as f64 - w as f64) * k;
+                let l16 = if lower { crate::fp16::down_f64(l) } else { crate::fp16::up_f64(l) };
+                let _ = frac;
+                (w, v, l16.to_f32() * (1.0 / k as f32), lower)
+            },
+        )
     }
 
     proptest! {

@@ -125,7 +125,10 @@ pub fn encode_child(c: &ChildRef) -> u32 {
 #[inline]
 pub fn decode_child(w: u32) -> ChildRef {
     if w & LEAF_BIT != 0 {
-        ChildRef::Leaf { first: w & ((1 << LEAF_FIRST_BITS) - 1), count: ((w >> LEAF_FIRST_BITS) & ((1 << LEAF_COUNT_BITS) - 1)) + 1 }
+        ChildRef::Leaf {
+            first: w & ((1 << LEAF_FIRST_BITS) - 1),
+            count: ((w >> LEAF_FIRST_BITS) & ((1 << LEAF_COUNT_BITS) - 1)) + 1,
+        }
     } else {
         ChildRef::Inner(w)
     }
@@ -247,14 +250,37 @@ pub trait Layout: Send + Sync + Sized + 'static {
     /// entry: the node is skipped for the ray when it exceeds the closest hit.
     fn entry_t(e: &Self::Entry) -> f32;
     /// Per node and active ray, before its box tests (`n` is the node being visited).
-    fn visit<const B: usize>(n: &Self::Node<B>, root: &Self::Root, e: &Self::Entry, r: &RayPre, lr: &Self::Ray, best_t: f32) -> Self::Visit;
+    fn visit<const B: usize>(
+        n: &Self::Node<B>,
+        root: &Self::Root,
+        e: &Self::Entry,
+        r: &RayPre,
+        lr: &Self::Ray,
+        best_t: f32,
+    ) -> Self::Visit;
     /// The box test of slot `s`: `Some((key, data))` when the ray may touch the child; `key`
     /// orders the children (nearest first).
     #[allow(clippy::too_many_arguments)]
-    fn test_child<const B: usize>(n: &Self::Node<B>, s: usize, e: &Self::Entry, v: &Self::Visit, r: &RayPre, lr: &Self::Ray) -> Option<(f32, Self::ChildHit)>;
+    fn test_child<const B: usize>(
+        n: &Self::Node<B>,
+        s: usize,
+        e: &Self::Entry,
+        v: &Self::Visit,
+        r: &RayPre,
+        lr: &Self::Ray,
+    ) -> Option<(f32, Self::ChildHit)>;
     /// The stack entry of a hit inner child.
     #[allow(clippy::too_many_arguments)]
-    fn child_entry<const B: usize>(n: &Self::Node<B>, s: usize, e: &Self::Entry, v: &Self::Visit, h: &Self::ChildHit, r: &RayPre, lr: &Self::Ray, c: &mut Counters) -> Self::Entry;
+    fn child_entry<const B: usize>(
+        n: &Self::Node<B>,
+        s: usize,
+        e: &Self::Entry,
+        v: &Self::Visit,
+        h: &Self::ChildHit,
+        r: &RayPre,
+        lr: &Self::Ray,
+        c: &mut Counters,
+    ) -> Self::Entry;
 }
 
 /// A node array of any layout and B, as the type-erased [`Encoded`] holds it.
@@ -288,7 +314,11 @@ impl<N: Node> NodeArray for Vec<N> {
         for n in &self[range.clone()] {
             n.write_bytes(&mut out);
         }
-        assert_eq!(out.len(), range.len() * self.node_size(), "a node wrote other than size_of bytes: its struct has padding");
+        assert_eq!(
+            out.len(),
+            range.len() * self.node_size(),
+            "a node wrote other than size_of bytes: its struct has padding"
+        );
         out
     }
     fn child(&self, node: usize, s: usize) -> u32 {
@@ -356,9 +386,21 @@ impl Encoded {
     }
 
     /// The CPU reference of the kernel built with float controls `fc` (their bounds differ).
-    pub fn trace_fc(&self, rays: &[Ray], p: usize, math: Math, fc: crate::variant::FloatControls) -> (Vec<Hit>, Vec<Counters>) {
+    pub fn trace_fc(
+        &self,
+        rays: &[Ray],
+        p: usize,
+        math: Math,
+        fc: crate::variant::FloatControls,
+    ) -> (Vec<Hit>, Vec<Counters>) {
         let (hits, counters) = self.layout.bvh().expect("Encoded holds a BVH layout").trace(self, rays, p, math, fc);
-        crate::digest::record("cpu", &format!("{} B{} P{p} {} fc-{}", self.layout, self.branching, math.name(), fc.name()), rays, &hits, Some(&counters));
+        crate::digest::record(
+            "cpu",
+            &format!("{} B{} P{p} {} fc-{}", self.layout, self.branching, math.name(), fc.name()),
+            rays,
+            &hits,
+            Some(&counters),
+        );
         (hits, counters)
     }
 

@@ -2,7 +2,7 @@
 //! the report and `shaders --emit` read it; nothing else names a layout. Adding a layout is
 //! one line in [`REGISTRY`].
 
-use super::{Encoded, EncodeError, Layout, Math, Needs};
+use super::{EncodeError, Encoded, Layout, Math, Needs};
 use crate::bvh::WideBvh;
 use crate::gpu::kernel::RunOutput;
 use crate::gpu::{Gpu, GpuError};
@@ -64,7 +64,9 @@ impl LayoutId {
 
     /// The entry called `name`.
     pub fn parse(name: &str) -> Result<LayoutId, EncodeError> {
-        Self::all().find(|l| l.name() == name).ok_or_else(|| EncodeError::UnknownLayout(name.to_string(), Self::names()))
+        Self::all()
+            .find(|l| l.name() == name)
+            .ok_or_else(|| EncodeError::UnknownLayout(name.to_string(), Self::names()))
     }
 
     /// The layout implemented by `L`.
@@ -196,7 +198,13 @@ fn encode_b<L: Layout, const B: usize>(scene: &Scene, w: &WideBvh) -> Result<Enc
     })
 }
 
-fn trace_b<L: Layout, const B: usize>(enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
+fn trace_b<L: Layout, const B: usize>(
+    enc: &Encoded,
+    rays: &[Ray],
+    p: usize,
+    math: Math,
+    fc: FloatControls,
+) -> (Vec<Hit>, Vec<Counters>) {
     let (nodes, root) = enc.typed::<L, B>().expect("Encoded of another layout or B");
     crate::trace::traverse::trace_all::<L, B>(nodes, root, enc, rays, p, math, fc)
 }

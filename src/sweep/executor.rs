@@ -76,8 +76,17 @@ pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
 /// The layout, math, B and P fields of a job's row (for a row written without a result).
 fn hung_identity(job: &Job) -> Row {
     match job.target {
-        Target::Variant(v) => Row { layout: v.layout.name().into(), math: v.math.name().into(), branching: v.branching, packet: v.packet, float_controls: v.fc.name().into(), ..Default::default() },
-        Target::Baseline(b) => Row { layout: b.name().into(), math: "n/a".into(), float_controls: "n/a".into(), ..Default::default() },
+        Target::Variant(v) => Row {
+            layout: v.layout.name().into(),
+            math: v.math.name().into(),
+            branching: v.branching,
+            packet: v.packet,
+            float_controls: v.fc.name().into(),
+            ..Default::default()
+        },
+        Target::Baseline(b) => {
+            Row { layout: b.name().into(), math: "n/a".into(), float_controls: "n/a".into(), ..Default::default() }
+        }
         Target::Kernel(_) => Row { math: "n/a".into(), float_controls: "n/a".into(), ..Default::default() },
     }
 }
@@ -109,7 +118,12 @@ fn row_key(r: &Row) -> String {
 /// their jobs are not run again.
 pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row>) -> anyhow::Result<Summary> {
     cfg.check()?;
-    let opts = gpu::ContextOptions { device: (!cfg.device.is_empty()).then(|| cfg.device.clone()), mask_features: mask.to_vec(), kernel_timeout_s: Some(cfg.kernel_timeout), ..Default::default() };
+    let opts = gpu::ContextOptions {
+        device: (!cfg.device.is_empty()).then(|| cfg.device.clone()),
+        mask_features: mask.to_vec(),
+        kernel_timeout_s: Some(cfg.kernel_timeout),
+        ..Default::default()
+    };
     let g = Gpu::new(&opts)?;
     let mut jobs = jobs::list(cfg);
     if let Some(s) = cfg.shard {
@@ -144,9 +158,24 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     use std::io::IsTerminal;
     let lines = !quiet && !std::io::stderr().is_terminal();
     let t0 = std::time::Instant::now();
-    let bar = if quiet || lines { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(jobs.len() as u64) };
-    bar.set_style(indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} ETA {eta}] {msg}").unwrap());
-    let mut ex = Executor { gpu: &g, cfg, kinds: jobs::kinds(cfg), baselines: &baselines, bench, kernels: HashMap::new(), user: HashMap::new(), scene: None, failed: Vec::new(), out, bar: &bar };
+    let bar =
+        if quiet || lines { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(jobs.len() as u64) };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} [{elapsed_precise} ETA {eta}] {msg}").unwrap(),
+    );
+    let mut ex = Executor {
+        gpu: &g,
+        cfg,
+        kinds: jobs::kinds(cfg),
+        baselines: &baselines,
+        bench,
+        kernels: HashMap::new(),
+        user: HashMap::new(),
+        scene: None,
+        failed: Vec::new(),
+        out,
+        bar: &bar,
+    };
     let last = jobs::last_uses(cfg, &jobs);
     for (i, job) in jobs.iter().enumerate() {
         ex.bar.set_message(ex.describe(job));
@@ -182,7 +211,17 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
             let done = i + 1;
             let el = t0.elapsed().as_secs_f64();
             let eta = el / done as f64 * (jobs.len() - done) as f64;
-            eprintln!("[{done}/{}] {} {} {}: {} ({:.2} Mrays/s) — {:.0} s elapsed, ETA {:.0} s", jobs.len(), row.scene, row.rays, row.kernel, row.status, row.mrays_median, el, eta);
+            eprintln!(
+                "[{done}/{}] {} {} {}: {} ({:.2} Mrays/s) — {:.0} s elapsed, ETA {:.0} s",
+                jobs.len(),
+                row.scene,
+                row.rays,
+                row.kernel,
+                row.status,
+                row.mrays_median,
+                el,
+                eta
+            );
         }
         writer.push(row)?;
         if let Some(s) = ex.scene.as_mut() {
@@ -265,7 +304,17 @@ impl<'a, 'g> Executor<'a, 'g> {
             let bin = bvh::build_binary(&scene);
             let binary_ms = t.elapsed().as_secs_f64() * 1e3;
             let f32_ref = Some(Encoded::new(&scene, &bin, LayoutId::f32(), 4)?);
-            self.scene = Some(SceneState { index, scene, bin, binary_ms, f32_ref, rays: HashMap::new(), encodings: HashMap::new(), baselines: HashMap::new(), images: Vec::new() });
+            self.scene = Some(SceneState {
+                index,
+                scene,
+                bin,
+                binary_ms,
+                f32_ref,
+                rays: HashMap::new(),
+                encodings: HashMap::new(),
+                baselines: HashMap::new(),
+                images: Vec::new(),
+            });
         }
         Ok(self.scene.as_mut().expect("just set"))
     }
@@ -276,7 +325,8 @@ impl<'a, 'g> Executor<'a, 'g> {
         let (kind, kinds) = (self.kinds[job.rays].clone(), self.kinds.len());
         let s = self.scene(job.scene)?;
         if !s.rays.contains_key(&job.rays) {
-            let params = RayParams { width: cfg.width, height: cfg.height, camera: None, seed: cfg.seed, ..Default::default() };
+            let params =
+                RayParams { width: cfg.width, height: cfg.height, camera: None, seed: cfg.seed, ..Default::default() };
             let rays = make_rays(&s.scene, &s.bin, &kind, &params)?;
             let f32_hits = s.f32_ref.as_ref().expect("kept until every ray kind has its hits").trace_default(&rays).0;
             s.rays.insert(job.rays, RaySet { rays, f32_hits });
@@ -329,8 +379,10 @@ impl<'a, 'g> Executor<'a, 'g> {
             Some(i) if !self.user.contains_key(&i) => {
                 let spec = &self.cfg.kernel[i];
                 let src = Source::user(&spec.file);
-                let timed = Kernel::build(g, v, imp, false, &src).with_context(|| format!("[[kernel]] '{}'", spec.name))?;
-                let counting = Kernel::user_counting(g, v, imp, &src).with_context(|| format!("[[kernel]] '{}' (counting)", spec.name))?;
+                let timed =
+                    Kernel::build(g, v, imp, false, &src).with_context(|| format!("[[kernel]] '{}'", spec.name))?;
+                let counting = Kernel::user_counting(g, v, imp, &src)
+                    .with_context(|| format!("[[kernel]] '{}' (counting)", spec.name))?;
                 self.user.insert(i, (timed, counting));
             }
             Some(_) => {}
@@ -364,7 +416,14 @@ impl<'a, 'g> Executor<'a, 'g> {
         // Correctness before speed: the CPU reference of the same layout, packet size and math.
         let (ref_hits, ref_counters) = enc.trace_fc(&set.rays, v.packet, v.math, v.fc);
         let target = KernelTarget { gpu: g, bvh: gb, timed, counting };
-        let m = measure::validate_then_time(&target, &set.rays, Reference::Exact { hits: &ref_hits, counters: &ref_counters }, &set.f32_hits, plan).with_context(|| name.clone())?;
+        let m = measure::validate_then_time(
+            &target,
+            &set.rays,
+            Reference::Exact { hits: &ref_hits, counters: &ref_counters },
+            &set.f32_hits,
+            plan,
+        )
+        .with_context(|| name.clone())?;
         let node_size = enc.node_size();
         let mut row = self.base_row(job, &s.scene, set.rays.len(), v.layout, &name, &m);
         row.math = v.math.name().into();
@@ -381,15 +440,34 @@ impl<'a, 'g> Executor<'a, 'g> {
                 Some(c) => {
                     let mc = mean_counters(c);
                     let packets = set.rays.len().div_ceil(v.packet).max(1) as f64;
-                    [mc[0], mc[1], mc[2], mc[3], c.iter().map(|x| x.packet_nodes as f64).sum::<f64>() / packets, simd_utilisation(c, v.packet)]
+                    [
+                        mc[0],
+                        mc[1],
+                        mc[2],
+                        mc[3],
+                        c.iter().map(|x| x.packet_nodes as f64).sum::<f64>() / packets,
+                        simd_utilisation(c, v.packet),
+                    ]
                 }
                 None => [f64::NAN; 6],
             }
         };
         let c = counts(m.counters.as_ref());
-        (row.nodes_per_ray, row.box_tests_per_ray, row.tri_tests_per_ray, row.reanchors_per_ray, row.packet_nodes_per_packet, row.simd_utilisation) = (c[0], c[1], c[2], c[3], c[4], c[5]);
+        (
+            row.nodes_per_ray,
+            row.box_tests_per_ray,
+            row.tri_tests_per_ray,
+            row.reanchors_per_ray,
+            row.packet_nodes_per_packet,
+            row.simd_utilisation,
+        ) = (c[0], c[1], c[2], c[3], c[4], c[5]);
         row.node_bytes_per_ray = c[0] * node_size as f64;
-        let wants_image = s.index == 0 && self.kinds[job.rays] == RayKind::Primary && user.is_none() && v.branching == 4 && v.packet == 1 && v.math == v.layout.caps().maths[0];
+        let wants_image = s.index == 0
+            && self.kinds[job.rays] == RayKind::Primary
+            && user.is_none()
+            && v.branching == 4
+            && v.packet == 1
+            && v.math == v.layout.caps().maths[0];
         if wants_image && m.failure.is_none() {
             let nodes = m.counters.as_ref().map(|c| c.iter().map(|x| x.nodes as f64).collect()).unwrap_or_default();
             self.scene.as_mut().expect("prepared").images.push((v.layout, m.hits, nodes));
@@ -431,7 +509,13 @@ impl<'a, 'g> Executor<'a, 'g> {
         let s = self.scene.as_ref().expect("prepared");
         let (bs, set) = (&s.baselines[&b], &s.rays[&job.rays]);
         let plan = Plan { warmup: self.cfg.warmup, repeat: self.cfg.repeat, count: false };
-        let m = measure::validate_then_time(&BaselineTarget { name: bl.kernel(), scene: bs.as_ref() }, &set.rays, Reference::Agreement, &set.f32_hits, plan)?;
+        let m = measure::validate_then_time(
+            &BaselineTarget { name: bl.kernel(), scene: bs.as_ref() },
+            &set.rays,
+            Reference::Agreement,
+            &set.f32_hits,
+            plan,
+        )?;
         let mut row = self.base_row(job, &s.scene, set.rays.len(), b, bl.kernel(), &m);
         row.bvh_bytes = bs.bytes();
         row.build_ms = bs.build_ms();
@@ -440,7 +524,15 @@ impl<'a, 'g> Executor<'a, 'g> {
     }
 
     /// The row fields every target shares: identity, status, timing, agreement with f32.
-    fn base_row(&self, job: &Job, scene: &Scene, ray_count: usize, layout: LayoutId, kernel: &str, m: &Measurement) -> Row {
+    fn base_row(
+        &self,
+        job: &Job,
+        scene: &Scene,
+        ray_count: usize,
+        layout: LayoutId,
+        kernel: &str,
+        m: &Measurement,
+    ) -> Row {
         let kind = &self.kinds[job.rays];
         let status = match &m.failure {
             None => "ok".to_string(),

@@ -45,7 +45,8 @@ pub fn kinds(cfg: &Config) -> Vec<RayKind> {
 /// kind, then the baselines, then the user kernels.
 pub fn list(cfg: &Config) -> Vec<Job> {
     let kinds = kinds(cfg);
-    let index = |r: &str| kinds.iter().position(|k| *k == r.parse::<RayKind>().expect("checked")).expect("listed in kinds");
+    let index =
+        |r: &str| kinds.iter().position(|k| *k == r.parse::<RayKind>().expect("checked")).expect("listed in kinds");
     let swept: Vec<usize> = cfg.rays.iter().map(|r| index(r)).collect();
     let mut jobs = Vec::new();
     for scene in 0..cfg.scenes.len() {
@@ -135,7 +136,13 @@ fn cost(cfg: &Config, job: &Job, scene_bytes: &[u64]) -> f64 {
             let math = match v.math {
                 crate::layout::Math::F16 => 4.0,
                 crate::layout::Math::Mixed => 3.0,
-                crate::layout::Math::F32 => if v.layout == crate::layout::LayoutId::f32() { 1.0 } else { 1.5 },
+                crate::layout::Math::F32 => {
+                    if v.layout == crate::layout::LayoutId::f32() {
+                        1.0
+                    } else {
+                        1.5
+                    }
+                }
             };
             math * if v.packet >= 16 { 2.5 } else { 1.0 }
         }
@@ -211,7 +218,11 @@ mod tests {
         let bytes = [1_000_000, 50_000, 20_000_000];
         for n in [1, 2, 3, 5, 8] {
             let shards: Vec<Vec<Job>> = (1..=n).map(|k| shard(&cfg, &jobs, Shard { k, n }, &bytes)).collect();
-            assert_eq!(shards, (1..=n).map(|k| shard(&cfg, &jobs, Shard { k, n }, &bytes)).collect::<Vec<_>>(), "deterministic");
+            assert_eq!(
+                shards,
+                (1..=n).map(|k| shard(&cfg, &jobs, Shard { k, n }, &bytes)).collect::<Vec<_>>(),
+                "deterministic"
+            );
             let mut all: Vec<Job> = shards.concat();
             assert_eq!(all.len(), jobs.len(), "n={n}: every job in exactly one shard");
             all.sort_by_key(|j| jobs.iter().position(|x| x == j).unwrap());
@@ -223,7 +234,10 @@ mod tests {
                 assert!(pos.windows(2).all(|w| w[0] < w[1]));
                 for j in s {
                     if let Some(e) = encoding(&cfg, j) {
-                        assert!(jobs.iter().filter(|x| encoding(&cfg, x) == Some(e)).all(|x| s.contains(x)), "n={n}: encoding {e:?} split");
+                        assert!(
+                            jobs.iter().filter(|x| encoding(&cfg, x) == Some(e)).all(|x| s.contains(x)),
+                            "n={n}: encoding {e:?} split"
+                        );
                     }
                 }
             }
@@ -233,9 +247,13 @@ mod tests {
                 Some(e) => format!("{e:?}"),
                 None => format!("{} {:?}", j.scene, j.target),
             };
-            let biggest = jobs.iter().map(|j| jobs.iter().filter(|x| group(x) == group(j)).map(|x| cost(&cfg, x, &bytes)).sum::<f64>()).fold(0.0, f64::max);
+            let biggest = jobs
+                .iter()
+                .map(|j| jobs.iter().filter(|x| group(x) == group(j)).map(|x| cost(&cfg, x, &bytes)).sum::<f64>())
+                .fold(0.0, f64::max);
             let costs: Vec<f64> = shards.iter().map(|s| s.iter().map(|j| cost(&cfg, j, &bytes)).sum()).collect();
-            let (lo, hi) = (costs.iter().cloned().fold(f64::INFINITY, f64::min), costs.iter().cloned().fold(0.0, f64::max));
+            let (lo, hi) =
+                (costs.iter().cloned().fold(f64::INFINITY, f64::min), costs.iter().cloned().fold(0.0, f64::max));
             assert!(hi <= lo + biggest * 1.0001, "n={n}: unbalanced {costs:?} (largest group {biggest})");
         }
     }
@@ -246,12 +264,32 @@ mod tests {
         for bad in ["0/2", "3/2", "1/0", "2", "a/b", "1/2/3"] {
             assert!(bad.parse::<Shard>().unwrap_err().contains("K/N"), "{bad}");
         }
-        let env = |vars: &'static [(&'static str, &'static str)]| move |k: &str| vars.iter().find(|v| v.0 == k).map(|v| v.1.to_string());
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |k: &str| vars.iter().find(|v| v.0 == k).map(|v| v.1.to_string())
+        };
         assert_eq!(Shard::from_slurm(env(&[])), Ok(None));
-        assert_eq!(Shard::from_slurm(env(&[("SLURM_ARRAY_TASK_COUNT", "4"), ("SLURM_ARRAY_TASK_ID", "0"), ("SLURM_ARRAY_TASK_MIN", "0")])), Ok(Some(Shard { k: 1, n: 4 })));
-        assert_eq!(Shard::from_slurm(env(&[("SLURM_ARRAY_TASK_COUNT", "4"), ("SLURM_ARRAY_TASK_ID", "4"), ("SLURM_ARRAY_TASK_MIN", "1")])), Ok(Some(Shard { k: 4, n: 4 })));
-        assert!(Shard::from_slurm(env(&[("SLURM_ARRAY_TASK_COUNT", "4"), ("SLURM_ARRAY_TASK_ID", "7")])).unwrap_err().contains("--array=0-3"));
-        assert!(Shard::from_slurm(env(&[("SLURM_ARRAY_TASK_COUNT", "4")])).unwrap_err().contains("SLURM_ARRAY_TASK_ID is not"));
+        assert_eq!(
+            Shard::from_slurm(env(&[
+                ("SLURM_ARRAY_TASK_COUNT", "4"),
+                ("SLURM_ARRAY_TASK_ID", "0"),
+                ("SLURM_ARRAY_TASK_MIN", "0")
+            ])),
+            Ok(Some(Shard { k: 1, n: 4 }))
+        );
+        assert_eq!(
+            Shard::from_slurm(env(&[
+                ("SLURM_ARRAY_TASK_COUNT", "4"),
+                ("SLURM_ARRAY_TASK_ID", "4"),
+                ("SLURM_ARRAY_TASK_MIN", "1")
+            ])),
+            Ok(Some(Shard { k: 4, n: 4 }))
+        );
+        assert!(Shard::from_slurm(env(&[("SLURM_ARRAY_TASK_COUNT", "4"), ("SLURM_ARRAY_TASK_ID", "7")]))
+            .unwrap_err()
+            .contains("--array=0-3"));
+        assert!(Shard::from_slurm(env(&[("SLURM_ARRAY_TASK_COUNT", "4")]))
+            .unwrap_err()
+            .contains("SLURM_ARRAY_TASK_ID is not"));
         assert_eq!(Shard { k: 2, n: 8 }.folder(), "shard-2-of-8");
     }
 
@@ -271,7 +309,10 @@ mod tests {
         for (i, j) in jobs.iter().enumerate() {
             if let Some(k) = encoding(&cfg, j) {
                 let first = jobs.iter().position(|x| encoding(&cfg, x) == Some(k)).unwrap();
-                assert!(jobs[first..=last[&k]].iter().all(|x| encoding(&cfg, x) == Some(k)), "encoding {k:?} is needed again after job {i}");
+                assert!(
+                    jobs[first..=last[&k]].iter().all(|x| encoding(&cfg, x) == Some(k)),
+                    "encoding {k:?} is needed again after job {i}"
+                );
             }
         }
     }

@@ -84,7 +84,11 @@ impl KernelSpec {
     pub fn variant(&self) -> anyhow::Result<Variant> {
         let what = || format!("[[kernel]] '{}'", self.name);
         let layout: LayoutId = self.layout.parse().with_context(what)?;
-        anyhow::ensure!(layout.bvh().is_some(), "{}: layout {layout} is a baseline; a kernel needs a BVH layout", what());
+        anyhow::ensure!(
+            layout.bvh().is_some(),
+            "{}: layout {layout} is a baseline; a kernel needs a BVH layout",
+            what()
+        );
         let b = bvh::check_branching(self.branching.unwrap_or(4)).with_context(what)?;
         let p = self.packet.unwrap_or(1);
         anyhow::ensure!(PACKETS.contains(&p), "{}: packet {p} is not one of 1, 4, 8, 16, 32, 64", what());
@@ -167,7 +171,11 @@ impl Config {
                 r.parse::<RayKind>().with_context(|| format!("[[kernel]] '{}'", k.name))?;
             }
             anyhow::ensure!(k.file.is_file(), "[[kernel]] '{}': {} is not a readable file", k.name, k.file.display());
-            anyhow::ensure!(!self.kernel[..i].iter().any(|o| o.name == k.name), "[[kernel]] '{}' is named twice", k.name);
+            anyhow::ensure!(
+                !self.kernel[..i].iter().any(|o| o.name == k.name),
+                "[[kernel]] '{}' is named twice",
+                k.name
+            );
         }
         Ok(())
     }
@@ -221,7 +229,8 @@ impl Config {
 
 /// `reports/<UTC timestamp>` for a default output folder.
 pub fn default_out() -> PathBuf {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0) as i64;
+    let secs =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0) as i64;
     let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
     // civil-from-days (H. Hinnant)
     let z = days + 719_468;

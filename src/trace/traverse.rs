@@ -18,11 +18,11 @@
 //! Packets are P consecutive rays; the last may be partial. Packet counters (nodes the packet
 //! visited, active rays summed over them) are stored in its first ray.
 
-use crate::variant::FloatControls;
 use super::{slab32, Closest, Counters, Hit, RayPre};
 use crate::bvh::ChildRef;
 use crate::layout::{decode_child, Encoded, Layout, Math, Node, TriBuffer, CHILD_EMPTY};
 use crate::rays::Ray;
+use crate::variant::FloatControls;
 use rayon::prelude::*;
 
 /// Orders hit children by (key, slot) ascending: an insertion sort over slots given in
@@ -78,26 +78,58 @@ struct Scratch<L: Layout> {
 
 impl<L: Layout> Scratch<L> {
     fn new() -> Scratch<L> {
-        Scratch { lanes: Vec::new(), stack: Vec::new(), entries: Vec::new(), cur: Vec::new(), visits: Vec::new(), res: Vec::new(), order: Vec::new(), pend: Vec::new(), pend_entries: Vec::new() }
+        Scratch {
+            lanes: Vec::new(),
+            stack: Vec::new(),
+            entries: Vec::new(),
+            cur: Vec::new(),
+            visits: Vec::new(),
+            res: Vec::new(),
+            order: Vec::new(),
+            pend: Vec::new(),
+            pend_entries: Vec::new(),
+        }
     }
 }
 
 /// Traces `rays` in packets of `p` consecutive rays (in parallel), keeping input order.
-pub fn trace_all<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
+pub fn trace_all<L: Layout, const B: usize>(
+    nodes: &[L::Node<B>],
+    root: &L::Root,
+    enc: &Encoded,
+    rays: &[Ray],
+    p: usize,
+    math: Math,
+    fc: FloatControls,
+) -> (Vec<Hit>, Vec<Counters>) {
     let p = p.max(1);
     let mut hits = vec![Hit::MISS; rays.len()];
     let mut counters = vec![Counters::default(); rays.len()];
     let box_lo: [f32; 3] = enc.root_box.min.into();
     let box_hi: [f32; 3] = enc.root_box.max.into();
-    rays.par_chunks(p).zip(hits.par_chunks_mut(p)).zip(counters.par_chunks_mut(p)).for_each_init(Scratch::<L>::new, |s, ((rays, hits), counters)| {
-        packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters)
-    });
+    rays.par_chunks(p).zip(hits.par_chunks_mut(p)).zip(counters.par_chunks_mut(p)).for_each_init(
+        Scratch::<L>::new,
+        |s, ((rays, hits), counters)| {
+            packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters)
+        },
+    );
     (hits, counters)
 }
 
 /// Traces one packet.
 #[allow(clippy::too_many_arguments)]
-fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris: &TriBuffer, root_box: ([f32; 3], [f32; 3]), rays: &[Ray], math: Math, fc: FloatControls, s: &mut Scratch<L>, hits: &mut [Hit], counters: &mut [Counters]) {
+fn packet<L: Layout, const B: usize>(
+    nodes: &[L::Node<B>],
+    root: &L::Root,
+    tris: &TriBuffer,
+    root_box: ([f32; 3], [f32; 3]),
+    rays: &[Ray],
+    math: Math,
+    fc: FloatControls,
+    s: &mut Scratch<L>,
+    hits: &mut [Hit],
+    counters: &mut [Counters],
+) {
     let p = rays.len();
     let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries } = s;
     lanes.clear();
@@ -126,7 +158,10 @@ fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris:
         let n = &nodes[ni as usize];
         let mut active = 0;
         for (lane, e) in lanes.iter().zip(cur.iter()) {
-            let v = e.as_ref().filter(|e| L::entry_t(e) <= lane.best.t).map(|e| L::visit::<B>(n, root, e, &lane.r, &lane.lr, lane.best.t));
+            let v = e
+                .as_ref()
+                .filter(|e| L::entry_t(e) <= lane.best.t)
+                .map(|e| L::visit::<B>(n, root, e, &lane.r, &lane.lr, lane.best.t));
             active += v.is_some() as u32;
             visits.push(v);
         }
@@ -180,7 +215,9 @@ fn packet<L: Layout, const B: usize>(nodes: &[L::Node<B>], root: &L::Root, tris:
                     for l in 0..p {
                         let lane = &mut lanes[l];
                         let e = match (&tests[l], &cur[l], &visits[l]) {
-                            (Some((_, h)), Some(e), Some(v)) => Some(L::child_entry::<B>(n, slot, e, v, h, &lane.r, &lane.lr, &mut lane.c)),
+                            (Some((_, h)), Some(e), Some(v)) => {
+                                Some(L::child_entry::<B>(n, slot, e, v, h, &lane.r, &lane.lr, &mut lane.c))
+                            }
                             _ => None,
                         };
                         pend_entries.push(e);

@@ -93,17 +93,38 @@ pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::layout::Baselin
         let f = encode(&p, LayoutId::f32(), 4);
         for (kind, rays) in ray_sets(&p, 48, 1500) {
             let out = bs.run(&rays, warmup, 1).unwrap();
-            assert_eq!((out.hits.len(), out.times_ms.len()), (rays.len(), 1), "{name}: one hit per ray, one time per timed run");
+            assert_eq!(
+                (out.hits.len(), out.times_ms.len()),
+                (rays.len(), 1),
+                "{name}: one hit per ray, one time per timed run"
+            );
             let a = halftrace::trace::agreement(&out.hits, &f.trace_default(&rays).0);
-            eprintln!("{} {kind}: {name} agrees with f32 on {:.4}% of {} rays ({} false misses)", p.scene.name, 100.0 * a.rate(), a.total, a.false_misses);
+            eprintln!(
+                "{} {kind}: {name} agrees with f32 on {:.4}% of {} rays ({} false misses)",
+                p.scene.name,
+                100.0 * a.rate(),
+                a.total,
+                a.false_misses
+            );
             if kind == "grazing" {
                 grazing.0 += a.agree;
                 grazing.1 += a.total;
             } else {
                 worst = worst.min(a.rate());
-                assert!(a.rate() >= 0.9999, "{} {kind}: {name} agreement {:.4}% < 99.99%", p.scene.name, 100.0 * a.rate());
+                assert!(
+                    a.rate() >= 0.9999,
+                    "{} {kind}: {name} agreement {:.4}% < 99.99%",
+                    p.scene.name,
+                    100.0 * a.rate()
+                );
             }
         }
     }
-    eprintln!("{name} vs f32: worst primary/ao/diffuse agreement {:.4}%, grazing set {:.3}% ({} of {})", 100.0 * worst, 100.0 * grazing.0 as f64 / grazing.1 as f64, grazing.0, grazing.1);
+    eprintln!(
+        "{name} vs f32: worst primary/ao/diffuse agreement {:.4}%, grazing set {:.3}% ({} of {})",
+        100.0 * worst,
+        100.0 * grazing.0 as f64 / grazing.1 as f64,
+        grazing.0,
+        grazing.1
+    );
 }

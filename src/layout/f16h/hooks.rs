@@ -375,7 +375,13 @@ pub fn slot_box<const B: usize>(n: &F16hNode<B>, s: usize) -> ([f16; 3], [f16; 3
 
 /// The box test of one child: `Some((tn, (tn, tn_lb)))` when the ray may touch it.
 #[inline]
-pub fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Visit, r16: &Ray16) -> Option<(f32, (f32, f32))> {
+pub fn test_child<const B: usize>(
+    n: &F16hNode<B>,
+    s: usize,
+    en: &Entry,
+    v: &Visit,
+    r16: &Ray16,
+) -> Option<(f32, (f32, f32))> {
     let (lo, hi) = slot_box(n, s);
     test_box(&en.o, lo, hi, v, r16).map(|(tn, tn_lb)| (tn, (tn, tn_lb)))
 }
@@ -383,7 +389,16 @@ pub fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Vis
 /// The stack entry of a hit inner child: its frame, and the origin moved into it in fp16
 /// (or re-anchored from the fp32 world ray when the bound grows too large).
 #[allow(clippy::too_many_arguments)]
-pub fn child_entry<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Visit, (tn, tn_lb): (f32, f32), r: &RayPre, r16: &Ray16, c: &mut Counters) -> Entry {
+pub fn child_entry<const B: usize>(
+    n: &F16hNode<B>,
+    s: usize,
+    en: &Entry,
+    v: &Visit,
+    (tn, tn_lb): (f32, f32),
+    r: &RayPre,
+    r16: &Ray16,
+    c: &mut Counters,
+) -> Entry {
     let (lo, hi) = slot_box(n, s);
     let (mk, math) = (v.mk, r16.math);
     let cf = derive_child(&en.frame, lo, hi);
@@ -429,9 +444,15 @@ pub fn child_entry<const B: usize>(n: &F16hNode<B>, s: usize, en: &Entry, v: &Vi
         let wmax = cf.frame.w.iter().fold(0f32, |m, x| m.max(x.abs()));
         let mk2 = r16.m * cf.frame.k;
         let e2 = if off {
-            (cf.r * (en.e + se.abs() * TWO_M9 + TWO_M10 * (emag + ecmag) + TWO_M22) + wmax * TWO_M24 * cf.frame.k + (en.tp.abs() + step.abs()) * TWO_M20 * mk2) * (1.0 + TWO_M18)
+            (cf.r * (en.e + se.abs() * TWO_M9 + TWO_M10 * (emag + ecmag) + TWO_M22)
+                + wmax * TWO_M24 * cf.frame.k
+                + (en.tp.abs() + step.abs()) * TWO_M20 * mk2)
+                * (1.0 + TWO_M18)
         } else {
-            (cf.r * (en.e + se.abs() * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23) + wmax * TWO_M24 * cf.frame.k + (en.tp.abs() + step.abs()) * TWO_M22 * mk2) * (1.0 + TWO_M18)
+            (cf.r * (en.e + se.abs() * TWO_M10 + TWO_M11 * (emag + ecmag) + TWO_M23)
+                + wmax * TWO_M24 * cf.frame.k
+                + (en.tp.abs() + step.abs()) * TWO_M22 * mk2)
+                * (1.0 + TWO_M18)
         };
         if finite && omag <= OCAP && e2 <= EMAX {
             return Entry { frame: cf.frame, o: o2, e: e2, tp, tlo };
@@ -485,12 +506,22 @@ mod tests {
             let la = faithful(faithful(lo[a].to_f64() - o[a].to_f64(), flip()).to_f64() - w.to_f64(), flip());
             let ha = faithful(faithful(hi[a].to_f64() - o[a].to_f64(), flip()).to_f64() + w.to_f64(), flip());
             let (t0, t1) = if d[a] == f16::ZERO {
-                if la <= f16::ZERO && ha >= f16::ZERO { (-sat, sat) } else { (sat, -sat) }
+                if la <= f16::ZERO && ha >= f16::ZERO {
+                    (-sat, sat)
+                } else {
+                    (sat, -sat)
+                }
             } else {
                 let idir = faithful(1.0 / d[a].to_f64(), flip());
                 let mul = |v: f16, f: bool| {
                     let p = v.to_f64() * idir.to_f64();
-                    if p > SAT as f64 { sat } else if p < -(SAT as f64) { -sat } else { faithful(p, f) }
+                    if p > SAT as f64 {
+                        sat
+                    } else if p < -(SAT as f64) {
+                        -sat
+                    } else {
+                        faithful(p, f)
+                    }
                 };
                 let (x, y) = (mul(la, flip()), mul(ha, flip()));
                 (x.min(y), x.max(y))
@@ -508,7 +539,14 @@ mod tests {
     /// Rays and boxes of the slab property tests: a point X of the box at parameter s on the
     /// exact line through P = X − s·d (|P| ≤ 20000), and an fp16 origin O within e of P.
     #[allow(clippy::type_complexity)]
-    fn slab_case(x: [f64; 3], off: [f64; 3], e_scale: f64, d: [f64; 3], s_frac: f64, ext: [f64; 3]) -> ([f16; 3], f32, f64, [f16; 3], [f16; 3]) {
+    fn slab_case(
+        x: [f64; 3],
+        off: [f64; 3],
+        e_scale: f64,
+        d: [f64; 3],
+        s_frac: f64,
+        ext: [f64; 3],
+    ) -> ([f16; 3], f32, f64, [f16; 3], [f16; 3]) {
         let mut s = s_frac * (16384.0 + 20000.0);
         for a in 0..3 {
             if d[a] != 0.0 {
@@ -553,13 +591,29 @@ mod tests {
                 let Some(d) = dir(dv) else { return Ok(()) };
                 let (o, e, s, lo, hi) = slab_case(x, off, e_scale, d, s_frac, ext);
                 prop_assume!(e <= EBIG);
-                let pre = RayPre::new(&Ray::new(glam::Vec3::ZERO, glam::Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32), 0.0, f32::INFINITY));
+                let pre = RayPre::new(&Ray::new(
+                    glam::Vec3::ZERO,
+                    glam::Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32),
+                    0.0,
+                    f32::INFINITY,
+                ));
                 let r16 = Ray16::new(&pre, Math::F16, crate::variant::FloatControls::Off);
                 for flips in [seed, !seed, u64::MAX, 0] {
                     let mut bits = flips;
                     let w = up_f32(e + e * TWO_M11 + W_MARGIN_OFF);
                     let (tn_lb, tf_ub) = slab16_faithful(&o, &r16.d, w, lo, hi, &mut bits);
-                    prop_assert!(tn_lb <= s && s <= tf_ub, "s={} not in [{}, {}] (o={:?} e={} d={:?} box {:?}..{:?})", s, tn_lb, tf_ub, o, e, d, lo, hi);
+                    prop_assert!(
+                        tn_lb <= s && s <= tf_ub,
+                        "s={} not in [{}, {}] (o={:?} e={} d={:?} box {:?}..{:?})",
+                        s,
+                        tn_lb,
+                        tf_ub,
+                        o,
+                        e,
+                        d,
+                        lo,
+                        hi
+                    );
                 }
                 Ok(())
             })

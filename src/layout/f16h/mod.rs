@@ -13,7 +13,7 @@ pub mod hooks;
 pub use frame::{derive_child, encode_with_frames, root_frame, to_local, ChildFrame, Frame, COORD_LIMIT};
 pub use hooks::{Entry, Ray16, Visit};
 
-use super::{Needs, EncodeError, Layout, Math, Node};
+use super::{EncodeError, Layout, Math, Needs, Node};
 use crate::bvh::WideBvh;
 use crate::scene::Scene;
 use crate::trace::{Counters, RayPre};
@@ -58,7 +58,8 @@ impl<const B: usize> Node for F16hNode<B> {
 
 impl Layout for F16h {
     const NAME: &'static str = "f16h";
-    const SUMMARY: &'static str = "fp16 child boxes in the parent's frame, frames chained (Koskela et al.), made conservative";
+    const SUMMARY: &'static str =
+        "fp16 child boxes in the parent's frame, frames chained (Koskela et al.), made conservative";
     const MATHS: &'static [Math] = &[Math::F16, Math::F32, Math::Mixed];
     const GLSL: &'static str = include_str!("../../../glsl/layout/f16h.glsl");
 
@@ -91,7 +92,9 @@ impl Layout for F16h {
         // frame (w.xyz, k), origin in the node's frame, its error bound, tp, tlo.
         match math {
             Math::F32 => &[("wk", "vec4"), ("o", "vec3"), ("e", "float"), ("tp", "float"), ("tlo", "float")],
-            Math::F16 | Math::Mixed => &[("wk", "vec4"), ("o", "f16vec3"), ("e", "float"), ("tp", "float"), ("tlo", "float")],
+            Math::F16 | Math::Mixed => {
+                &[("wk", "vec4"), ("o", "f16vec3"), ("e", "float"), ("tp", "float"), ("tlo", "float")]
+            }
         }
     }
 
@@ -129,11 +132,27 @@ impl Layout for F16h {
     }
 
     #[inline]
-    fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, e: &Entry, v: &Visit, _: &RayPre, lr: &Ray16) -> Option<(f32, (f32, f32))> {
+    fn test_child<const B: usize>(
+        n: &F16hNode<B>,
+        s: usize,
+        e: &Entry,
+        v: &Visit,
+        _: &RayPre,
+        lr: &Ray16,
+    ) -> Option<(f32, (f32, f32))> {
         hooks::test_child(n, s, e, v, lr)
     }
 
-    fn child_entry<const B: usize>(n: &F16hNode<B>, s: usize, e: &Entry, v: &Visit, h: &(f32, f32), r: &RayPre, lr: &Ray16, c: &mut Counters) -> Entry {
+    fn child_entry<const B: usize>(
+        n: &F16hNode<B>,
+        s: usize,
+        e: &Entry,
+        v: &Visit,
+        h: &(f32, f32),
+        r: &RayPre,
+        lr: &Ray16,
+        c: &mut Counters,
+    ) -> Entry {
         hooks::child_entry(n, s, e, v, *h, r, lr, c)
     }
 }

@@ -97,7 +97,14 @@ impl Layout for F16hSeed {
         Visit { mk, s_lim: f16::from_f32((best_t - e.tp) * mk) }
     }
 
-    fn test_child<const B: usize>(n: &F16hNode<B>, s: usize, e: &Entry, v: &Visit, _: &RayPre, lr: &Ray16) -> Option<(f32, f16)> {
+    fn test_child<const B: usize>(
+        n: &F16hNode<B>,
+        s: usize,
+        e: &Entry,
+        v: &Visit,
+        _: &RayPre,
+        lr: &Ray16,
+    ) -> Option<(f32, f16)> {
         let (lo, hi) = slot_box(n, s);
         let (mut tn, mut tf) = (f16::NEG_INFINITY, f16::INFINITY);
         for a in 0..3 {
@@ -119,7 +126,16 @@ impl Layout for F16hSeed {
         (tn <= tf && tf >= f16::ZERO && tn <= v.s_lim).then_some((tn.to_f32(), tn))
     }
 
-    fn child_entry<const B: usize>(n: &F16hNode<B>, s: usize, e: &Entry, v: &Visit, tn: &f16, _: &RayPre, lr: &Ray16, _: &mut Counters) -> Entry {
+    fn child_entry<const B: usize>(
+        n: &F16hNode<B>,
+        s: usize,
+        e: &Entry,
+        v: &Visit,
+        tn: &f16,
+        _: &RayPre,
+        lr: &Ray16,
+        _: &mut Counters,
+    ) -> Entry {
         let (lo, hi) = slot_box(n, s);
         let cf = derive_child(&e.frame, lo, hi);
         let se = tn.max(f16::ZERO);

@@ -109,13 +109,29 @@ impl Layout for F32 {
     }
 
     #[inline(always)]
-    fn test_child<const B: usize>(n: &F32Node<B>, s: usize, _: &f32, best_t: &f32, r: &RayPre, _: &()) -> Option<(f32, f32)> {
+    fn test_child<const B: usize>(
+        n: &F32Node<B>,
+        s: usize,
+        _: &f32,
+        best_t: &f32,
+        r: &RayPre,
+        _: &(),
+    ) -> Option<(f32, f32)> {
         let (lo, hi) = n.child_box(s);
         let (near, far) = slab32(r, lo, hi, r.tmin, *best_t);
         (near <= far).then_some((near, near))
     }
 
-    fn child_entry<const B: usize>(_: &F32Node<B>, _: usize, _: &f32, _: &f32, near: &f32, _: &RayPre, _: &(), _: &mut Counters) -> f32 {
+    fn child_entry<const B: usize>(
+        _: &F32Node<B>,
+        _: usize,
+        _: &f32,
+        _: &f32,
+        near: &f32,
+        _: &RayPre,
+        _: &(),
+        _: &mut Counters,
+    ) -> f32 {
         *near
     }
 }

@@ -173,7 +173,12 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
     let mut e = [0i32; 3];
     for a in 0..3 {
         let ext = bounds.max[a] as f64 - bounds.min[a] as f64;
-        e[a] = step_exp(ext).ok_or(EncodeError::Extent { layout: "q8", node: i, value: ext, limit: 255.0 * 2f64.powi(E_MAX) })?;
+        e[a] = step_exp(ext).ok_or(EncodeError::Extent {
+            layout: "q8",
+            node: i,
+            value: ext,
+            limit: 255.0 * 2f64.powi(E_MAX),
+        })?;
     }
     let em = e[0].max(e[1]).max(e[2]);
     for x in &mut e {
@@ -185,7 +190,8 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
         node.exps |= ((e[a] + 128) as u32) << (8 * a);
     }
     let first_inner = n.children.iter().find_map(|(_, c)| if let ChildRef::Inner(j) = c { Some(*j) } else { None });
-    let first_leaf = n.children.iter().find_map(|(_, c)| if let ChildRef::Leaf { first, .. } = c { Some(*first) } else { None });
+    let first_leaf =
+        n.children.iter().find_map(|(_, c)| if let ChildRef::Leaf { first, .. } = c { Some(*first) } else { None });
     node.child_base = first_inner.unwrap_or(0);
     node.tri_base = first_leaf.unwrap_or(0);
     let mut rank = 0u16;
@@ -194,13 +200,20 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
             let step = 2f64.powi(e[a]);
             let lo = ((b.min[a] as f64 - p[a] as f64) / step).floor();
             let hi = ((b.max[a] as f64 - p[a] as f64) / step).ceil();
-            assert!((0.0..=255.0).contains(&lo) && (0.0..=255.0).contains(&hi), "q8: node {i} slot {slot} axis {a}: grid {lo}..{hi}");
+            assert!(
+                (0.0..=255.0).contains(&lo) && (0.0..=255.0).contains(&hi),
+                "q8: node {i} slot {slot} axis {a}: grid {lo}..{hi}"
+            );
             node.q[0][a][slot] = lo as u8;
             node.q[1][a][slot] = hi as u8;
         }
         node.meta[slot] = match *c {
             ChildRef::Inner(j) => {
-                assert_eq!(j, node.child_base + rank as u32, "q8: inner children of node {i} are not consecutive (reorder first)");
+                assert_eq!(
+                    j,
+                    node.child_base + rank as u32,
+                    "q8: inner children of node {i} are not consecutive (reorder first)"
+                );
                 rank += 1;
                 META_INNER | (rank - 1)
             }
