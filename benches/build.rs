@@ -1,5 +1,5 @@
 //! BVH build + collapse + encode throughput on the largest shared scene (igea, 268k
-//! triangles), every B and registered layout. Target on the 2-core CI machine: ≥ 2 M triangles/s for
+//! triangles), every B and registered layout. Goal on the 2-core CI machine: ≥ 2 M triangles/s for
 //! the binary SAH build. Beside it, the yardstick for that rate on the machine at hand: Intel
 //! Embree 3's own build of the same triangles (its default, medium build quality, all host
 //! threads; timed with filling its vertex and index buffers, as ours is with the triangles'
@@ -10,6 +10,7 @@
 //! `halftrace instance` GLB.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use halftrace::baseline::BaselineDevice;
 use halftrace::bvh::{self, BRANCHINGS};
 use halftrace::layout::{Encoded, LayoutId};
 use std::path::PathBuf;
@@ -27,16 +28,16 @@ fn bench(c: &mut Criterion) {
     g.sample_size(if n > 1_000_000 { 10 } else { 20 });
     g.throughput(Throughput::Elements(n));
     g.bench_function(format!("binary_sah/{name}"), |b| b.iter(|| bvh::build_binary(&scene)));
-    let embree = halftrace::embree::host();
+    let embree = halftrace::baseline::embree::host();
     g.bench_function(format!("embree_scene/{name}"), |b| {
-        b.iter(|| embree.scene(&scene).expect("Embree builds the scene"))
+        b.iter(|| BaselineDevice::scene(&embree, &scene).expect("Embree builds the scene"))
     });
     let bin = bvh::build_binary(&scene);
     for b in BRANCHINGS {
         g.bench_function(format!("collapse/b{b}"), |bn| bn.iter(|| bvh::collapse(&bin, b)));
         let w = bvh::collapse(&bin, b);
-        for l in LayoutId::layouts() {
-            let layout = l.bvh().unwrap();
+        for l in LayoutId::all() {
+            let layout = l.imp();
             g.bench_function(format!("encode_{l}/b{b}"), |bn| bn.iter(|| layout.encode(&scene, &w).unwrap()));
         }
         let f16h = LayoutId::parse("f16h").unwrap();

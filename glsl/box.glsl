@@ -1,13 +1,13 @@
 // The conservative fp32 slab test (Ize 2013), shared by every layout's root box test.
-// Mirrors src/trace/mod.rs (lower32, upper32, slab32). No NaN is ever formed: zero direction
+// Mirrors src/base/slab.rs (lower32, upper32, slab32). No NaN is ever formed: zero direction
 // components get an explicit inside test.
 
 float lower32(float t) {
-    precise float r = t * (t > 0.0 ? (1.0 - 1.0 / 1048576.0) : (1.0 + 1.0 / 1048576.0));
+    precise float r = t * (t > 0.0 ? (1.0 - MARGIN32) : (1.0 + MARGIN32));
     return r;
 }
 float upper32(float t) {
-    precise float r = t * (t > 0.0 ? (1.0 + 1.0 / 1048576.0) : (1.0 - 1.0 / 1048576.0));
+    precise float r = t * (t > 0.0 ? (1.0 + MARGIN32) : (1.0 - MARGIN32));
     return r;
 }
 

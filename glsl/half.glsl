@@ -1,9 +1,9 @@
 // Shared fp16 machinery of the layouts that test fp16 boxes in a node frame against an origin
 // with an error bound (f16h, f16w, f16a, q8): fp16 value types per math mode, emulated
 // roundings, the anchored origin, the per-ray fp16 direction, the widened slab test, the visit
-// bounds. Mirrors src/layout/f16h/hooks.rs (the bound is argued there) and src/fp16.rs. Needs
-// the constants OCAP, EMAX, EBIG, W_MARGIN, W_MARGIN_OFF, SAT, BIG32, D_FLUSH, K_MIN_LOG2 and
-// K_MAX_LOG2 from interface.glsl.
+// bounds, and the chained frames' derivation. Mirrors src/layout/half.rs (the bound is argued
+// there), src/layout/frames.rs and src/fp16.rs; every constant (OCAP, EMAX, …, TWO_M*,
+// K_MIN_LOG2, K_MAX_LOG2) comes from those files through the generated interface.glsl.
 // fp16 values: `float16_t` with fp16 arithmetic (MATH_F16, MATH_MIXED); in MATH_F32 they are
 // held exactly in fp32 and the few fp16 roundings are emulated (rte16), so that mode uses 16-bit
 // storage only and runs on devices without shaderFloat16. Every value and bound is the same.
@@ -27,17 +27,6 @@ const float H0 = 0.0;
 const float16_t H0 = float16_t(0.0);
 #endif
 
-const float S_BASE = 16384.0 + OCAP;
-const float TWO_M9 = 1.0 / 512.0;
-const float TWO_M10 = 1.0 / 1024.0;
-const float TWO_M19 = 1.0 / 524288.0;
-const float TWO_M20 = 1.0 / 1048576.0;
-const float TWO_M11 = 1.0 / 2048.0;
-const float TWO_M18 = 1.0 / 262144.0;
-const float TWO_M21 = 1.0 / 2097152.0;
-const float TWO_M22 = 1.0 / 4194304.0;
-const float TWO_M23 = 1.0 / 8388608.0;
-const float TWO_M24 = 1.0 / 16777216.0;
 // Origin type: fp32 in the fp32 math mode, fp16 otherwise (the Entry's `o` has the same type).
 #ifdef MATH_F32
 #define OVEC vec3
@@ -121,11 +110,11 @@ float add_rte(float a, float b) {
 // An fp16 value >= x with one round-to-nearest conversion (fp16::up_f32). Without float
 // controls, the largest finite fp16 stands for inf (only where box tests are skipped).
 HALF up16(float x) {
-    precise float y = x + abs(x) * (1.0 / 1024.0) + (1.0 / 16777216.0);
+    precise float y = x + abs(x) * NUDGE_REL + NUDGE_ABS;
 #ifdef FC_OFF
-    return y > 65504.0 ? HALF(65504.0) : TO_HALF(y);
+    return y > F16_MAX ? HALF(F16_MAX) : TO_HALF(y);
 #else
-    return y > 65504.0 ? HINF : TO_HALF(y);
+    return y > F16_MAX ? HINF : TO_HALF(y);
 #endif
 }
 HALF down16(float x) { return -up16(-x); }
@@ -136,7 +125,7 @@ float up32(float x) { return isinf(x) ? x : upper32(x); }
 #endif
 
 // Origin at world parameter t in frame (w, k), fp32 then fp16, clamped to +-OCAP; returns the
-// error bound (hooks.rs, anchor).
+// error bound (half.rs, anchor).
 float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
     float mag = 0.0;
     float clampd = 0.0;
@@ -161,7 +150,7 @@ float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
     return e;
 }
 
-// Per-ray constants (hooks.rs, Ray16): m = max|D|, d16 = fp16(D / m), its fp16 and fp32
+// Per-ray constants (half.rs, Ray16): m = max|D|, d16 = fp16(D / m), its fp16 and fp32
 // reciprocals.
 float lr_m;
 HVEC3 lr_d16;
@@ -194,9 +183,9 @@ void layout_ray(RayPre r) {
 }
 
 #ifndef MATH_F32
-// fp16 slab test in the node frame: (tn, tn_lb, tf_ub) (hooks.rs, slab16).
+// fp16 slab test in the node frame: (tn, tn_lb, tf_ub) (half.rs, slab16).
 #ifdef FC_OFF
-// fp16 product saturated to +-SAT, decided on the exact fp32 product (hooks.rs, mul_sat).
+// fp16 product saturated to +-SAT, decided on the exact fp32 product (half.rs, mul_sat).
 float16_t mul_sat(float16_t a, float16_t b) {
     precise float p = float(a) * float(b);
     if (p > SAT) return float16_t(SAT);
@@ -239,7 +228,7 @@ f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
 }
 #endif
 
-// The box test in the variant's math mode, as fp32 (tn, tn_lb, tf_ub) (hooks.rs, slab).
+// The box test in the variant's math mode, as fp32 (tn, tn_lb, tf_ub) (half.rs, slab).
 vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
 #if !defined(MATH_F32) && !defined(MATH_MIXED)
     return vec3(slab16(o, w, lo, hi));
@@ -288,7 +277,7 @@ vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
 #endif
 }
 
-// Quantities fixed for one visit of one node by one ray (hooks.rs, visit): node frame scale k,
+// Quantities fixed for one visit of one node by one ray (half.rs, half_visit): node frame scale k,
 // origin error e, the world parameter tp the origin stands for, the entry bound tlo.
 struct HVisit {
     float mk;
@@ -323,7 +312,7 @@ HVisit half_visit(float k, float e, float tp, float tlo, float best) {
     return v;
 }
 
-// The box test of one stored fp16 box under a visit: hit, with (tn, tn_lb) (hooks.rs, test_box).
+// The box test of one stored fp16 box under a visit: hit, with (tn, tn_lb) (half.rs, half_test).
 bool half_test(OVEC o, HVisit v, HVEC3 lo, HVEC3 hi, out float tn, out float tn_lb) {
     if (!v.prec) {
         tn = float(v.lower);
@@ -336,13 +325,13 @@ bool half_test(OVEC o, HVisit v, HVEC3 lo, HVEC3 hi, out float tn, out float tn_
     return q.y <= q.z && q.z >= float(v.lower) && q.y <= float(v.s_lim);
 }
 
-// A lower bound of the world parameter of anything that matters in a hit child (hooks.rs,
-// child_tlo).
+// A lower bound of the world parameter of anything that matters in a hit child (half.rs,
+// half_child_tlo).
 float half_child_tlo(HVisit v, float tp, float tlo, float tn_lb) {
     float s_lo = max(tn_lb, float(v.lower));
     precise float q = s_lo / v.mk;
 #ifdef FC_OFF
-    // A node visited without box tests keeps its parent's tlo (hooks.rs).
+    // A node visited without box tests keeps its parent's tlo (half.rs).
     precise float t0 = (tp + q) - (abs(tp) + abs(q)) * TWO_M19;
     return v.prec ? max(t0, tlo) : tlo;
 #else
@@ -376,7 +365,7 @@ void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float 
         w[a] = wa;
         wmax = max(wmax, abs(wa));
     }
-    float m = add_rte(add_rte(h, h * (1.0 / 1048576.0)), (wmax * pk) * (1.0 / 4194304.0));
+    float m = add_rte(add_rte(h, h * TWO_M20), (wmax * pk) * TWO_M22);
 #else
 #ifdef MATH_F32
         // fp16's (lo + hi) * 0.5, each operation rounded to fp16: the fp32 sum of two fp16
@@ -399,7 +388,7 @@ void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float 
         w[a] = wa;
         wmax = max(wmax, abs(wa));
     }
-    precise float m = (h + h * (1.0 / 1048576.0)) + (wmax * pk) * (1.0 / 4194304.0);
+    precise float m = (h + h * TWO_M20) + (wmax * pk) * TWO_M22;
 #endif
     int pl = frexp_exp(pk) - 1;
     int j = clamp(14 - frexp_exp(m), K_MIN_LOG2 - pl, K_MAX_LOG2 - pl);

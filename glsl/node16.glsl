@@ -1,5 +1,5 @@
 // The node of the layouts that store every child box as fp16 in one frame per node or per BVH
-// (f16h, f16h-seed, f16w, and f16a after its frame; src/layout/f16h/mod.rs, F16hNode): lo and hi structure of arrays,
+// (f16h, f16h-poster, f16w, and f16a after its frame; src/layout/node16.rs, Node16): lo and hi structure of arrays,
 // then the child words. Include after half.glsl (HVEC3, LOADH). A layout whose node carries
 // more (f16a: its frame) defines NODE16_HEAD as the fields that come first.
 struct Node {

@@ -1,4 +1,4 @@
-// Packet reductions over the P rays of a packet (src/trace/traverse.rs has the rule). Per
+// Packet reductions over the P rays of a packet (src/layout/traverse.rs has the rule). Per
 // visited node the skeleton makes one reduction, packet_reduce: the number of active rays,
 // the union of the children they hit and each hit child's smallest key.
 // P == 1: single-ray traversal; the reductions are the identity.

@@ -1,6 +1,6 @@
 // Shared by every traversal kernel: workgroup size, the buffers of the interface (declared
 // from the generated interface.glsl, which must come first and enables the fp16 types), the
-// ray set-up and the hit write. Mirrors src/trace/mod.rs (RayPre). The float-control
+// ray set-up and the hit write. Mirrors src/base/slab.rs (RayPre). The float-control
 // execution modes (round-to-nearest-even, signed zero/inf/NaN preserved, per float width the
 // kernel computes in) are added to the SPIR-V by the host (gpu::support::float_modes), unless
 // the kernel is built without them (FC_OFF).

@@ -2,7 +2,7 @@
 #extension GL_EXT_control_flow_attributes : require
 // The traversal skeleton of every layout and kernel family: single rays (P = 1), packets in
 // a subgroup (PACKET_SUBGROUP) and packets in shared memory; STATS adds the counters. It
-// mirrors src/trace/traverse.rs step for step.
+// mirrors src/layout/traverse.rs step for step.
 //
 // Defines: B, P, WG, STACK_SIZE, MATH_F16 | MATH_F32 | MATH_MIXED, PACKET_SUBGROUP, STATS,
 // HAS_F64, FC_OFF, ADDRESSED. "interface.glsl" is generated from the Rust definitions for this

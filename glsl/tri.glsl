@@ -1,5 +1,5 @@
 // Watertight ray-triangle test (Woop, Benthin, Wald 2013) and the closest-hit rule.
-// Mirrors src/trace/tri.rs and trace::Closest operation for operation (no contraction).
+// Mirrors src/base/tri.rs and base::Closest operation for operation (no contraction).
 
 bool tri_intersect(RayPre r, uint ti, out float t, out float u, out float v) {
     uint b = 9u * ti;

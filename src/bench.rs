@@ -7,19 +7,18 @@
 //! round's value their median), so slow drift on a shared machine hits every target alike. A
 //! ratio "a ÷ b" is speed (rays per second) of a over b, computed per round from the two
 //! medians of that round; the table gives the median of those per-round ratios and their min
-//! and max. Speed targets live here (and in the closing notes), never in timed unit tests.
+//! and max. Speed goals live here (and in the closing notes), never in timed unit tests.
 
-use crate::bvh::{self, BinaryBvh};
-use crate::gpu::kernel::{choose_impl, GpuBvh, Kernel, Source};
-use crate::gpu::{self, ContextOptions, Gpu};
-use crate::layout::{BaselineDevice, BaselineScene, Encoded, LayoutId, Math};
-use crate::measure::{self, BaselineTarget, KernelTarget, Plan, Reference, Target, Timing};
-use crate::rays::{make_rays, Ray, RayKind, RayParams};
-use crate::scene::{self, Scene};
-use crate::trace::Hit;
-use crate::variant::{FcChoice, Variant};
+use crate::baseline::BaselineId;
+use crate::gpu::{ContextOptions, Gpu};
+use crate::layout::LayoutId;
+use crate::precision::Math;
+use crate::rays::{RayKind, RayParams};
+use crate::report::Status;
+use crate::runner::{Plan, RaySetId, RaySpec, Runner, Target, Timing};
+use crate::variant::Variant;
 use anyhow::Context;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -41,11 +40,11 @@ pub struct BenchConfig {
 /// The packet sizes of the packet ratios (against P = 1), f32 at B = 4 on primary rays.
 pub const BENCH_PACKETS: [usize; 5] = [4, 8, 16, 32, 64];
 
-/// What a timed thing is.
+/// What is timed: a built-in variant (float controls as the device has them) or a baseline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 enum Key {
     Variant(Variant),
-    Baseline(LayoutId),
+    Baseline(BaselineId),
 }
 
 impl Key {
@@ -53,6 +52,13 @@ impl Key {
         match self {
             Key::Variant(v) => v.name(false),
             Key::Baseline(b) => b.name().to_string(),
+        }
+    }
+
+    fn target(&self) -> Target {
+        match self {
+            Key::Variant(v) => Target::builtin(*v),
+            Key::Baseline(b) => Target::Baseline(*b),
         }
     }
 }
@@ -63,18 +69,18 @@ pub struct Ratio {
     pub what: String,
     pub scene: String,
     pub rays: String,
-    /// The two targets, "a ÷ b".
+    /// The two timed things, "a ÷ b".
     pub pair: String,
     pub ratio: Timing,
-    /// The target this ratio is held to (`>= target`), if any.
-    pub target: Option<f64>,
+    /// The goal this ratio is held to (`>= goal`), if any.
+    pub goal: Option<f64>,
 }
 
-/// The result of a run: every ratio, and every target's Mrays/s.
+/// The result of a run: every ratio, and every timed thing's Mrays/s.
 pub struct BenchResult {
     pub device: String,
     pub ratios: Vec<Ratio>,
-    /// (scene, rays, target label) → Mrays/s over the rounds (median, min, max).
+    /// (scene, rays, label) → Mrays/s over the rounds (median, min, max).
     pub speeds: Vec<(String, String, String, f64, f64, f64)>,
 }
 
@@ -83,14 +89,13 @@ pub struct BenchResult {
 /// (P = 1); on primary rays also f32 at B = 4 with every packet size.
 fn variants(kind: &RayKind, only: &[LayoutId]) -> Vec<Variant> {
     let mut v = Vec::new();
-    for layout in LayoutId::layouts() {
-        let l = layout.bvh().expect("a BVH layout");
-        let chosen =
-            layout == LayoutId::f32() || if only.is_empty() { l.conservative() } else { only.contains(&layout) };
+    for layout in LayoutId::all() {
+        let l = layout.info();
+        let chosen = layout == LayoutId::f32() || if only.is_empty() { l.conservative } else { only.contains(&layout) };
         if !chosen {
             continue;
         }
-        for &math in l.maths() {
+        for &math in l.maths {
             for b in [4, 8] {
                 v.push(Variant::new(layout, b, 1).with_math(math));
             }
@@ -104,10 +109,10 @@ fn variants(kind: &RayKind, only: &[LayoutId]) -> Vec<Variant> {
     v
 }
 
+/// A ray set of a scene: its kind and size.
 struct RaySet {
     kind: RayKind,
-    rays: Vec<Ray>,
-    f32_hits: Vec<Hit>,
+    count: usize,
 }
 
 /// Runs the benchmark, printing progress to stderr; returns the ratios.
@@ -120,33 +125,26 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
         "bench: device {device}; {} rounds of 1 warm-up + {} timed dispatches per target",
         cfg.rounds, cfg.repeat
     );
-    let mut base_devs: Vec<(LayoutId, Box<dyn BaselineDevice + '_>)> = Vec::new();
-    for b in LayoutId::all().filter(|l| l.baseline().is_some()) {
-        let bl = b.baseline().expect("a baseline");
-        match bl.unavailable(&g.info) {
-            Some(why) => eprintln!("bench: {b} skipped: {why}"),
-            None => base_devs.push((b, bl.prepare(&g).with_context(|| format!("baseline {b}"))?)),
-        }
-    }
-    let mut kernels: HashMap<Variant, Kernel> = HashMap::new();
+    let baselines: Vec<BaselineId> = BaselineId::all().collect();
+    let mut runner = Runner::new(Some(&g), &baselines, Default::default())?;
     let mut ratios = Vec::new();
     let mut speeds = Vec::new();
     let mut largest = (0usize, String::new());
     // Per scene: (scene name, per (kind, key) the per-round medians in ms).
     let mut per_scene: Vec<(String, Vec<RaySet>, Times)> = Vec::new();
     for path in &cfg.scenes {
-        let scene = scene::load(path).with_context(|| format!("bench: {}", path.display()))?;
-        let bin = bvh::build_binary(&scene);
-        eprintln!("bench: scene {} ({} triangles)", scene.name, scene.len());
-        if scene.len() > largest.0 {
-            largest = (scene.len(), scene.name.clone());
+        let (scene, _) = runner.scene(path).with_context(|| format!("bench: {}", path.display()))?;
+        let (name, n) = (scene.name.clone(), scene.len());
+        eprintln!("bench: scene {name} ({n} triangles)");
+        if n > largest.0 {
+            largest = (n, name.clone());
         }
-        let (sets, times) = bench_scene(&g, cfg, &scene, &bin, &base_devs, &mut kernels)?;
-        per_scene.push((scene.name.clone(), sets, times));
+        let (sets, times) = bench_scene(&mut runner, cfg, &name)?;
+        per_scene.push((name, sets, times));
     }
     for (name, sets, times) in &per_scene {
         for (ki, set) in sets.iter().enumerate() {
-            let n = set.rays.len();
+            let n = set.count;
             let t = |k: &Key| times.get(&(ki, *k));
             for ((_, k), ms) in times.iter().filter(|((kk, _), _)| *kk == ki) {
                 let s = Timing::of(&ms.iter().map(|m| n as f64 / m / 1e3).collect::<Vec<_>>());
@@ -156,7 +154,7 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
                 let (ta, tb) = (t(a)?, t(b)?);
                 Some(Timing::of(&ta.iter().zip(tb).map(|(x, y)| y / x).collect::<Vec<_>>()))
             };
-            let mut push = |what: &str, a: &Key, b: &Key, target: Option<f64>| {
+            let mut push = |what: &str, a: &Key, b: &Key, goal: Option<f64>| {
                 if let Some(r) = ratio(a, b) {
                     ratios.push(Ratio {
                         what: what.into(),
@@ -164,7 +162,7 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
                         rays: set.kind.to_string(),
                         pair: format!("{} ÷ {}", a.label(), b.label()),
                         ratio: r,
-                        target,
+                        goal,
                     });
                 }
             };
@@ -196,8 +194,8 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
                 push(what, &a, &b, largest_scene.then_some(1.1));
             }
             // The best of ours (any variant) against the host CPU's Embree.
-            let embree = LayoutId::parse("embree").ok().map(Key::Baseline);
-            let rq = LayoutId::parse("rq").ok().map(Key::Baseline);
+            let embree = BaselineId::parse("embree").map(Key::Baseline);
+            let rq = BaselineId::parse("rq").map(Key::Baseline);
             let ours: Vec<Key> =
                 times.keys().filter(|(kk, k)| *kk == ki && matches!(k, Key::Variant(_))).map(|(_, k)| *k).collect();
             let best_of = |against: &Key| -> Option<Key> {
@@ -243,115 +241,68 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
 
 type Times = BTreeMap<(usize, Key), Vec<f64>>;
 
-fn bench_scene<'g>(
-    g: &'g Gpu,
-    cfg: &BenchConfig,
-    scene: &Scene,
-    bin: &BinaryBvh,
-    base_devs: &[(LayoutId, Box<dyn BaselineDevice + 'g>)],
-    kernels: &mut HashMap<Variant, Kernel<'g>>,
-) -> anyhow::Result<(Vec<RaySet>, Times)> {
-    let f32_enc = Encoded::new(scene, bin, LayoutId::f32(), 4)?;
-    let mut sets = Vec::new();
+/// Validates every timed thing on the current scene once, then times them in interleaved
+/// rounds; returns the ray sets and, per (set, key), the per-round medians (ms).
+fn bench_scene(runner: &mut Runner, cfg: &BenchConfig, scene: &str) -> anyhow::Result<(Vec<RaySet>, Times)> {
+    let mut sets: Vec<(RaySetId, RaySet)> = Vec::new();
     for kind in &cfg.kinds {
         let params = RayParams { width: cfg.width, height: cfg.height, ..Default::default() };
-        let rays = make_rays(scene, bin, kind, &params)?;
-        let f32_hits = f32_enc.trace_default(&rays).0;
-        sets.push(RaySet { kind: kind.clone(), rays, f32_hits });
+        let id = runner.ray_set(&RaySpec { kind: kind.clone(), params })?;
+        sets.push((id, RaySet { kind: kind.clone(), count: runner.rays(id).rays.len() }));
     }
-    // Encodings, kernels and baseline structures for everything timed on this scene.
-    let mut wanted: Vec<(usize, Variant)> = Vec::new();
-    for (ki, s) in sets.iter().enumerate() {
-        for v in variants(&s.kind, &cfg.layouts) {
-            match gpu::support::resolve(&g.info, v, FcChoice::Auto) {
-                Ok(v) => wanted.push((ki, v)),
-                Err(why) => eprintln!("bench: {} skipped: {why}", v.name(false)),
-            }
-        }
+    let mut keys: Vec<(usize, Key)> = Vec::new();
+    for (ki, (_, s)) in sets.iter().enumerate() {
+        keys.extend(variants(&s.kind, &cfg.layouts).into_iter().map(|v| (ki, Key::Variant(v))));
+        keys.extend(BaselineId::all().map(|b| (ki, Key::Baseline(b))));
     }
-    let mut encs: BTreeMap<(LayoutId, usize), (Encoded, GpuBvh)> = BTreeMap::new();
-    for (_, v) in &wanted {
-        if let std::collections::btree_map::Entry::Vacant(slot) = encs.entry((v.layout, v.branching)) {
-            let e = Encoded::new(scene, bin, v.layout, v.branching)?;
-            let gb = GpuBvh::upload(g, &e).with_context(|| format!("{}, B={}", v.layout, v.branching))?;
-            slot.insert((e, gb));
+    // Validated once, each against its reference (ours: the CPU reference; baselines: f32).
+    let validate = Plan { warmup: 0, repeat: 0, count: false };
+    let mut timed = Vec::new();
+    for (ki, key) in keys {
+        let (id, set) = &sets[ki];
+        let o = runner.measure(&key.target(), *id, validate)?;
+        match &o.status {
+            Status::Ok => timed.push((ki, key)),
+            Status::Skipped(why) => eprintln!("bench: {} skipped: {why}", key.label()),
+            Status::Failed(f) => anyhow::bail!("bench: {scene} {}: {f}", set.kind),
         }
-        // A scene beyond one storage buffer is read by address: kernels are kept per build.
-        let kv = v.with_buffers(encs[&(v.layout, v.branching)].1.buffers);
-        if let std::collections::hash_map::Entry::Vacant(slot) = kernels.entry(kv) {
-            slot.insert(
-                Kernel::build(g, &kv, choose_impl(g, v, None), false, &Source::Builtin)
-                    .with_context(|| v.name(false))?,
+        if let Key::Baseline(b) = key {
+            let a = o.m.vs_f32;
+            eprintln!(
+                "bench: {scene} {} {b}: agrees with f32 on {:.4}% of {} rays",
+                set.kind,
+                100.0 * a.rate(),
+                a.total
             );
         }
     }
-    let mut base_scenes: Vec<(LayoutId, Box<dyn BaselineScene + '_>)> = Vec::new();
-    for (b, dev) in base_devs {
-        base_scenes.push((*b, dev.scene(scene).with_context(|| format!("baseline {b} on {}", scene.name))?));
-    }
-    // The targets, validated once.
-    let mut targets: Vec<(usize, Key, Box<dyn Target + '_>)> = Vec::new();
-    for (ki, v) in &wanted {
-        let (_, gb) = &encs[&(v.layout, v.branching)];
-        let timed = &kernels[&v.with_buffers(gb.buffers)];
-        targets.push((*ki, Key::Variant(*v), Box::new(KernelTarget { gpu: g, bvh: gb, timed, counting: None })));
-    }
-    for ki in 0..sets.len() {
-        for (b, bs) in &base_scenes {
-            targets.push((ki, Key::Baseline(*b), Box::new(BaselineTarget { name: b.name(), scene: bs.as_ref() })));
-        }
-    }
-    let one = Plan { warmup: 0, repeat: 1, count: false };
-    for (ki, key, t) in &targets {
-        let set = &sets[*ki];
-        let m = match key {
-            Key::Variant(v) => {
-                let (enc, _) = &encs[&(v.layout, v.branching)];
-                let (hits, counters) = enc.trace_fc(&set.rays, v.packet, v.math, v.fc);
-                measure::validate_then_time(
-                    t.as_ref(),
-                    &set.rays,
-                    Reference::Exact { hits: &hits, counters: &counters },
-                    &set.f32_hits,
-                    one,
-                )?
-            }
-            Key::Baseline(b) => {
-                let m = measure::validate_then_time(t.as_ref(), &set.rays, Reference::Agreement, &set.f32_hits, one)?;
-                eprintln!(
-                    "bench: {} {} {b}: agrees with f32 on {:.4}% of {} rays",
-                    scene.name,
-                    set.kind,
-                    100.0 * m.vs_f32.rate(),
-                    m.vs_f32.total
-                );
-                m
-            }
-        };
-        if let Some(f) = m.failure {
-            anyhow::bail!("bench: {} {}: {f}", scene.name, set.kind);
-        }
-    }
-    eprintln!("bench: {}: {} targets validated", scene.name, targets.len());
+    eprintln!("bench: {scene}: {} targets validated", timed.len());
     let mut times: Times = BTreeMap::new();
+    let plan = Plan { warmup: 1, repeat: cfg.repeat, count: false };
     for round in 0..cfg.rounds {
-        for (ki, key, t) in &targets {
-            let out = t.dispatch(&sets[*ki].rays, 1, cfg.repeat)?;
-            times.entry((*ki, *key)).or_default().push(Timing::of(&out.times_ms).median);
+        for (ki, key) in &timed {
+            let o = runner.measure(&key.target(), sets[*ki].0, plan)?;
+            let t = o.m.timing.ok_or_else(|| anyhow::anyhow!("bench: {scene} {}: {}", key.label(), o.status))?;
+            times.entry((*ki, *key)).or_default().push(t.median);
         }
-        eprintln!("bench: {}: round {}/{} done", scene.name, round + 1, cfg.rounds);
+        eprintln!("bench: {scene}: round {}/{} done", round + 1, cfg.rounds);
     }
-    drop(targets);
-    Ok((sets, times))
+    Ok((sets.into_iter().map(|(_, s)| s).collect(), times))
 }
 
-/// The report: the ratios (with targets) and every target's speed, as Markdown.
+/// The report: the ratios (with their goals) and every target's speed, as Markdown.
 pub fn markdown(cfg: &BenchConfig, r: &BenchResult) -> String {
     let mut md = String::new();
-    let _ = writeln!(md, "# halftrace bench\n\ndevice: {}; rays {}×{} per kind; {} rounds, each 1 warm-up + {} timed dispatches per target (a round's value: their median); ratios are speed ratios computed per round, shown as median (min–max) over the rounds.\n", r.device, cfg.width, cfg.height, cfg.rounds, cfg.repeat);
-    md += "| ratio | scene | rays | a ÷ b | median | min | max | target | met |\n|---|---|---|---|---:|---:|---:|---:|---|\n";
+    let _ = writeln!(
+        md,
+        "# halftrace bench\n\ndevice: {}; rays {}×{} per kind; {} rounds, each 1 warm-up + {} timed dispatches per \
+         target (a round's value: their median); ratios are speed ratios computed per round, shown as median \
+         (min–max) over the rounds.\n",
+        r.device, cfg.width, cfg.height, cfg.rounds, cfg.repeat
+    );
+    md += "| ratio | scene | rays | a ÷ b | median | min | max | goal | met |\n|---|---|---|---|---:|---:|---:|---:|---|\n";
     for x in &r.ratios {
-        let (t, met) = match x.target {
+        let (t, met) = match x.goal {
             Some(t) => (format!("≥ {t}"), if x.ratio.median >= t { "yes" } else { "**no**" }),
             None => ("–".into(), ""),
         };
@@ -361,7 +312,7 @@ pub fn markdown(cfg: &BenchConfig, r: &BenchResult) -> String {
             x.what, x.scene, x.rays, x.pair, x.ratio.median, x.ratio.min, x.ratio.max
         );
     }
-    md += "\n| scene | rays | target | Mrays/s median | min | max |\n|---|---|---|---:|---:|---:|\n";
+    md += "\n| scene | rays | kernel | Mrays/s median | min | max |\n|---|---|---|---:|---:|---:|\n";
     for (s, k, t, med, lo, hi) in &r.speeds {
         let _ = writeln!(md, "| {s} | {k} | {t} | {med:.2} | {lo:.2} | {hi:.2} |");
     }

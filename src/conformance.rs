@@ -1,28 +1,23 @@
 //! `halftrace conformance`: which variants are correct on this device. Every layout × B × P ×
 //! math × float-control mode × packet implementation (or, `--quick`, a subset that still
-//! touches each value of each of them once) runs over every scene and ray kind and is compared
-//! with the CPU reference of its layout, packet size and math: hits bit for bit, counters
-//! exactly (float controls on) or within [`FC_OFF_COUNTER_BOUND`] (off, where the device's own
-//! rounding may move a box test by an ulp), and hits equal to the `f32` reference's. The
-//! result is a pass/fail table naming any failing variant, ray and both results.
+//! touches each value of each of them once) runs over every scene and ray kind through the
+//! runner and is compared with the CPU reference of its layout, packet size and math: hits
+//! bit for bit, counters exactly (float controls on) or within
+//! [`crate::runner::measure::FC_OFF_COUNTER_BOUND`] (off, where the device's own rounding may
+//! move a box test by an ulp), and hits equal to the `f32` reference's. The result is a
+//! table naming any failing variant, ray and both results.
 
-use crate::bvh::{self, BinaryBvh, BRANCHINGS};
-use crate::gpu::kernel::{GpuBvh, Kernel, Source};
-use crate::gpu::{self, support, Gpu};
-use crate::layout::{Encoded, LayoutId};
-use crate::rays::{make_rays, Ray, RayKind, RayParams};
-use crate::scene::Scene;
-use crate::trace::{Counters, Hit};
-use crate::variant::{Buffers, FloatControls, PacketImpl, Variant, PACKETS};
+use crate::bvh::BRANCHINGS;
+use crate::gpu::{self, support, Gpu, Source};
+use crate::layout::LayoutId;
+use crate::precision::{FcChoice, FloatControls};
+use crate::rays::{RayKind, RayParams};
+use crate::report::Status;
+use crate::runner::{KernelTarget, Plan, RaySpec, Runner, Target};
+use crate::variant::{PacketImpl, Variant, PACKETS};
 use anyhow::Context;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// With float controls off, a device may round box-test arithmetic differently from the CPU
-/// reference (the bounds stay conservative, so hits are exact): counters may then differ on at
-/// most this fraction of a ray set's rays.
-pub const FC_OFF_COUNTER_BOUND: f64 = 0.01;
 
 /// What to check.
 #[derive(Clone, Debug, Default)]
@@ -49,23 +44,6 @@ pub struct Check {
     pub secs: f64,
 }
 
-#[derive(Clone, Debug, PartialEq)]
-pub enum Status {
-    Pass,
-    Fail(String),
-    Skipped(String),
-}
-
-impl Status {
-    pub fn label(&self) -> String {
-        match self {
-            Status::Pass => "pass".into(),
-            Status::Fail(m) => format!("FAIL: {m}"),
-            Status::Skipped(m) => format!("skipped: {m}"),
-        }
-    }
-}
-
 /// A finished run.
 pub struct Outcome {
     pub device: String,
@@ -78,7 +56,7 @@ pub struct Outcome {
 
 impl Outcome {
     pub fn failures(&self) -> Vec<&Check> {
-        self.checks.iter().filter(|c| matches!(c.status, Status::Fail(_))).collect()
+        self.checks.iter().filter(|c| c.status.is_failed()).collect()
     }
     pub fn passed(&self) -> bool {
         self.failures().is_empty() && self.validation.is_empty()
@@ -109,11 +87,13 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
             PacketImpl::Shared => vec![PacketImpl::Shared],
         }
     };
-    for layout in LayoutId::layouts() {
-        let l = layout.bvh().expect("a BVH layout");
-        let maths = layout.caps().maths;
-        let fcs: Vec<FloatControls> =
-            if l.float_controls_off() { vec![FloatControls::On, FloatControls::Off] } else { vec![FloatControls::On] };
+    for layout in LayoutId::all() {
+        let maths = layout.info().maths;
+        let fcs: Vec<FloatControls> = if layout.info().float_controls_off {
+            vec![FloatControls::On, FloatControls::Off]
+        } else {
+            vec![FloatControls::On]
+        };
         if quick {
             for b in BRANCHINGS {
                 out.push((Variant::new(layout, b, 1), PacketImpl::Single));
@@ -153,31 +133,27 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     out
 }
 
-/// Ray sets of one scene: primary, ao and diffuse at `res`², and `grazing` grazing rays.
-fn ray_sets(scene: &Scene, bin: &BinaryBvh, quick: bool) -> anyhow::Result<Vec<(RayKind, Vec<Ray>)>> {
+/// The ray sets of every scene: primary, ao and diffuse at `res`², and grazing rays.
+fn ray_specs(quick: bool) -> Vec<RaySpec> {
     let (res, grazing) = if quick { (16, 256) } else { (32, 1000) };
     let params = RayParams { width: res, height: res, camera: None, seed: 7, grazing };
     [RayKind::Primary, RayKind::Ao, RayKind::Diffuse, RayKind::Grazing]
         .into_iter()
-        .map(|k| Ok((k.clone(), make_rays(scene, bin, &k, &params)?)))
+        .map(|kind| RaySpec { kind, params: params.clone() })
         .collect()
 }
 
-/// The first rays whose hits differ, for a failure message.
-fn first_diff(rays: &[Ray], want: &[Hit], got: &[Hit]) -> Option<String> {
-    let bad: Vec<usize> = (0..got.len()).filter(|&i| !want[i].same_bits(&got[i])).collect();
-    let &i = bad.first()?;
-    Some(format!(
-        "{} of {} rays differ; ray {i} {:?}: expected {:?}, got {:?}",
-        bad.len(),
-        got.len(),
-        rays[i],
-        want[i],
-        got[i]
-    ))
+/// The kernel target of a check: its variant with its float controls as given, in its packet
+/// implementation.
+fn target(c: &Check) -> Target {
+    let fc = match c.variant.fc {
+        FloatControls::On => FcChoice::On,
+        FloatControls::Off => FcChoice::Off,
+    };
+    Target::Kernel(KernelTarget { variant: c.variant, fc, imp: Some(c.imp), source: Source::Builtin })
 }
 
-/// Runs the checks; `progress` gets a line as kernels are built and as each scene finishes.
+/// Runs the checks; `progress` gets a line as each scene finishes.
 pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Outcome> {
     let t0 = Instant::now();
     anyhow::ensure!(!opts.scenes.is_empty(), "conformance needs at least one scene");
@@ -187,157 +163,64 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
         validation: opts.validation,
         ..Default::default()
     })?;
-    let plan = plan(&g.info, opts.quick);
-    let mut checks: Vec<Check> = plan
-        .iter()
-        .map(|&(variant, imp)| {
-            let status = match support::check(&g.info, &variant) {
-                Ok(()) => Status::Pass,
-                Err(why) => Status::Skipped(why),
-            };
+    let mut checks: Vec<Check> = plan(&g.info, opts.quick)
+        .into_iter()
+        .map(|(variant, imp)| {
+            let status = support::check(&g.info, &variant).err().map_or(Status::Ok, Status::Skipped);
             Check { variant, imp, status, rays: 0, counter_diffs: 0, secs: 0.0 }
         })
         .collect();
-    // Kernels (timed, counting) of every runnable check, built once per way of reaching the
-    // scene's buffers (bound up front; read by address when a scene needs it).
-    let pair = |v: &Variant, imp: PacketImpl| {
-        Kernel::build(&g, v, imp, false, &Source::Builtin)
-            .and_then(|a| Ok((a, Kernel::build(&g, v, imp, true, &Source::Builtin)?)))
-    };
-    let mut kernels: HashMap<(usize, Buffers), (Kernel, Kernel)> = HashMap::new();
-    let total = checks.len();
-    progress(&format!("{total} kernels on {}: building pipelines", g.info.name));
-    for (i, c) in checks.iter_mut().enumerate() {
-        if i > 0 && i % 16 == 0 {
-            progress(&format!("built {i}/{total} kernels ({:.0} s)", t0.elapsed().as_secs_f64()));
-        }
-        if c.status != Status::Pass {
-            continue;
-        }
-        let t = Instant::now();
-        match pair(&c.variant, c.imp) {
-            Ok(k) => {
-                kernels.insert((i, Buffers::Bound), k);
-            }
-            Err(gpu::GpuError::Unsupported(why)) => c.status = Status::Skipped(why),
-            Err(e) => c.status = Status::Fail(format!("building the kernel: {e}")),
-        }
-        c.secs += t.elapsed().as_secs_f64();
-    }
+    progress(&format!("{} kernels on {}", checks.len(), g.info.name));
+    let mut runner = Runner::new(Some(&g), &[], Default::default())?;
     let mut scene_names = Vec::new();
     for path in &opts.scenes {
-        let scene = crate::scene::load(path)?;
-        let bin = bvh::build_binary(&scene);
-        let sets = ray_sets(&scene, &bin, opts.quick).with_context(|| path.display().to_string())?;
-        let f32_enc = Encoded::new(&scene, &bin, LayoutId::f32(), 4)?;
-        let f32_hits: Vec<Vec<Hit>> = sets.iter().map(|(_, r)| f32_enc.trace_default(r).0).collect();
-        // One encoding per (layout, B), uploaded while its checks run.
-        let mut keys: Vec<(LayoutId, usize)> = checks
-            .iter()
-            .filter(|c| c.status == Status::Pass)
-            .map(|c| (c.variant.layout, c.variant.branching))
-            .collect();
+        let name = runner.scene(path)?.0.name.clone();
+        let mut sets = Vec::new();
+        for spec in ray_specs(opts.quick) {
+            let id = runner.ray_set(&spec).with_context(|| format!("{} {} rays", path.display(), spec.kind))?;
+            sets.push((spec.kind, id));
+        }
+        // Each encoding (layout × B) stays on the device while its checks run.
+        let mut keys: Vec<(LayoutId, usize)> =
+            checks.iter().filter(|c| c.status.is_ok()).map(|c| (c.variant.layout, c.variant.branching)).collect();
         keys.sort();
         keys.dedup();
         for (layout, b) in keys {
-            let tg = Instant::now();
-            let enc = Encoded::new(&scene, &bin, layout, b)?;
-            let gb = GpuBvh::upload(&g, &enc).with_context(|| format!("{} {layout} B={b}", scene.name))?;
-            let mut refs: HashMap<(usize, crate::layout::Math, FloatControls, usize), (Vec<Hit>, Vec<Counters>)> =
-                HashMap::new();
-            for (i, c) in checks.iter_mut().enumerate() {
-                if c.status != Status::Pass || c.variant.layout != layout || c.variant.branching != b {
-                    continue;
-                }
+            for c in
+                checks.iter_mut().filter(|c| c.status.is_ok() && (c.variant.layout, c.variant.branching) == (layout, b))
+            {
                 let t = Instant::now();
-                // A scene beyond one storage buffer is read by address: that build of the kernels.
-                if let std::collections::hash_map::Entry::Vacant(slot) = kernels.entry((i, gb.buffers)) {
-                    match pair(&c.variant.with_buffers(gb.buffers), c.imp) {
-                        Ok(k) => {
-                            slot.insert(k);
-                        }
-                        Err(e) => {
-                            c.status =
-                                Status::Fail(format!("building the kernel that reads the scene by address: {e}"));
-                            continue;
-                        }
+                for (kind, set) in &sets {
+                    let what = format!("{name} {kind}");
+                    match runner.measure(&target(c), *set, Plan::VALIDATE) {
+                        Ok(o) => match o.status {
+                            Status::Ok => {
+                                c.rays += runner.rays(*set).rays.len();
+                                c.counter_diffs += o.m.counter_diffs;
+                            }
+                            Status::Failed(f) => c.status = Status::Failed(format!("{what}: {f}")),
+                            Status::Skipped(why) => c.status = Status::Skipped(why),
+                        },
+                        Err(e) => c.status = Status::Failed(format!("{what}: {e:#}")),
                     }
-                }
-                let (timed, counting) = &kernels[&(i, gb.buffers)];
-                let v = c.variant;
-                for (k, (kind, rays)) in sets.iter().enumerate() {
-                    let (hits, counters) = refs
-                        .entry((v.packet, v.math, v.fc, k))
-                        .or_insert_with(|| enc.trace_fc(rays, v.packet, v.math, v.fc));
-                    let what = format!("{} {kind}", scene.name);
-                    let result = (|| -> Result<usize, String> {
-                        // A conservative layout's reference must be f32's hits (the seed's
-                        // literal algorithm is checked against its own reference only).
-                        if let Some(d) = first_diff(rays, &f32_hits[k], hits)
-                            .filter(|_| layout.bvh().is_some_and(|l| l.conservative()))
-                        {
-                            return Err(format!("{what}: CPU reference vs f32: {d}"));
-                        }
-                        let a = timed.run(&g, &gb, rays, 0, 1).map_err(|e| format!("{what}: {e}"))?;
-                        if let Some(d) = first_diff(rays, hits, &a.hits) {
-                            return Err(format!("{what}: timed kernel vs CPU reference: {d}"));
-                        }
-                        let s = counting.run(&g, &gb, rays, 0, 1).map_err(|e| format!("{what}: {e}"))?;
-                        if let Some(d) = first_diff(rays, hits, &s.hits) {
-                            return Err(format!("{what}: counting kernel vs CPU reference: {d}"));
-                        }
-                        let gc = s.counters.unwrap_or_default();
-                        let diff: Vec<usize> = (0..rays.len()).filter(|&r| gc.get(r) != counters.get(r)).collect();
-                        let allowed = if v.fc == FloatControls::Off {
-                            (FC_OFF_COUNTER_BOUND * rays.len() as f64) as usize
-                        } else {
-                            0
-                        };
-                        if diff.len() > allowed {
-                            let r = diff[0];
-                            return Err(format!(
-                                "{what}: counters differ on {} of {} rays; ray {r} {:?}: GPU {:?}, CPU {:?}",
-                                diff.len(),
-                                rays.len(),
-                                rays[r],
-                                gc.get(r),
-                                counters.get(r)
-                            ));
-                        }
-                        Ok(diff.len())
-                    })();
-                    match result {
-                        Ok(d) => {
-                            c.rays += rays.len();
-                            c.counter_diffs += d;
-                        }
-                        Err(m) => {
-                            c.status = Status::Fail(m);
-                            break;
-                        }
+                    if !c.status.is_ok() {
+                        break;
                     }
                 }
                 c.secs += t.elapsed().as_secs_f64();
             }
-            if tg.elapsed().as_secs_f64() > 10.0 {
-                progress(&format!(
-                    "  {} {layout} B={b}: {:.0} s (pipelines compiled on first use)",
-                    scene.name,
-                    tg.elapsed().as_secs_f64()
-                ));
-            }
+            runner.release(layout, b);
         }
-        scene_names.push(scene.name.clone());
-        let fails = checks.iter().filter(|c| matches!(c.status, Status::Fail(_))).count();
+        scene_names.push(name.clone());
+        let fails = checks.iter().filter(|c| c.status.is_failed()).count();
         progress(&format!(
-            "scene {}/{} {} checked ({fails} failing kernels so far, {:.0} s)",
+            "scene {}/{} {name} checked ({fails} failing kernels so far, {:.0} s)",
             scene_names.len(),
             opts.scenes.len(),
-            scene.name,
             t0.elapsed().as_secs_f64()
         ));
     }
-    drop(kernels);
+    drop(runner);
     let validation = g.validation_messages();
     Ok(Outcome {
         device: g.info.name.clone(),
@@ -349,17 +232,31 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
     })
 }
 
-/// The pass/fail table (Markdown).
+/// The table of every check (Markdown).
 pub fn markdown(o: &Outcome, quick: bool) -> String {
     let fails = o.failures().len();
-    let skipped = o.checks.iter().filter(|c| matches!(c.status, Status::Skipped(_))).count();
-    let mut md = format!(
-        "# Conformance on {}\n\n- driver: {}\n- halftrace {} ({}), {} run, {:.0} s\n- scenes: {}\n- rays per scene: primary, ao, diffuse at {r}², {g} grazing\n- {} kernels: {} pass, {fails} FAIL, {skipped} skipped\n- validation layer messages: {}\n\n",
-        o.device, o.driver, env!("CARGO_PKG_VERSION"), env!("HALFTRACE_COMMIT"), if quick { "quick" } else { "full" }, o.secs, o.scenes.join(", "),
-        o.checks.len(), o.checks.len() - fails - skipped, o.validation.len(),
-        r = if quick { 16 } else { 32 }, g = if quick { 256 } else { 1000 },
+    let skipped = o.checks.iter().filter(|c| c.status.is_skipped()).count();
+    let (res, grazing) = if quick { (16, 256) } else { (32, 1000) };
+    let mut md = format!("# Conformance on {}\n\n- driver: {}\n", o.device, o.driver);
+    let run = if quick { "quick" } else { "full" };
+    md += &format!(
+        "- halftrace {} ({}), {run} run, {:.0} s\n",
+        env!("CARGO_PKG_VERSION"),
+        env!("HALFTRACE_COMMIT"),
+        o.secs
     );
-    md += "Each kernel is compared with the CPU reference of its layout, packet size and math: hits bit for bit (and equal to the f32 reference's), counters exactly with float controls on, on all but 1% of rays with them off.\n\n";
+    md += &format!(
+        "- scenes: {}\n- rays per scene: primary, ao, diffuse at {res}², {grazing} grazing\n",
+        o.scenes.join(", ")
+    );
+    let ok = o.checks.len() - fails - skipped;
+    md += &format!("- {} kernels: {ok} ok, {fails} FAILED, {skipped} skipped\n", o.checks.len());
+    md += &format!("- validation layer messages: {}\n\n", o.validation.len());
+    md += concat!(
+        "Each kernel is compared with the CPU reference of its layout, packet size and math: hits bit for bit ",
+        "(and equal to the f32 reference's), counters exactly with float controls on, on all but 1% of rays with ",
+        "them off.\n\n"
+    );
     md += "| kernel | layout | math | B | P | implementation | float controls | rays | counter diffs | s | status |\n|---|---|---|---:|---:|---|---|---:|---:|---:|---|\n";
     for c in &o.checks {
         let v = c.variant;
@@ -375,7 +272,7 @@ pub fn markdown(o: &Outcome, quick: bool) -> String {
             c.rays,
             c.counter_diffs,
             c.secs,
-            c.status.label().replace('|', "/")
+            c.status.to_string().replace('|', "/")
         );
     }
     for m in &o.validation {
@@ -417,7 +314,7 @@ pub fn write(o: &Outcome, quick: bool, dir: &Path) -> anyhow::Result<()> {
             c.rays.to_string(),
             c.counter_diffs.to_string(),
             format!("{:.3}", c.secs),
-            c.status.label(),
+            c.status.to_string(),
             o.device.clone(),
             o.driver.clone(),
         ])?;

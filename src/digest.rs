@@ -6,8 +6,8 @@
 //! changed. The hash is FNV-1a (64 bits) of the records' bytes, stable across platforms and
 //! compiler versions.
 
-use crate::rays::Ray;
-use crate::trace::{Counters, Hit};
+use crate::base::Ray;
+use crate::base::{Counters, Hit};
 use std::io::Write;
 use std::sync::Mutex;
 

@@ -11,6 +11,9 @@ use half::f16;
 
 /// Largest finite fp16 value.
 pub const F16_MAX: f32 = 65504.0;
+/// [`up_f32`]'s nudge: |x|·NUDGE_REL + NUDGE_ABS, more than half an fp16 ulp of x.
+pub const NUDGE_REL: f32 = 1.0 / 1024.0;
+pub const NUDGE_ABS: f32 = 1.0 / 16_777_216.0;
 
 /// The next fp16 value towards +inf.
 pub fn next_up(x: f16) -> f16 {
@@ -58,7 +61,7 @@ pub fn up_f64(x: f64) -> f16 {
 /// but exceed it become +inf. The shader mirrors this exactly.
 #[inline]
 pub fn up_f32(x: f32) -> f16 {
-    let y = x + x.abs() * (1.0 / 1024.0) + 1.0 / 16_777_216.0;
+    let y = x + x.abs() * NUDGE_REL + NUDGE_ABS;
     if y > F16_MAX {
         f16::INFINITY
     } else {

@@ -1,9 +1,10 @@
 //! Images of primary rays (pixel order: `rays::pixel_order`): the shaded render, heat maps
 //! of per-pixel work, and masks of differing pixels.
 
-use crate::rays::{self, Ray};
+use crate::base::Hit;
+use crate::base::Ray;
+use crate::rays;
 use crate::scene::Scene;
-use crate::trace::Hit;
 use std::path::Path;
 
 /// Writes a shaded PNG of primary hits: grey by |cos| between ray and geometric normal.

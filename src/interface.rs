@@ -7,46 +7,46 @@
 //! layout (`Layout::stack_entry`), so the report's stack bytes and the kernel's stack are the
 //! same figure.
 
-use crate::layout::{CHILD_EMPTY, LEAF_BIT, LEAF_COUNT_BITS, LEAF_FIRST_BITS};
-use crate::trace::{Counters, Hit};
+use crate::base::glsl::GlslStruct;
+use crate::base::{Counters, Hit};
+use crate::glsl_struct;
 
-/// A Rust type with a GLSL (std430) counterpart: its GLSL name and its size in bytes.
-pub trait GlslType {
-    const GLSL: &'static str;
-}
+/// Child reference word, shared by all layouts (4 bytes): [`CHILD_EMPTY`] = empty slot;
+/// [`LEAF_BIT`] set = leaf with `count − 1` in the [`LEAF_COUNT_BITS`] bits above the
+/// [`LEAF_FIRST_BITS`] bits of its first triangle (in leaf order); otherwise the index of an
+/// inner node. The kernels get these values from the generated header.
+pub const CHILD_EMPTY: u32 = u32::MAX;
+pub const LEAF_BIT: u32 = 1 << 31;
+pub const LEAF_FIRST_BITS: u32 = 27;
+pub const LEAF_COUNT_BITS: u32 = 4;
+/// Most triangles one leaf may hold.
+pub const LEAF_MAX: u32 = 1 << LEAF_COUNT_BITS;
 
-impl GlslType for u32 {
-    const GLSL: &'static str = "uint";
-}
-impl GlslType for i32 {
-    const GLSL: &'static str = "int";
-}
-impl GlslType for f32 {
-    const GLSL: &'static str = "float";
-}
-impl GlslType for [f32; 4] {
-    const GLSL: &'static str = "vec4";
-}
-
-/// A `#[repr(C)]` struct whose fields map one to one onto a GLSL struct or block.
-pub trait GlslStruct: bytemuck::Pod {
-    /// (field name, GLSL type) in declaration order.
-    const FIELDS: &'static [(&'static str, &'static str)];
+/// The child word of inner node `i`.
+pub fn inner_word(i: u32) -> u32 {
+    assert!(i < LEAF_BIT, "inner node index {i} does not fit a child word");
+    i
 }
 
-/// Declares a `#[repr(C)]`, `bytemuck::Pod` struct and its GLSL field list from one
-/// definition, so the two can never drift. Field types must implement [`GlslType`].
-#[macro_export]
-macro_rules! glsl_struct {
-    ($(#[$m:meta])* pub struct $name:ident { $($(#[$fm:meta])* pub $f:ident : $t:ty),* $(,)? }) => {
-        $(#[$m])*
-        #[repr(C)]
-        #[derive(bytemuck::Pod, bytemuck::Zeroable)]
-        pub struct $name { $($(#[$fm])* pub $f: $t),* }
-        impl $crate::interface::GlslStruct for $name {
-            const FIELDS: &'static [(&'static str, &'static str)] = &[$((stringify!($f), <$t as $crate::interface::GlslType>::GLSL)),*];
-        }
-    };
+/// The child word of a leaf of `count` triangles from `first` (in leaf order).
+pub fn leaf_word(first: u32, count: u32) -> u32 {
+    assert!(
+        (1..=LEAF_MAX).contains(&count) && first < (1 << LEAF_FIRST_BITS),
+        "leaf {first}+{count} does not fit a child word"
+    );
+    LEAF_BIT | ((count - 1) << LEAF_FIRST_BITS) | first
+}
+
+/// Whether a non-empty child word is a leaf.
+#[inline]
+pub fn is_leaf(w: u32) -> bool {
+    w & LEAF_BIT != 0
+}
+
+/// A leaf word's first triangle and count.
+#[inline]
+pub fn leaf_parts(w: u32) -> (u32, u32) {
+    (w & ((1 << LEAF_FIRST_BITS) - 1), ((w >> LEAF_FIRST_BITS) & (LEAF_MAX - 1)) + 1)
 }
 
 glsl_struct! {
@@ -94,6 +94,11 @@ pub fn glsl_float(name: &str, x: f32) -> String {
     format!("const float {name} = {:?};\n", x as f64)
 }
 
+/// A GLSL `const uint` declaration.
+pub fn glsl_uint(name: &str, x: u32) -> String {
+    format!("const uint {name} = {x:#x}u;\n")
+}
+
 /// A GLSL `const int` declaration.
 pub fn glsl_int(name: &str, x: i32) -> String {
     format!("const int {name} = {x};\n")
@@ -130,6 +135,7 @@ pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
     s += &format!("const uint CHILD_EMPTY = {CHILD_EMPTY:#010x}u;\nconst uint LEAF_BIT = {LEAF_BIT:#010x}u;\n");
     s += &format!("const uint LEAF_FIRST_MASK = {:#010x}u;\nconst uint LEAF_COUNT_SHIFT = {LEAF_FIRST_BITS}u;\nconst uint LEAF_COUNT_MASK = {:#x}u;\n", (1u32 << LEAF_FIRST_BITS) - 1, (1u32 << LEAF_COUNT_BITS) - 1);
     s += &format!("const uint RAY_FLOATS = {RAY_FLOATS}u;\nconst int PRIM_OVERFLOW = {PRIM_OVERFLOW};\n");
+    s += &glsl_float("MARGIN32", crate::base::slab::MARGIN32);
     for (name, value) in [
         ("NODES", binding::NODES),
         ("TRI_VERTS", binding::TRI_VERTS),

@@ -1,31 +1,38 @@
 //! halftrace: a harness for reduced-precision BVH traversal, starting from the half-precision
 //! hierarchical traversal of Koskela et al. ("Half-Precision Floating-Point Ray Traversal").
 //!
-//! Data flow: [`scene`] → [`bvh`] (binary SAH, collapsed to B-wide) → [`layout`] (one folder
-//! per precision layout, listed in [`layout::REGISTRY`]) → [`trace`] (the one CPU traversal,
-//! the oracle) and [`gpu`] (the kernels: one GLSL skeleton, one hooks file per layout, the
-//! shared [`interface`]) → [`measure`] (validate, then time) → [`sweep`] (jobs) → [`report`].
-//! `docs/architecture.md` has the picture and how to add a layout.
+//! Layers, bottom up (each module imports only those below it; `docs/architecture.md` has the
+//! picture and `tests/architecture.rs` checks it): [`base`] (rays, hits, counters, the fp32
+//! tests), [`precision`], [`fp16`]; [`interface`] (what Rust and GLSL share), [`scene`],
+//! [`rays`], [`npy`]; [`bvh`]; [`layout`] (one folder per precision layout, the CPU
+//! traversal); [`variant`]; [`gpu`] (the Vulkan backend, the only `unsafe`); [`baseline`]
+//! (`rq`, `embree`); [`report`]; [`runner`] (validate, then time — the one way to a result);
+//! [`sweep`], [`bench`], [`conformance`]; [`cli`] and [`commands`].
 
+// The exact arithmetic loops over the three axes index several arrays in step, as the GLSL
+// they mirror does; iterators would hide that correspondence.
+#![allow(clippy::needless_range_loop)]
+
+pub mod base;
+pub mod baseline;
 pub mod bench;
 pub mod bvh;
+pub mod cli;
+pub mod commands;
 pub mod conformance;
 pub mod digest;
-pub mod embree;
-pub mod formats;
 pub mod fp16;
 pub mod fsx;
-pub mod geom;
 pub mod gpu;
 pub mod images;
 pub mod interface;
 pub mod layout;
-pub mod measure;
 pub mod npy;
+pub mod precision;
 pub mod progress;
 pub mod rays;
 pub mod report;
+pub mod runner;
 pub mod scene;
 pub mod sweep;
-pub mod trace;
 pub mod variant;

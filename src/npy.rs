@@ -3,8 +3,8 @@
 //! Written by hand because the hit file needs a structured dtype and every error must name
 //! the file and what is wrong with it.
 
-use crate::rays::Ray;
-use crate::trace::Hit;
+use crate::base::Hit;
+use crate::base::Ray;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -96,7 +96,7 @@ fn write_npy(path: &Path, descr: &str, shape: &str, data: &[u8]) -> Result<(), N
 }
 
 /// Reads rays from a float32 array of shape (N, 8): `ox oy oz tmin dx dy dz tmax`.
-/// The rays are not validated here; see [`crate::rays::validate`].
+/// The rays are not validated here; see [`crate::base::validate`].
 pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
     let b = std::fs::read(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
     let h = parse_header(path, &b)?;
@@ -180,5 +180,5 @@ pub fn read_hits(path: &Path) -> Result<Vec<Hit>, NpyError> {
             found: format!("{} bytes", data.len()),
         });
     }
-    Ok(data.chunks_exact(16).map(|c| bytemuck::pod_read_unaligned(c)).collect())
+    Ok(data.chunks_exact(16).map(bytemuck::pod_read_unaligned).collect())
 }

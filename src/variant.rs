@@ -4,15 +4,15 @@
 use crate::bvh::BRANCHINGS;
 use crate::interface;
 use crate::layout::LayoutId;
-pub use crate::layout::Math;
+use crate::precision::{FloatControls, Math};
 
 /// Packet sizes the harness supports.
 pub const PACKETS: [usize; 6] = [1, 4, 8, 16, 32, 64];
 
-/// The layouts the default sweep runs with the seed's B and P series.
+/// The layouts the default sweep runs with the poster's B and P series.
 pub const SERIES_LAYOUTS: [&str; 2] = ["f32", "f16h"];
 /// The branching factors at which the default sweep compares every layout (P = 1).
-pub const SCHEME_BRANCHINGS: [usize; 2] = [4, 8];
+pub const LAYOUT_BRANCHINGS: [usize; 2] = [4, 8];
 
 /// One traversal kernel configuration of a BVH layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -41,54 +41,11 @@ pub enum Buffers {
     Addressed,
 }
 
-/// The float-control execution modes of a kernel (SPIR-V 1.4 / `VK_KHR_shader_float_controls`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
-pub enum FloatControls {
-    /// The kernel declares round-to-nearest-even and signed-zero/inf/NaN preservation for the
-    /// float widths it computes in, and the CPU reference matches it bit for bit.
-    #[default]
-    On,
-    /// The kernel declares none and is written so that any faithful rounding and any inf/NaN
-    /// handling keeps its hits exact (only layouts that provide such a build).
-    Off,
-}
-
-impl FloatControls {
-    pub fn name(self) -> &'static str {
-        match self {
-            FloatControls::On => "on",
-            FloatControls::Off => "off",
-        }
-    }
-}
-
-/// `--float-controls`: on, off, or auto (on where the device has the modes, else off where the
-/// layout has such a build).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FcChoice {
-    #[default]
-    Auto,
-    On,
-    Off,
-}
-
-impl std::str::FromStr for FcChoice {
-    type Err = String;
-    fn from_str(s: &str) -> Result<FcChoice, String> {
-        match s {
-            "auto" => Ok(FcChoice::Auto),
-            "on" => Ok(FcChoice::On),
-            "off" => Ok(FcChoice::Off),
-            o => Err(format!("unknown float-controls mode '{o}' (use on, off or auto)")),
-        }
-    }
-}
-
 /// How the P rays of a packet cooperate on the GPU.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, clap::ValueEnum)]
 pub enum PacketImpl {
     /// P = 1: classic per-invocation traversal.
+    #[value(skip)]
     Single,
     /// Clusters of P invocations of a subgroup (P ≤ subgroup size), clustered subgroup ops.
     Subgroup,
@@ -112,13 +69,13 @@ pub fn stack_entries(b: usize) -> usize {
 }
 
 impl Variant {
-    /// A variant in its layout's default math. `layout` must be a BVH layout.
+    /// A variant in its layout's default math.
     pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
         Variant {
             layout,
             branching,
             packet,
-            math: layout.caps().maths[0],
+            math: layout.default_math(),
             fc: FloatControls::On,
             buffers: Buffers::Bound,
         }
@@ -138,7 +95,7 @@ impl Variant {
 
     /// The same variant in another math mode, when the layout has it (else unchanged).
     pub fn with_math(mut self, math: Math) -> Variant {
-        if self.layout.caps().maths.contains(&math) {
+        if self.layout.info().maths.contains(&math) {
             self.math = math;
         }
         self
@@ -153,7 +110,7 @@ impl Variant {
         format!(
             "trav_{}{}_b{}_p{}{}{}{}{}",
             self.layout.name(),
-            if self.layout.caps().maths.len() > 1 { format!("_{}", self.math.tag()) } else { String::new() },
+            if self.layout.info().maths.len() > 1 { format!("_{}", self.math.tag()) } else { String::new() },
             self.branching,
             self.packet,
             if self.fc == FloatControls::Off { "_fcoff" } else { "" },
@@ -189,13 +146,13 @@ impl Variant {
         }
     }
 
-    /// The default matrix: the seed's two series — B ∈ {2, 4, 8, 16} at P = 1 and P ∈ {4, 8, 16,
+    /// The default matrix: the poster's two series — B ∈ {2, 4, 8, 16} at P = 1 and P ∈ {4, 8, 16,
     /// 32, 64} at B = 4 — for the [`SERIES_LAYOUTS`], and every other layout at
-    /// [`SCHEME_BRANCHINGS`] with P = 1; every layout in every math mode.
+    /// [`LAYOUT_BRANCHINGS`] with P = 1; every layout in every math mode.
     pub fn matrix() -> Vec<Variant> {
         let mut v = Vec::new();
-        for layout in LayoutId::layouts() {
-            for &math in layout.caps().maths {
+        for layout in LayoutId::all() {
+            for &math in layout.info().maths {
                 if SERIES_LAYOUTS.contains(&layout.name()) {
                     for b in BRANCHINGS {
                         v.push(Variant::new(layout, b, 1).with_math(math));
@@ -204,7 +161,7 @@ impl Variant {
                         v.push(Variant::new(layout, 4, p).with_math(math));
                     }
                 } else {
-                    for b in SCHEME_BRANCHINGS {
+                    for b in LAYOUT_BRANCHINGS {
                         v.push(Variant::new(layout, b, 1).with_math(math));
                     }
                 }
@@ -244,7 +201,7 @@ impl Variant {
 
     /// The layout's stack entry fields in this variant's math.
     pub fn stack_entry(&self) -> &'static [(&'static str, &'static str)] {
-        self.layout.bvh().expect("a variant's layout is a BVH layout").stack_entry(self.math)
+        (self.layout.info().stack_entry)(self.math)
     }
 
     /// Stack bytes per ray: entries × entry bytes (node index and the layout's fields, from
@@ -255,8 +212,38 @@ impl Variant {
 
     /// The generated `interface.glsl` of this variant's kernels.
     pub fn interface_glsl(&self) -> String {
-        let l = self.layout.bvh().expect("a variant's layout is a BVH layout");
-        interface::glsl_header(Some((self.stack_entry(), &l.glsl_constants())))
+        interface::glsl_header(Some((self.stack_entry(), &(self.layout.info().glsl_constants)())))
+    }
+}
+
+/// One kernel: a variant in one packet implementation, timed or counting (`stats`). What the
+/// runner keys its pipelines by and what a kernel's name spells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct KernelId {
+    pub variant: Variant,
+    pub imp: PacketImpl,
+    pub stats: bool,
+}
+
+impl KernelId {
+    pub fn new(variant: Variant, imp: PacketImpl, stats: bool) -> KernelId {
+        KernelId { variant, imp, stats }
+    }
+
+    /// The same kernel, timed (`false`) or counting (`true`).
+    pub fn with_stats(self, stats: bool) -> KernelId {
+        KernelId { stats, ..self }
+    }
+
+    /// `trav_{layout}[_{math}]_b{B}_p{P}…` ([`Variant::kernel_name`]).
+    pub fn name(&self) -> String {
+        self.variant.kernel_name(self.imp, self.stats)
+    }
+}
+
+impl std::fmt::Display for KernelId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name())
     }
 }
 

@@ -6,11 +6,12 @@
 mod common;
 use common::*;
 use halftrace::bvh::{collapse, ChildRef, WideBvh, BRANCHINGS};
-use halftrace::layout::f16h::{derive_child, encode_with_frames, hooks::slot_box, Frame};
-use halftrace::layout::{decode_child, encode_child, CHILD_EMPTY};
+use halftrace::interface::CHILD_EMPTY;
+use halftrace::layout::frames::{derive_child, encode_chained, Frame};
+use halftrace::layout::{decode_child, encode_child};
 
 fn check<const B: usize>(name: &str, w: &WideBvh) -> usize {
-    let (nodes, _, frames) = encode_with_frames::<B>(w).unwrap();
+    let (nodes, _, frames) = encode_chained::<B>("f16h", w).unwrap();
     let mut checked = 0;
     assert_eq!(nodes.len(), w.nodes.len());
     for (i, (wn, n)) in w.nodes.iter().zip(&nodes).enumerate() {
@@ -23,7 +24,7 @@ fn check<const B: usize>(name: &str, w: &WideBvh) -> usize {
             let (bx, c) = &wn.children[s];
             assert_eq!(n.child[s], encode_child(c));
             assert_eq!(decode_child(n.child[s]), *c);
-            let (lo, hi) = slot_box(n, s);
+            let (lo, hi) = n.slot_box(s);
             for a in 0..3 {
                 let (lo, hi) = (lo[a], hi[a]);
                 assert!(lo.is_finite() && hi.is_finite(), "{name} B={B} node {i} slot {s}: non-finite");
@@ -82,7 +83,7 @@ fn q8_nodes_take_at_most_four_tenths_of_f32_at_b8() {
         let p = prepare(&path);
         for b in halftrace::bvh::BRANCHINGS {
             let f = encode(&p, LayoutId::f32(), b);
-            for l in LayoutId::layouts() {
+            for l in LayoutId::all() {
                 let e = encode(&p, l, b);
                 assert_eq!(e.node_count(), f.node_count(), "{} {l} B={b}: the same tree", p.scene.name);
                 if l.name() == "q8" && b == 8 {

@@ -1,7 +1,7 @@
 //! Bad input gets a clear error naming the file, line or parameter; never a panic.
 
+use halftrace::base::Ray;
 use halftrace::npy;
-use halftrace::rays::Ray;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

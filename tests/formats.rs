@@ -51,8 +51,8 @@ fn same_hits(a: &Scene, b: &Scene) {
     let (pa, pb) = (of(a), of(b));
     let mut hits = 0;
     for (kind, rays) in ray_sets(&pa, 64, 500) {
-        let ha = encode(&pa, LayoutId::f32(), 4).trace_default(&rays).0;
-        let hb = encode(&pb, LayoutId::f32(), 4).trace_default(&rays).0;
+        let ha = encode(&pa, LayoutId::f32(), 4).reference_default(&rays).0;
+        let hb = encode(&pb, LayoutId::f32(), 4).reference_default(&rays).0;
         hits += ha.iter().filter(|h| h.is_hit()).count();
         assert_same_hits(&format!("{} vs {} {kind}", a.path.display(), b.path.display()), &rays, &ha, &hb);
     }
@@ -156,7 +156,7 @@ fn gltf_node_transforms_strips_and_fans() {
 #[test]
 fn instanced_glb_loads_every_copy() {
     let src = load("teapot.obj");
-    let bytes = halftrace::formats::instanced_glb(&src, 5, 3);
+    let bytes = halftrace::scene::instance::instanced_glb(&src, 5, 3);
     let p = dir().join("teapots.glb");
     std::fs::write(&p, &bytes).unwrap();
     let s = scene::load(&p).unwrap_or_else(|e| panic!("{e}"));

@@ -4,9 +4,9 @@
 
 mod common;
 use common::*;
+use halftrace::base::Hit;
 use halftrace::bvh::BRANCHINGS;
 use halftrace::layout::LayoutId;
-use halftrace::trace::{brute, Hit};
 use rayon::prelude::*;
 
 #[test]
@@ -14,10 +14,10 @@ fn f32_traversal_equals_brute_force() {
     for name in ["teapot.obj", "cornell_box.obj", "smallpine.obj"] {
         let p = prepare(&scenes_dir().join(name));
         for (kind, rays) in ray_sets(&p, 40, 1500) {
-            let expected: Vec<Hit> = rays.par_iter().map(|r| brute::trace(&p.scene, r)).collect();
+            let expected: Vec<Hit> = rays.par_iter().map(|r| p.scene.brute_force(r)).collect();
             assert!(expected.iter().any(|h| h.is_hit()), "{name} {kind}: no ray hits; the test would be vacuous");
             for b in BRANCHINGS {
-                let (hits, _) = encode(&p, LayoutId::f32(), b).trace_default(&rays);
+                let (hits, _) = encode(&p, LayoutId::f32(), b).reference_default(&rays);
                 assert_same_hits(&format!("{name} f32 B={b} {kind} vs brute force"), &rays, &expected, &hits);
             }
         }
@@ -26,10 +26,9 @@ fn f32_traversal_equals_brute_force() {
 
 #[test]
 fn every_layout_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
-    // Every conservative layout (f16h-seed, the poster's literal algorithm, is not: its
+    // Every conservative layout (f16h-poster, the poster's literal algorithm, is not: its
     // disagreements are counted by the sweep and the test below).
-    let layouts: Vec<LayoutId> =
-        LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
+    let layouts: Vec<LayoutId> = LayoutId::all().filter(|&l| l != LayoutId::f32() && l.info().conservative).collect();
     assert!(!layouts.is_empty());
     let mut total = 0usize;
     // per (layout, math): re-anchors, box tests; and f32's box tests
@@ -42,11 +41,11 @@ fn every_layout_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
             let f = encode(&p, LayoutId::f32(), b);
             let encoded: Vec<_> = layouts.iter().map(|&l| encode(&p, l, b)).collect();
             for (kind, rays) in &sets {
-                let (hf, cf) = f.trace_default(rays);
+                let (hf, cf) = f.reference_default(rays);
                 f32_boxes += cf.iter().map(|c| c.box_tests as u64).sum::<u64>();
                 for enc in &encoded {
-                    for &math in enc.layout.caps().maths {
-                        let (hh, ch) = enc.trace(rays, 1, math);
+                    for &math in enc.layout.info().maths {
+                        let (hh, ch) = enc.reference(rays, 1, math, halftrace::precision::FloatControls::On);
                         let what = format!("{}/{}", enc.layout, math.tag());
                         assert_same_hits(&format!("{} {what} B={b} {kind} vs f32", p.scene.name), rays, &hf, &hh);
                         let i = stats.iter().position(|s| s.0 == what).unwrap_or_else(|| {
@@ -76,8 +75,8 @@ fn traversal_is_deterministic_and_hits_exist() {
     let sets = ray_sets(&p, 32, 500);
     let h = encode(&p, layout("f16h"), 8);
     for (kind, rays) in &sets {
-        let a = h.trace_default(rays);
-        let b = h.trace_default(rays);
+        let a = h.reference_default(rays);
+        let b = h.reference_default(rays);
         assert_eq!(a.1, b.1, "{kind}: counters differ between runs");
         assert_same_hits(kind, rays, &a.0, &b.0);
         assert!(a.0.iter().any(|x| x.is_hit()), "{kind}: nothing hit");
@@ -93,12 +92,11 @@ fn traversal_is_deterministic_and_hits_exist() {
 #[test]
 fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
     use glam::Vec3;
-    use halftrace::rays::Ray;
+    use halftrace::base::Ray;
     use halftrace::scene::Scene;
     use proptest::prelude::*;
     use proptest::test_runner::{Config, TestRunner};
-    let layouts: Vec<LayoutId> =
-        LayoutId::layouts().filter(|&l| l != LayoutId::f32() && l.bvh().unwrap().conservative()).collect();
+    let layouts: Vec<LayoutId> = LayoutId::all().filter(|&l| l != LayoutId::f32() && l.info().conservative).collect();
     let mut runner = TestRunner::new(Config { cases: 48, ..Config::default() });
     let cluster = (
         prop::array::uniform3(-1.0f32..1.0),
@@ -110,7 +108,7 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
     let rays_total = std::sync::atomic::AtomicUsize::new(0);
     runner
         .run(&strat, |(clusters, seed)| {
-            let mut rng = halftrace::rays::Rng::new(seed);
+            let mut rng = halftrace::base::Rng::new(seed);
             let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
             let mut tris = Vec::new();
             for (c, dist, size, n) in &clusters {
@@ -160,11 +158,11 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
             rays_total.fetch_add(rays.len(), std::sync::atomic::Ordering::Relaxed);
             for b in [2, 4, 8, 16] {
                 let f = encode(&p, LayoutId::f32(), b);
-                let (hf, _) = f.trace_default(&rays);
+                let (hf, _) = f.reference_default(&rays);
                 for &l in &layouts {
                     let enc = encode(&p, l, b);
-                    for &math in l.caps().maths {
-                        let (h, _) = enc.trace(&rays, 1, math);
+                    for &math in l.info().maths {
+                        let (h, _) = enc.reference(&rays, 1, math, halftrace::precision::FloatControls::On);
                         let bad = (0..rays.len()).find(|&i| !hf[i].same_bits(&h[i]));
                         prop_assert!(
                             bad.is_none(),
@@ -198,13 +196,13 @@ fn huge_coordinates_keep_every_hit() {
     let q = Prepared { bin: halftrace::bvh::build_binary(&big), scene: big };
     let rays = &ray_sets(&p, 32, 0)[0].1;
     let big_rays = &ray_sets(&q, 32, 0)[0].1;
-    let base = encode(&p, LayoutId::f32(), 4).trace_default(rays).0;
+    let base = encode(&p, LayoutId::f32(), 4).reference_default(rays).0;
     assert!(base.iter().filter(|h| h.is_hit()).count() > 100);
-    for l in LayoutId::layouts().filter(|l| l.bvh().unwrap().conservative()) {
+    for l in LayoutId::all().filter(|l| l.info().conservative) {
         for b in [4, 8] {
             let enc = encode(&q, l, b);
-            for &math in l.caps().maths {
-                let got = enc.trace(big_rays, 1, math).0;
+            for &math in l.info().maths {
+                let got = enc.reference(big_rays, 1, math, halftrace::precision::FloatControls::On).0;
                 for (i, (g, e)) in got.iter().zip(&base).enumerate() {
                     assert!(
                         g.prim == e.prim && (g.prim < 0 || g.t == e.t * k),
@@ -222,5 +220,5 @@ fn huge_coordinates_keep_every_hit() {
 /// (the bar of common::baseline_agrees_with_f32; Embree's triangle test is not ours).
 #[test]
 fn embree_baseline_agrees_with_f32_on_every_scene() {
-    baseline_agrees_with_f32("embree", halftrace::embree::host().as_ref(), 1);
+    baseline_agrees_with_f32("embree", &halftrace::baseline::embree::host(), 1);
 }

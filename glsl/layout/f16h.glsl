@@ -1,10 +1,9 @@
 // Layout f16h hooks (src/layout/f16h): fp16 child boxes in the parent's frame, frames derived
-// from the stored boxes, box tests and origin moves in the variant's math (MATH_F16: the seed,
+// from the stored boxes, box tests and origin moves in the variant's math (MATH_F16: the poster's,
 // MATH_F32, MATH_MIXED) with a carried error bound, re-anchored from the fp32 world ray when
-// it grows too large. Mirrors src/layout/f16h/{frame,hooks}.rs operation for operation; the
-// bound is argued in hooks.rs. The constants OCAP, EMAX, EBIG, W_MARGIN, W_MARGIN_OFF, SAT,
-// BIG32, D_FLUSH, K_MIN_LOG2 and K_MAX_LOG2 come from interface.glsl (generated from the Rust
-// ones). FC_OFF: the build for devices without float controls (hooks.rs, "Without float
+// it grows too large. Mirrors src/layout/f16h/hooks.rs operation for operation (the box test
+// and frames: half.glsl); the bound is argued in src/layout/half.rs and hooks.rs. Every
+// constant comes from interface.glsl (generated from the Rust ones). FC_OFF: the build for devices without float controls (hooks.rs, "Without float
 // controls"): conversions to fp16 and the frame's fp32 additions emulated with integer
 // operations, products saturated instead of overflowing, no inf or NaN anywhere, every
 // rounding allowed a full ulp.
@@ -58,9 +57,9 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     // The fp16 origin move must not overflow (hooks.rs): else re-anchor.
     float om = max(max(abs(float(en.o.x)), abs(float(en.o.y))), abs(float(en.o.z)));
     float cm = max(max(abs(float(cc.x)), abs(float(cc.y))), abs(float(cc.z)));
-    fits = om + abs(se) + cm <= 60000.0;
+    fits = om + abs(se) + cm <= MOVE_LIMIT;
 #endif
-    if (v.prec && cr <= 32768.0 && fits) {
+    if (v.prec && cr <= R_MAX && fits) {
         float emag = 0.0, ecmag = 0.0, omag = 0.0;
         bool finite = true;
         for (int a = 0; a < 3; a++) {

@@ -3,7 +3,7 @@
 //! least 65 536 triangles bin an even sample of them; nodes of at most 16 find the same split as
 //! their bins would by sorting.
 
-use crate::geom::Aabb;
+use crate::base::Aabb;
 use crate::scene::Scene;
 use bytemuck::Zeroable;
 use glam::Vec3A;

@@ -3,7 +3,7 @@
 //! greedy collapse, as in Wald et al. 2008 and tinybvh's `BVH4`/`BVH8` conversions).
 
 use super::build::{BinaryBvh, MAX_LEAF};
-use crate::geom::Aabb;
+use crate::base::Aabb;
 
 /// A child slot of a wide node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -57,7 +57,7 @@ impl<'g> Buffer<'g> {
         let mut req = unsafe { d.get_buffer_memory_requirements(raw) };
         // Kernels that read a buffer by address assume 16-byte alignment (buffer_reference_align).
         req.alignment = req.alignment.max(16);
-        let alloc = gpu.allocator.lock().unwrap().allocate(&AllocationCreateDesc {
+        let alloc = gpu.allocator().lock().unwrap().allocate(&AllocationCreateDesc {
             name,
             requirements: req,
             location,
@@ -72,7 +72,7 @@ impl<'g> Buffer<'g> {
             }
         };
         if let Err(e) = unsafe { d.bind_buffer_memory(raw, alloc.memory(), alloc.offset()) }.vk("vkBindBufferMemory") {
-            let _ = gpu.allocator.lock().unwrap().free(alloc);
+            let _ = gpu.allocator().lock().unwrap().free(alloc);
             unsafe { d.destroy_buffer(raw, None) };
             return Err(e);
         }
@@ -194,7 +194,7 @@ impl Drop for Buffer<'_> {
         }
         unsafe { self.gpu.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.alloc.take() {
-            let _ = self.gpu.allocator.lock().map(|mut al| al.free(a));
+            let _ = self.gpu.allocator().lock().map(|mut al| al.free(a));
         }
     }
 }

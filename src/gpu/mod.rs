@@ -1,20 +1,29 @@
 //! The Vulkan backend: the only module with `unsafe`. One file per Vulkan concept:
-//! [`context`] (instance, device, queue, allocator, validation), [`buffer`], [`shader`]
-//! (GLSL → SPIR-V, interface checks), [`pipeline`] (the Vulkan compute pipeline object),
-//! [`timer`] (timestamp queries), [`kernel`] (a BVH on the device and the traversal kernels
-//! over it), [`rq`] (the ray-query baseline) and [`bench`] (raw fp16/fp32 throughput).
+//! [`instance`] (loader, instance, validation layer), [`device`] (what each device can do,
+//! which one is picked), [`context`] (the open device: queue, command pool, allocator),
+//! [`buffer`], [`shader`] (GLSL → SPIR-V, SPIR-V reading and patching, user-module checks),
+//! [`pipeline`] (the Vulkan compute pipeline object), [`timer`] (timestamp queries),
+//! [`bvh`] (a BVH resident on the device), [`kernel`] (a traversal kernel and its dispatch),
+//! [`support`] (what a device runs of each variant), [`accel`] (the driver's acceleration
+//! structures and ray queries) and [`arith`] (raw fp16/fp32 arithmetic rates).
 
-pub mod bench;
+pub mod accel;
+pub mod arith;
 pub mod buffer;
+pub mod bvh;
 pub mod context;
+pub mod device;
+pub(crate) mod instance;
 pub mod kernel;
 pub mod pipeline;
-pub mod rq;
 pub mod shader;
 pub mod support;
 pub mod timer;
 
-pub use context::{list_devices, pick, ContextOptions, DeviceInfo, Gpu};
+pub use bvh::GpuBvh;
+pub use context::{ContextOptions, Gpu, DEFAULT_KERNEL_TIMEOUT_S};
+pub use device::{list_devices, pick, DeviceInfo, MASKABLE};
+pub use kernel::{Kernel, Source};
 use thiserror::Error;
 
 #[derive(Debug, Error)]

@@ -3,8 +3,9 @@
 //! device is never refused as a whole: what it lacks becomes one skipped line per variant.
 
 use super::DeviceInfo;
-use crate::layout::{LayoutId, Math};
-use crate::variant::{FcChoice, FloatControls, PacketImpl, Variant};
+use crate::layout::{LayoutId, Needs};
+use crate::precision::{FcChoice, FloatControls, Math};
+use crate::variant::{PacketImpl, Variant};
 
 /// A float-control execution mode a kernel declares: (SPIR-V execution mode, float width).
 pub type FloatMode = (u32, u32);
@@ -25,8 +26,8 @@ pub fn float_modes(v: &Variant) -> Vec<FloatMode> {
     m
 }
 
-fn needs(layout: LayoutId, math: Math) -> crate::layout::Needs {
-    layout.bvh().map(|l| l.needs(math)).unwrap_or_default()
+fn needs(layout: LayoutId, math: Math) -> Needs {
+    (layout.info().needs)(math)
 }
 
 /// The device feature behind a float mode.
@@ -42,8 +43,8 @@ fn mode_feature(info: &DeviceInfo, (mode, width): FloatMode) -> (&'static str, b
 /// `Ok` when `info`'s device can run the kernels of `v` as built (its float controls
 /// included), else what it lacks, in one line.
 pub fn check(info: &DeviceInfo, v: &Variant) -> Result<(), String> {
-    let Some(l) = v.layout.bvh() else { return Err(format!("{} is not a BVH layout", v.layout)) };
-    let n = l.needs(v.math);
+    let l = v.layout.info();
+    let n = (l.needs)(v.math);
     let mut missing = Vec::new();
     if n.storage16 && !info.storage_16bit {
         missing.push("storageBuffer16BitAccess");
@@ -57,7 +58,7 @@ pub fn check(info: &DeviceInfo, v: &Variant) -> Result<(), String> {
     match v.fc {
         FloatControls::On => missing
             .extend(float_modes(v).into_iter().map(|m| mode_feature(info, m)).filter(|(_, ok)| !ok).map(|(n, _)| n)),
-        FloatControls::Off if !l.float_controls_off() => {
+        FloatControls::Off if !l.float_controls_off => {
             return Err(format!("{} has no kernel build without float controls", v.layout))
         }
         FloatControls::Off => {}

@@ -13,21 +13,21 @@
 //! # fp16 math (`Math::F16`)
 //! At each visited node the origin is placed at the node's entry bound `t` (the stack entry)
 //! in the node's frame, computed in fp32 from the world ray and rounded to fp16, with the
-//! error bound of `f16h`'s anchor (`hooks::anchor`: fp32 rounding of the point and the frame
+//! error bound of the shared anchor (`half::anchor`: fp32 rounding of the point and the frame
 //! map, clamping to ±OCAP, the fp16 rounding). The node's boxes span at most ±16384 in its
-//! frame, so `f16h`'s box-test argument applies unchanged (`hooks` module docs: the widening
+//! frame, so the shared box-test argument applies unchanged (`half` module docs: the widening
 //! w = e·(1 + 2⁻¹¹) + 44 and the (1 ∓ 2⁻⁸) factors, property-tested there on adversarial
 //! boxes and rays); with tp = tlo = t the lower cull keeps exactly the part of the ray from t
 //! on, which holds everything that can still matter (t is a lower bound of the node's entry).
 //! A hit child's entry bound is its tn_lb mapped back to world units and rounded down
-//! (`hooks::child_tlo`). No origin is carried from node to node, so the bound never compounds
+//! (`half::half_child_tlo`). No origin is carried from node to node, so the bound never compounds
 //! and nothing is ever re-anchored; the stack entry is one fp32 value.
 
-use super::f16h::hooks::{self, Ray16};
-use super::f16h::Frame;
-use super::Math;
-use crate::trace::{slab32, RayPre};
-use half::f16;
+use super::frames::Frame;
+use super::half::{self, HVisit, Ray16};
+use crate::base::{slab32, RayPre};
+use crate::precision::Math;
+use ::half::f16;
 
 /// What one visit of one node fixes for one ray.
 #[derive(Clone, Copy, Debug)]
@@ -40,11 +40,10 @@ pub struct Visit {
     pub frame: Frame,
     /// fp16 math: the origin anchored in the node's frame (fp16 values) and the visit bounds.
     pub o: [f32; 3],
-    pub h: hooks::Visit,
+    pub h: HVisit,
 }
 
-const NO_HALF_VISIT: hooks::Visit =
-    hooks::Visit { mk: 0.0, s_lim: f16::ZERO, lower: f16::ZERO, precise: true, w: f16::ZERO };
+const NO_HALF_VISIT: HVisit = HVisit { mk: 0.0, s_lim: f16::ZERO, lower: f16::ZERO, precise: true, w: f16::ZERO };
 
 /// 1/k for a power of two k, exactly, from the exponent bits (`inv_pow2` in the kernels).
 #[inline]
@@ -69,8 +68,8 @@ pub fn visit(frame: &Frame, t: f32, r: &RayPre, r16: &Ray16, best_t: f32) -> Vis
     if r16.math == Math::F32 {
         return Visit { tmax: best_t, t, frame: *frame, o: [0.0; 3], h: NO_HALF_VISIT };
     }
-    let (o, e) = hooks::anchor(r, frame, t, Math::F16, false);
-    Visit { tmax: best_t, t, frame: *frame, o, h: hooks::visit_parts(frame.k, e, t, t, r16, best_t) }
+    let (o, e) = half::anchor(r, frame, t, Math::F16, false);
+    Visit { tmax: best_t, t, frame: *frame, o, h: half::half_visit(frame.k, e, t, t, r16, best_t) }
 }
 
 /// fp32 math: the box test of a child's outward-decoded world box; (key, (near, near)).
@@ -83,7 +82,7 @@ pub fn test_world(lo: [f32; 3], hi: [f32; 3], v: &Visit, r: &RayPre) -> Option<(
 /// fp16 math: the widened box test of a child's fp16 box in the node frame; (tn, (tn, tn_lb)).
 #[inline]
 pub fn test_local(lo: [f16; 3], hi: [f16; 3], v: &Visit, r16: &Ray16) -> Option<(f32, (f32, f32))> {
-    hooks::test_box(&v.o, lo, hi, &v.h, r16).map(|(tn, tn_lb)| (tn, (tn, tn_lb)))
+    half::half_test(&v.o, lo, hi, &v.h, r16).map(|(tn, tn_lb)| (tn, (tn, tn_lb)))
 }
 
 /// The stack entry (entry bound) of a hit inner child.
@@ -92,36 +91,32 @@ pub fn child_entry(v: &Visit, (tn, tn_lb): (f32, f32), r16: &Ray16) -> f32 {
     if r16.math == Math::F32 {
         tn
     } else {
-        hooks::child_tlo(&v.h, v.t, v.t, tn_lb, false)
+        half::half_child_tlo(&v.h, v.t, v.t, tn_lb, false)
     }
 }
 
 /// A wide node's children as fp16 boxes in frame `f`, rounded outward, with their child words
-/// (the fp16 part of the f16w and f16a nodes): `(lo[axis][slot], hi[axis][slot], child[slot])`.
-#[allow(clippy::type_complexity)]
+/// (the fp16 part of the f16w and f16a nodes).
 pub fn children16<const B: usize>(
     layout: &'static str,
     i: usize,
     n: &crate::bvh::WideNode,
     f: &Frame,
-) -> Result<([[f16; B]; 3], [[f16; B]; 3], [u32; B]), super::EncodeError> {
-    let mut lo16 = [[f16::ZERO; B]; 3];
-    let mut hi16 = [[f16::ZERO; B]; 3];
-    let mut child = [super::CHILD_EMPTY; B];
+) -> Result<super::node16::Node16<B>, super::EncodeError> {
+    let mut out = super::node16::Node16 {
+        lo: [[f16::ZERO; B]; 3],
+        hi: [[f16::ZERO; B]; 3],
+        child: [crate::interface::CHILD_EMPTY; B],
+    };
     for (slot, (b, c)) in n.children.iter().enumerate() {
-        let (lo, hi, exact) = super::f16h::to_local(f, b);
-        for (k, v) in lo.iter().chain(&hi).enumerate() {
-            if !(v.to_f32().abs() <= super::f16h::COORD_LIMIT) {
-                return Err(super::EncodeError::OutOfRange { layout, node: i, child: slot, value: exact[k] });
-            }
-        }
+        let (lo, hi) = super::frames::stored_box(layout, i, slot, f, b)?;
         for a in 0..3 {
-            lo16[a][slot] = lo[a];
-            hi16[a][slot] = hi[a];
+            out.lo[a][slot] = lo[a];
+            out.hi[a][slot] = hi[a];
         }
-        child[slot] = super::encode_child(c);
+        out.child[slot] = super::encode_child(c);
     }
-    Ok((lo16, hi16, child))
+    Ok(out)
 }
 
 /// The stack entry fields of these layouts.
@@ -140,18 +135,11 @@ pub trait AnchoredNode<Root> {
 }
 
 /// The `Layout` hooks every anchored layout shares, inside its `impl Layout` block, for node
-/// type `$node` (implementing [`AnchoredNode`]) and root type `$root`.
+/// type `$node` (implementing [`AnchoredNode`]) and root type `$root`. Its `INFO` takes
+/// [`STACK_ENTRY`] and `half::glsl_constants`.
 macro_rules! anchored_hooks {
     ($node:ident, $root:ty) => {
-        fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
-            anchored::STACK_ENTRY
-        }
-
-        fn glsl_constants() -> String {
-            <super::f16h::F16h as Layout>::glsl_constants()
-        }
-
-        fn ray(r: &RayPre, math: Math, fc: crate::variant::FloatControls) -> Ray16 {
+        fn ray(r: &RayPre, math: Math, fc: crate::precision::FloatControls) -> Ray16 {
             Ray16::new(r, math, fc)
         }
 

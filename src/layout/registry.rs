@@ -1,85 +1,55 @@
-//! The one list of layouts and baselines. The command line, the variant matrix, the sweep,
-//! the report and `shaders --emit` read it; nothing else names a layout. Adding a layout is
-//! one line in [`REGISTRY`].
+//! Handles to the registered layouts ([`LayoutId`], over [`super::REGISTRY`], which
+//! `layout/mod.rs` lists one line per layout) and the object-safe face every layout gets
+//! ([`DynLayout`], through [`Plug`]).
 
-use super::{EncodeError, Encoded, Layout, Math, Needs};
+use super::{EncodeError, Encoded, Layout, LayoutInfo, TriBuffer, REGISTRY};
+use crate::base::{Counters, Hit, Ray};
 use crate::bvh::WideBvh;
-use crate::gpu::kernel::RunOutput;
-use crate::gpu::{Gpu, GpuError};
-use crate::rays::Ray;
+use crate::precision::{FloatControls, Math};
 use crate::scene::Scene;
-use crate::trace::{Counters, Hit};
-use crate::variant::FloatControls;
 use std::marker::PhantomData;
+use thiserror::Error;
 
-/// Every layout and baseline, in report order.
-pub static REGISTRY: &[Entry] = &[
-    Entry::Layout(&Plug::<super::f32::F32>::NEW),
-    Entry::Layout(&Plug::<super::f16h::F16h>::NEW),
-    Entry::Layout(&Plug::<super::f16w::F16w>::NEW),
-    Entry::Layout(&Plug::<super::f16a::F16a>::NEW),
-    Entry::Layout(&Plug::<super::q8::Q8>::NEW),
-    Entry::Layout(&Plug::<super::f16h_seed::F16hSeed>::NEW),
-    Entry::Baseline(&crate::gpu::rq::Rq),
-    Entry::Baseline(&crate::embree::Embree),
-];
+/// Names layouts had before, still read from configs and result files.
+const RENAMED: &[(&str, &str)] = &[("f16h-seed", "f16h-poster")];
 
-/// A registered layout (our BVH in one precision layout, traced by our kernels) or baseline
-/// (someone else's traversal of the same triangles, e.g. the driver's ray queries).
-pub enum Entry {
-    Layout(&'static dyn DynLayout),
-    Baseline(&'static dyn Baseline),
+/// A name that is no registered layout.
+#[derive(Debug, Error, PartialEq)]
+#[error("unknown layout '{name}' (use {known})")]
+pub struct UnknownLayout {
+    pub name: String,
+    pub known: String,
 }
 
-/// What a registry entry supports.
-#[derive(Clone, Copy, Debug)]
-pub struct Caps {
-    /// Branching factor B applies.
-    pub branching: bool,
-    /// Packet size P applies.
-    pub packets: bool,
-    /// Work counters (nodes, box and triangle tests) exist.
-    pub counters: bool,
-    /// Arithmetic modes (empty: not applicable); the first is the default.
-    pub maths: &'static [Math],
-    /// Results are checked bit for bit against a CPU reference of the same layout (else they
-    /// are compared with the f32 reference and reported as agreement).
-    pub exact: bool,
-}
-
-/// A handle to a registry entry.
+/// A handle to a registered layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct LayoutId(u8);
 
 impl LayoutId {
-    /// Every entry, in registry order.
+    /// Every layout, in registry order.
     pub fn all() -> impl Iterator<Item = LayoutId> {
         (0..REGISTRY.len()).map(|i| LayoutId(i as u8))
     }
 
-    /// Every BVH layout (no baselines).
-    pub fn layouts() -> impl Iterator<Item = LayoutId> {
-        Self::all().filter(|l| l.bvh().is_some())
-    }
-
-    /// The entry called `name`.
-    pub fn parse(name: &str) -> Result<LayoutId, EncodeError> {
+    /// The layout called `name` (or once called so).
+    pub fn parse(name: &str) -> Result<LayoutId, UnknownLayout> {
+        let name = RENAMED.iter().find(|(old, _)| *old == name).map_or(name, |(_, new)| new);
         Self::all()
             .find(|l| l.name() == name)
-            .ok_or_else(|| EncodeError::UnknownLayout(name.to_string(), Self::names()))
+            .ok_or_else(|| UnknownLayout { name: name.to_string(), known: Self::names() })
     }
 
     /// The layout implemented by `L`.
     pub fn of<L: Layout>() -> LayoutId {
-        Self::parse(L::NAME).expect("every Layout is registered")
+        Self::parse(L::INFO.name).expect("every Layout is registered")
     }
 
-    /// The fp32 baseline layout every other is compared with.
+    /// The fp32 layout every other is compared with.
     pub fn f32() -> LayoutId {
         Self::of::<super::f32::F32>()
     }
 
-    /// "f32, f16h or rq".
+    /// "f32, f16h or q8".
     pub fn names() -> String {
         let n: Vec<&str> = Self::all().map(|l| l.name()).collect();
         match n.split_last() {
@@ -88,45 +58,23 @@ impl LayoutId {
         }
     }
 
-    pub fn entry(self) -> &'static Entry {
-        &REGISTRY[self.0 as usize]
+    /// The layout's implementation.
+    pub fn imp(self) -> &'static dyn DynLayout {
+        REGISTRY[self.0 as usize]
+    }
+
+    /// Everything known of the layout besides its hooks.
+    pub fn info(self) -> &'static LayoutInfo {
+        self.imp().info()
     }
 
     pub fn name(self) -> &'static str {
-        match self.entry() {
-            Entry::Layout(l) => l.name(),
-            Entry::Baseline(b) => b.name(),
-        }
+        self.info().name
     }
 
-    pub fn summary(self) -> &'static str {
-        match self.entry() {
-            Entry::Layout(l) => l.summary(),
-            Entry::Baseline(b) => b.summary(),
-        }
-    }
-
-    /// The BVH layout, or `None` for a baseline.
-    pub fn bvh(self) -> Option<&'static dyn DynLayout> {
-        match self.entry() {
-            Entry::Layout(l) => Some(*l),
-            Entry::Baseline(_) => None,
-        }
-    }
-
-    /// The baseline, or `None` for a BVH layout.
-    pub fn baseline(self) -> Option<&'static dyn Baseline> {
-        match self.entry() {
-            Entry::Layout(_) => None,
-            Entry::Baseline(b) => Some(*b),
-        }
-    }
-
-    pub fn caps(self) -> Caps {
-        match self.entry() {
-            Entry::Layout(l) => Caps { branching: true, packets: true, counters: true, maths: l.maths(), exact: true },
-            Entry::Baseline(_) => Caps { branching: false, packets: false, counters: false, maths: &[], exact: false },
-        }
+    /// The default math mode (the first of the layout's modes).
+    pub fn default_math(self) -> Math {
+        self.info().maths[0]
     }
 }
 
@@ -137,30 +85,21 @@ impl std::fmt::Display for LayoutId {
 }
 
 impl std::str::FromStr for LayoutId {
-    type Err = EncodeError;
-    fn from_str(s: &str) -> Result<LayoutId, EncodeError> {
+    type Err = UnknownLayout;
+    fn from_str(s: &str) -> Result<LayoutId, UnknownLayout> {
         LayoutId::parse(s)
     }
 }
 
 /// The object-safe face of a [`Layout`], implemented once for all of them by [`Plug`].
 pub trait DynLayout: Send + Sync {
-    fn name(&self) -> &'static str;
-    fn summary(&self) -> &'static str;
-    fn maths(&self) -> &'static [Math];
-    /// The GLSL hooks source.
-    fn glsl(&self) -> &'static str;
-    fn stack_entry(&self, math: Math) -> &'static [(&'static str, &'static str)];
-    fn needs(&self, math: Math) -> Needs;
-    fn float_controls_off(&self) -> bool;
-    fn conservative(&self) -> bool;
-    fn glsl_constants(&self) -> String;
+    fn info(&self) -> &'static LayoutInfo;
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError>;
     /// The CPU reference: rays in packets of `p` (1: single rays) in math mode `math`.
     fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>);
 }
 
-/// Registers a [`Layout`]: `Entry::Layout(&Plug::<MyLayout>::NEW)`.
+/// The [`DynLayout`] of a [`Layout`] (`layout/mod.rs`'s `layouts!` list makes one per layout).
 pub struct Plug<L>(PhantomData<fn() -> L>);
 
 impl<L: Layout> Plug<L> {
@@ -184,7 +123,7 @@ macro_rules! with_branching {
 fn encode_b<L: Layout, const B: usize>(scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError> {
     let reordered = L::reorder(w);
     let w = reordered.as_ref().unwrap_or(w);
-    let (nodes, root) = L::encode::<B>(scene, w)?;
+    let (nodes, root) = L::encode::<B>(w)?;
     let rb = w.nodes[0].bounds;
     Ok(Encoded {
         layout: LayoutId::of::<L>(),
@@ -193,7 +132,7 @@ fn encode_b<L: Layout, const B: usize>(scene: &Scene, w: &WideBvh) -> Result<Enc
         push_root: L::push_root(&root),
         root: Box::new(root),
         root_box: rb,
-        tris: super::TriBuffer::new(scene, w),
+        tris: TriBuffer::new(scene, w),
         max_stack: w.max_stack(),
     })
 }
@@ -206,74 +145,20 @@ fn trace_b<L: Layout, const B: usize>(
     fc: FloatControls,
 ) -> (Vec<Hit>, Vec<Counters>) {
     let (nodes, root) = enc.typed::<L, B>().expect("Encoded of another layout or B");
-    crate::trace::traverse::trace_all::<L, B>(nodes, root, enc, rays, p, math, fc)
+    super::traverse::trace_all::<L, B>(nodes, root, enc, rays, p, math, fc)
 }
 
 impl<L: Layout> DynLayout for Plug<L> {
-    fn name(&self) -> &'static str {
-        L::NAME
-    }
-    fn summary(&self) -> &'static str {
-        L::SUMMARY
-    }
-    fn maths(&self) -> &'static [Math] {
-        L::MATHS
-    }
-    fn glsl(&self) -> &'static str {
-        L::GLSL
-    }
-    fn stack_entry(&self, math: Math) -> &'static [(&'static str, &'static str)] {
-        L::stack_entry(math)
-    }
-    fn needs(&self, math: Math) -> Needs {
-        L::needs(math)
-    }
-    fn float_controls_off(&self) -> bool {
-        L::FLOAT_CONTROLS_OFF
-    }
-    fn conservative(&self) -> bool {
-        L::CONSERVATIVE
-    }
-    fn glsl_constants(&self) -> String {
-        L::glsl_constants()
+    fn info(&self) -> &'static LayoutInfo {
+        &L::INFO
     }
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError> {
         with_branching!(w.branching, encode_b, scene, w)
     }
     fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
-        assert!(L::MATHS.contains(&math), "{}: math {} is not one of its modes", L::NAME, math.name());
+        assert!(L::INFO.maths.contains(&math), "{}: math {} is not one of its modes", L::INFO.name, math.name());
         with_branching!(enc.branching, trace_b, enc, rays, p, math, fc)
     }
-}
-
-/// A traversal that is not ours, run on the same rays as the baseline a user would otherwise
-/// pick (`rq`: the driver's ray queries). Its results are compared with the f32 reference and
-/// reported as agreement; it has no B, P or work counters.
-pub trait Baseline: Send + Sync {
-    fn name(&self) -> &'static str;
-    fn summary(&self) -> &'static str;
-    /// The `kernel` column of its rows.
-    fn kernel(&self) -> &'static str;
-    /// Why a device cannot run it (one line for the report and `devices`), or `None`.
-    fn unavailable(&self, info: &crate::gpu::DeviceInfo) -> Option<String>;
-    /// What it needs once per device (pipelines).
-    fn prepare<'g>(&self, gpu: &'g Gpu) -> Result<Box<dyn BaselineDevice + 'g>, GpuError>;
-}
-
-/// A baseline prepared on one device.
-pub trait BaselineDevice {
-    /// Builds its structures over a scene's triangles (in `prim` order).
-    fn scene<'s>(&'s self, scene: &Scene) -> Result<Box<dyn BaselineScene + 's>, GpuError>;
-}
-
-/// A baseline's structures over one scene.
-pub trait BaselineScene {
-    /// Bytes of its acceleration structures.
-    fn bytes(&self) -> u64;
-    /// Build time, ms.
-    fn build_ms(&self) -> f64;
-    /// `warmup` untimed then `repeat` timed traversals of `rays` (at least one in all).
-    fn run(&self, rays: &[Ray], warmup: usize, repeat: usize) -> Result<RunOutput, GpuError>;
 }
 
 #[cfg(test)]
@@ -285,8 +170,10 @@ mod tests {
         for l in LayoutId::all() {
             assert_eq!(LayoutId::parse(l.name()), Ok(l));
             assert_eq!(LayoutId::all().filter(|m| m.name() == l.name()).count(), 1);
+            assert!(!l.info().maths.is_empty() && !l.info().glsl.is_empty() && !l.info().summary.is_empty(), "{l}");
         }
         assert_eq!(LayoutId::f32().name(), "f32");
+        assert_eq!(LayoutId::parse("f16h-seed").map(|l| l.name()), Ok("f16h-poster"), "the old name still reads");
         let e = LayoutId::parse("f8").unwrap_err().to_string();
         assert!(e.contains("unknown layout 'f8'") && e.contains("f32, f16h"), "{e}");
     }

@@ -1,29 +1,21 @@
 //! The sweep as data: the job list, generated in one place from a [`Config`].
 
 use super::Config;
+use crate::gpu::Source;
 use crate::layout::LayoutId;
+use crate::precision::Math;
 use crate::rays::RayKind;
-use crate::variant::Variant;
+use crate::runner::{KernelTarget, Target};
 use std::collections::HashMap;
 
-/// What a job traces with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Target {
-    /// A built-in kernel of a BVH layout.
-    Variant(Variant),
-    /// A baseline (e.g. `rq`).
-    Baseline(LayoutId),
-    /// The user kernel `Config::kernel[i]`.
-    Kernel(usize),
-}
-
 /// One row of the results: a scene (index into `Config::scenes`), a ray set (index into
-/// [`kinds`]) and a target.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// [`kinds`]) and what traces it; `user` names the `Config::kernel` entry of a user kernel.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct Job {
     pub scene: usize,
     pub rays: usize,
     pub target: Target,
+    pub user: Option<usize>,
 }
 
 /// The ray kinds of a sweep: the configured ones, then any a user kernel adds.
@@ -48,30 +40,33 @@ pub fn list(cfg: &Config) -> Vec<Job> {
     let index =
         |r: &str| kinds.iter().position(|k| *k == r.parse::<RayKind>().expect("checked")).expect("listed in kinds");
     let swept: Vec<usize> = cfg.rays.iter().map(|r| index(r)).collect();
+    let fc = cfg.float_controls;
     let mut jobs = Vec::new();
     for scene in 0..cfg.scenes.len() {
         for v in cfg.variants() {
-            jobs.extend(swept.iter().map(|&rays| Job { scene, rays, target: Target::Variant(v) }));
+            let target = Target::Kernel(KernelTarget { variant: v, fc, imp: None, source: Source::Builtin });
+            jobs.extend(swept.iter().map(|&rays| Job { scene, rays, target: target.clone(), user: None }));
         }
-        for b in cfg.entries().into_iter().filter(|l| l.baseline().is_some()) {
-            jobs.extend(swept.iter().map(|&rays| Job { scene, rays, target: Target::Baseline(b) }));
+        for b in cfg.baselines() {
+            jobs.extend(swept.iter().map(|&rays| Job { scene, rays, target: Target::Baseline(b), user: None }));
         }
         for (i, spec) in cfg.kernel.iter().enumerate() {
             let rays: Vec<usize> = match &spec.rays {
                 Some(r) => r.iter().map(|r| index(r)).collect(),
                 None => swept.clone(),
             };
-            jobs.extend(rays.into_iter().map(|rays| Job { scene, rays, target: Target::Kernel(i) }));
+            let variant = spec.variant().expect("checked by Config::check");
+            let target = Target::Kernel(KernelTarget { variant, fc, imp: None, source: Source::user(&spec.file) });
+            jobs.extend(rays.into_iter().map(|rays| Job { scene, rays, target: target.clone(), user: Some(i) }));
         }
     }
     jobs
 }
 
 /// The (scene, layout, B) encoding a job needs, if any.
-pub fn encoding(cfg: &Config, job: &Job) -> Option<(usize, LayoutId, usize)> {
-    match job.target {
-        Target::Variant(v) => Some((job.scene, v.layout, v.branching)),
-        Target::Kernel(i) => cfg.kernel[i].variant().ok().map(|v| (job.scene, v.layout, v.branching)),
+pub fn encoding(job: &Job) -> Option<(usize, LayoutId, usize)> {
+    match &job.target {
+        Target::Kernel(k) => Some((job.scene, k.variant.layout, k.variant.branching)),
         Target::Baseline(_) => None,
     }
 }
@@ -131,23 +126,19 @@ impl Shard {
 fn cost(cfg: &Config, job: &Job, scene_bytes: &[u64]) -> f64 {
     let rays = (cfg.width as f64 * cfg.height as f64).max(1.0);
     let size = (scene_bytes[job.scene].max(2) as f64).ln();
-    let factor = match job.target {
-        Target::Variant(v) => {
+    let factor = match (&job.target, job.user) {
+        (Target::Kernel(_), Some(_)) => 2.0,
+        (Target::Kernel(k), None) => {
+            let v = k.variant;
             let math = match v.math {
-                crate::layout::Math::F16 => 4.0,
-                crate::layout::Math::Mixed => 3.0,
-                crate::layout::Math::F32 => {
-                    if v.layout == crate::layout::LayoutId::f32() {
-                        1.0
-                    } else {
-                        1.5
-                    }
-                }
+                Math::F16 => 4.0,
+                Math::Mixed => 3.0,
+                Math::F32 if v.layout == LayoutId::f32() => 1.0,
+                Math::F32 => 1.5,
             };
             math * if v.packet >= 16 { 2.5 } else { 1.0 }
         }
-        Target::Baseline(_) => 0.5,
-        Target::Kernel(_) => 2.0,
+        (Target::Baseline(_), _) => 0.5,
     };
     rays * size * factor
 }
@@ -161,15 +152,14 @@ pub fn shard(cfg: &Config, jobs: &[Job], shard: Shard, scene_bytes: &[u64]) -> V
     #[derive(PartialEq)]
     enum Group {
         Encoding((usize, LayoutId, usize)),
-        Baseline(usize, LayoutId),
-        Job(usize),
+        Baseline(usize, crate::baseline::BaselineId),
     }
     let mut groups: Vec<(Group, f64, Vec<usize>)> = Vec::new();
     for (i, j) in jobs.iter().enumerate() {
-        let g = match (encoding(cfg, j), j.target) {
+        let g = match (encoding(j), &j.target) {
             (Some(e), _) => Group::Encoding(e),
-            (None, Target::Baseline(b)) => Group::Baseline(j.scene, b),
-            _ => Group::Job(i),
+            (None, Target::Baseline(b)) => Group::Baseline(j.scene, *b),
+            (None, Target::Kernel(_)) => unreachable!("every kernel job has an encoding"),
         };
         let c = cost(cfg, j, scene_bytes);
         match groups.iter_mut().find(|x| x.0 == g) {
@@ -193,14 +183,14 @@ pub fn shard(cfg: &Config, jobs: &[Job], shard: Shard, scene_bytes: &[u64]) -> V
             }
         }
     }
-    jobs.iter().zip(mine).filter(|(_, m)| *m).map(|(j, _)| *j).collect()
+    jobs.iter().zip(mine).filter(|(_, m)| *m).map(|(j, _)| j.clone()).collect()
 }
 
 /// For each encoding, the index of the last job that needs it (so it can be freed after).
-pub fn last_uses(cfg: &Config, jobs: &[Job]) -> HashMap<(usize, LayoutId, usize), usize> {
+pub fn last_uses(jobs: &[Job]) -> HashMap<(usize, LayoutId, usize), usize> {
     let mut m = HashMap::new();
     for (i, j) in jobs.iter().enumerate() {
-        if let Some(k) = encoding(cfg, j) {
+        if let Some(k) = encoding(j) {
             m.insert(k, i);
         }
     }
@@ -233,9 +223,9 @@ mod tests {
                 let pos: Vec<usize> = s.iter().map(|j| jobs.iter().position(|x| x == j).unwrap()).collect();
                 assert!(pos.windows(2).all(|w| w[0] < w[1]));
                 for j in s {
-                    if let Some(e) = encoding(&cfg, j) {
+                    if let Some(e) = encoding(j) {
                         assert!(
-                            jobs.iter().filter(|x| encoding(&cfg, x) == Some(e)).all(|x| s.contains(x)),
+                            jobs.iter().filter(|x| encoding(x) == Some(e)).all(|x| s.contains(x)),
                             "n={n}: encoding {e:?} split"
                         );
                     }
@@ -243,7 +233,7 @@ mod tests {
             }
             // Greedy dealing, largest first: no shard exceeds the lightest by more than the
             // largest group.
-            let group = |j: &Job| match encoding(&cfg, j) {
+            let group = |j: &Job| match encoding(j) {
                 Some(e) => format!("{e:?}"),
                 None => format!("{} {:?}", j.scene, j.target),
             };
@@ -298,19 +288,19 @@ mod tests {
         let cfg = Config::default();
         let jobs = list(&cfg);
         let variants = cfg.variants();
-        let baselines = cfg.entries().into_iter().filter(|l| l.baseline().is_some()).count();
+        let baselines = cfg.baselines().len();
         assert_eq!(jobs.len(), (variants.len() + baselines) * cfg.rays.len());
         let mut uniq = jobs.clone();
         uniq.sort_by_key(|j| format!("{j:?}"));
         uniq.dedup();
         assert_eq!(uniq.len(), jobs.len(), "duplicate jobs");
         // Each encoding's jobs are contiguous: it is encoded and uploaded once.
-        let last = last_uses(&cfg, &jobs);
+        let last = last_uses(&jobs);
         for (i, j) in jobs.iter().enumerate() {
-            if let Some(k) = encoding(&cfg, j) {
-                let first = jobs.iter().position(|x| encoding(&cfg, x) == Some(k)).unwrap();
+            if let Some(k) = encoding(j) {
+                let first = jobs.iter().position(|x| encoding(x) == Some(k)).unwrap();
                 assert!(
-                    jobs[first..=last[&k]].iter().all(|x| encoding(&cfg, x) == Some(k)),
+                    jobs[first..=last[&k]].iter().all(|x| encoding(x) == Some(k)),
                     "encoding {k:?} is needed again after job {i}"
                 );
             }

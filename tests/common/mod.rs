@@ -1,11 +1,13 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+use halftrace::base::Hit;
+use halftrace::base::Ray;
 use halftrace::bvh::{self, BinaryBvh};
 use halftrace::layout::{Encoded, LayoutId};
-use halftrace::rays::{make_rays, Ray, RayKind, RayParams};
+use halftrace::rays::{RayKind, RayParams};
+use halftrace::runner::rays::{make, RaySpec};
 use halftrace::scene::{self, Scene};
-use halftrace::trace::Hit;
 use std::path::PathBuf;
 
 /// `../shared/scenes` beside the repository. Missing scenes fail the test loudly: CI always
@@ -40,7 +42,7 @@ pub struct Prepared {
     pub bin: BinaryBvh,
 }
 
-pub fn prepare(path: &PathBuf) -> Prepared {
+pub fn prepare(path: &std::path::Path) -> Prepared {
     let scene = scene::load(path).unwrap_or_else(|e| panic!("{e}"));
     let bin = bvh::build_binary(&scene);
     Prepared { scene, bin }
@@ -51,7 +53,7 @@ pub fn ray_sets(p: &Prepared, res: u32, grazing: usize) -> Vec<(String, Vec<Ray>
     let params = RayParams { width: res, height: res, camera: None, seed: 7, grazing };
     [RayKind::Primary, RayKind::Ao, RayKind::Diffuse, RayKind::Grazing]
         .into_iter()
-        .map(|k| (k.to_string(), make_rays(&p.scene, &p.bin, &k, &params).unwrap()))
+        .map(|k| (k.to_string(), make(&p.scene, &p.bin, &RaySpec::new(k, params.clone())).unwrap()))
         .collect()
 }
 
@@ -84,7 +86,7 @@ pub fn encode(p: &Prepared, layout: LayoutId, b: usize) -> Encoded {
 /// 99.99% of primary, ao and diffuse rays. The grazing set (rays through shared vertices and
 /// along edges) is reported, not held to the bar: it measures whether the baseline's triangle
 /// test is watertight like ours. Each run is timed once after `warmup` untimed ones.
-pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::layout::BaselineDevice, warmup: usize) {
+pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::baseline::BaselineDevice, warmup: usize) {
     let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
     for path in all_scenes() {
         let p = prepare(&path);
@@ -98,7 +100,7 @@ pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::layout::Baselin
                 (rays.len(), 1),
                 "{name}: one hit per ray, one time per timed run"
             );
-            let a = halftrace::trace::agreement(&out.hits, &f.trace_default(&rays).0);
+            let a = halftrace::base::agreement(&out.hits, &f.reference_default(&rays).0);
             eprintln!(
                 "{} {kind}: {name} agrees with f32 on {:.4}% of {} rays ({} false misses)",
                 p.scene.name,

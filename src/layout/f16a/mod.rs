@@ -2,10 +2,10 @@
 //! centre of its box) and a power-of-two scale `k` (its largest half extent below 16384) — and
 //! its children as fp16 in that frame, rounded outward. At each node the ray origin is moved
 //! into the node's frame from the fp32 world ray: no chain of moved origins, no re-anchoring,
-//! a stack entry of one fp32 value. The lean alternative to the seed's chained frames.
+//! a stack entry of one fp32 value. The lean alternative to the poster's chained frames.
 //!
 //! Box tests in fp16 (`--math f16`, the default: origin anchored at the node's entry bound,
-//! f16h's widened fp16 slab test) or fp32 (`--math f32`: boxes decoded to world fp32); both
+//! the shared widened fp16 slab test) or fp32 (`--math f32`: boxes decoded to world fp32); both
 //! argued in [`super::anchored`].
 //!
 //! Node byte layout for branching B (16 + 16·B bytes): `w` f32[3] at 0, `k` f32 at 12, `lo`
@@ -14,12 +14,12 @@
 //! `glsl/layout/f16a.glsl`.
 
 use super::anchored::{self, decode_plane, inv_pow2, AnchoredNode};
-use super::f16h::hooks::Ray16;
-use super::f16h::{root_frame, Frame};
-use super::{EncodeError, Layout, Math, Needs, Node};
+use super::frames::{fit_frame, Frame};
+use super::half::Ray16;
+use super::{EncodeError, Layout, LayoutInfo, Needs, Node};
+use crate::base::{Counters, RayPre};
 use crate::bvh::WideBvh;
-use crate::scene::Scene;
-use crate::trace::{Counters, RayPre};
+use crate::precision::Math;
 use half::f16;
 
 /// The `f16a` layout.
@@ -98,14 +98,16 @@ impl<const B: usize> Node for F16aNode<B> {
 }
 
 impl Layout for F16a {
-    const NAME: &'static str = "f16a";
-    const SUMMARY: &'static str = "fp16 child boxes in a per-node fp32 anchored frame, origin re-derived per node";
-    const MATHS: &'static [Math] = &[Math::F16, Math::F32];
-    const GLSL: &'static str = include_str!("../../../glsl/layout/f16a.glsl");
-
-    fn needs(math: Math) -> Needs {
-        Needs { storage16: true, float16: math == Math::F16 }
-    }
+    const INFO: LayoutInfo = LayoutInfo {
+        name: "f16a",
+        summary: "fp16 child boxes in a per-node fp32 anchored frame, origin re-derived per node",
+        maths: &[Math::F16, Math::F32],
+        glsl: include_str!("../../../glsl/layout/f16a.glsl"),
+        needs: |math| Needs { storage16: true, float16: math == Math::F16 },
+        stack_entry: |_| anchored::STACK_ENTRY,
+        glsl_constants: super::half::glsl_constants,
+        ..LayoutInfo::DEFAULT
+    };
 
     type Node<const B: usize> = F16aNode<B>;
     type Root = ();
@@ -116,17 +118,17 @@ impl Layout for F16a {
     /// (entry parameter, its lower bound).
     type ChildHit = (f32, f32);
 
-    fn encode<const B: usize>(_scene: &Scene, w: &WideBvh) -> Result<(Vec<F16aNode<B>>, ()), EncodeError> {
+    fn encode<const B: usize>(w: &WideBvh) -> Result<(Vec<F16aNode<B>>, ()), EncodeError> {
         let mut out = Vec::with_capacity(w.nodes.len());
         for (i, n) in w.nodes.iter().enumerate() {
-            let mut bounds = crate::geom::Aabb::EMPTY;
+            let mut bounds = crate::base::Aabb::EMPTY;
             for (b, _) in &n.children {
                 bounds.grow(b.min);
                 bounds.grow(b.max);
             }
-            let f = root_frame(&bounds);
-            let (lo, hi, child) = anchored::children16::<B>(Self::NAME, i, n, &f)?;
-            out.push(F16aNode { w: f.w, k: f.k, lo, hi, child });
+            let f = fit_frame(&bounds);
+            let c = anchored::children16::<B>(Self::INFO.name, i, n, &f)?;
+            out.push(F16aNode { w: f.w, k: f.k, lo: c.lo, hi: c.hi, child: c.child });
         }
         Ok((out, ()))
     }

@@ -6,10 +6,11 @@
 //! 12·B, `child` u32[B] at 24·B. Empty slots have zero boxes and `CHILD_EMPTY`.
 //! B=2: 56 bytes, B=4: 112, B=8: 224, B=16: 448. GLSL hooks: `glsl/layout/f32.glsl`.
 
-use super::{encode_child, EncodeError, Layout, Math, Node, CHILD_EMPTY};
+use super::{encode_child, EncodeError, Layout, LayoutInfo, Node};
+use crate::base::{slab32, Counters, RayPre};
 use crate::bvh::WideBvh;
-use crate::scene::Scene;
-use crate::trace::{slab32, Counters, RayPre};
+use crate::interface::CHILD_EMPTY;
+use crate::precision::{FloatControls, Math};
 
 /// The `f32` layout.
 pub struct F32;
@@ -49,13 +50,16 @@ impl<const B: usize> Node for F32Node<B> {
 }
 
 impl Layout for F32 {
-    const NAME: &'static str = "f32";
-    const SUMMARY: &'static str = "world-space fp32 child boxes (the baseline)";
-    const MATHS: &'static [Math] = &[Math::F32];
-    const GLSL: &'static str = include_str!("../../../glsl/layout/f32.glsl");
-    // fp32 everywhere; the slab test never forms a NaN and widens by 2^-20, far more than any
-    // faithful rounding of its three operations can move a bound (glsl/box.glsl).
-    const FLOAT_CONTROLS_OFF: bool = true;
+    const INFO: LayoutInfo = LayoutInfo {
+        name: "f32",
+        summary: "world-space fp32 child boxes (the baseline)",
+        glsl: include_str!("../../../glsl/layout/f32.glsl"),
+        // fp32 everywhere; the slab test never forms a NaN and widens by 2^-20, far more than
+        // any faithful rounding of its three operations can move a bound (glsl/box.glsl).
+        float_controls_off: true,
+        stack_entry: |_| &[("t", "float")],
+        ..LayoutInfo::DEFAULT
+    };
 
     type Node<const B: usize> = F32Node<B>;
     type Root = ();
@@ -67,7 +71,7 @@ impl Layout for F32 {
     /// The child's entry distance.
     type ChildHit = f32;
 
-    fn encode<const B: usize>(_scene: &Scene, w: &WideBvh) -> Result<(Vec<F32Node<B>>, ()), EncodeError> {
+    fn encode<const B: usize>(w: &WideBvh) -> Result<(Vec<F32Node<B>>, ()), EncodeError> {
         let nodes = w
             .nodes
             .iter()
@@ -90,11 +94,7 @@ impl Layout for F32 {
         [0.0; 4]
     }
 
-    fn stack_entry(_: Math) -> &'static [(&'static str, &'static str)] {
-        &[("t", "float")]
-    }
-
-    fn ray(_: &RayPre, _: Math, _: crate::variant::FloatControls) {}
+    fn ray(_: &RayPre, _: Math, _: FloatControls) {}
 
     fn root_entry(_: &(), _: &RayPre, _: &(), near: f32) -> f32 {
         near

@@ -23,13 +23,14 @@
 //! so it needs no 8- or 16-bit storage. GLSL hooks: `glsl/layout/q8.glsl`.
 
 use super::anchored::{self, decode_plane, AnchoredNode};
-use super::f16h::hooks::Ray16;
-use super::f16h::Frame;
-use super::{EncodeError, Layout, Math, Needs, Node, CHILD_EMPTY, LEAF_BIT, LEAF_FIRST_BITS};
+use super::frames::Frame;
+use super::half::Ray16;
+use super::{EncodeError, Layout, LayoutInfo, Needs, Node};
+use crate::base::Aabb;
+use crate::base::{Counters, RayPre};
 use crate::bvh::{ChildRef, WideBvh, WideNode};
-use crate::geom::Aabb;
-use crate::scene::Scene;
-use crate::trace::{Counters, RayPre};
+use crate::interface::{glsl_int, glsl_uint, CHILD_EMPTY, LEAF_BIT, LEAF_FIRST_BITS};
+use crate::precision::Math;
 use half::f16;
 
 /// The `q8` layout.
@@ -39,10 +40,28 @@ pub struct Q8;
 pub const E_MIN: i32 = -54;
 pub const E_MAX: i32 = 66;
 /// The fp16 frame's scale is 2^(E_SHIFT − max e): the largest grid value 255 maps to 16320.
-const E_SHIFT: i32 = 6;
+pub const E_SHIFT: i32 = 6;
+/// Step exponents are stored as e + E_BIAS, one byte per axis.
+pub const E_BIAS: i32 = 128;
 
-const META_EMPTY: u16 = 0xffff;
-const META_INNER: u16 = 0x8000;
+/// A child's 16-bit meta word: `META_EMPTY`, `META_INNER | rank` (among the node's inner
+/// children), or `(count − 1) << META_COUNT_SHIFT | offset` for a leaf (triangles from
+/// `tri_base + offset`).
+pub const META_EMPTY: u16 = 0xffff;
+pub const META_INNER: u16 = 0x8000;
+pub const META_COUNT_SHIFT: u32 = 8;
+pub const META_OFFSET_MASK: u16 = 0xff;
+
+/// The constants `glsl/layout/q8.glsl` shares with this module, besides `half`'s.
+fn glsl_constants() -> String {
+    super::half::glsl_constants()
+        + &glsl_uint("META_EMPTY", META_EMPTY as u32)
+        + &glsl_uint("META_INNER", META_INNER as u32)
+        + &glsl_uint("META_COUNT_SHIFT", META_COUNT_SHIFT)
+        + &glsl_uint("META_OFFSET_MASK", META_OFFSET_MASK as u32)
+        + &glsl_int("E_SHIFT", E_SHIFT)
+        + &glsl_int("E_BIAS", E_BIAS)
+}
 
 /// A `q8` node (see the module docs for the byte layout).
 #[repr(C)]
@@ -72,7 +91,7 @@ fn pow2(e: i32) -> f32 {
 impl<const B: usize> Q8Node<B> {
     #[inline(always)]
     pub fn exp(&self, a: usize) -> i32 {
-        ((self.exps >> (8 * a)) & 0xff) as i32 - 128
+        ((self.exps >> (8 * a)) & 0xff) as i32 - E_BIAS
     }
 
     #[inline(always)]
@@ -136,7 +155,9 @@ impl<const B: usize> Node for Q8Node<B> {
         } else if m & META_INNER != 0 {
             self.child_base + (m & !META_INNER) as u32
         } else {
-            LEAF_BIT | (((m >> 8) as u32) << LEAF_FIRST_BITS) | (self.tri_base + (m & 0xff) as u32)
+            LEAF_BIT
+                | (((m >> META_COUNT_SHIFT) as u32) << LEAF_FIRST_BITS)
+                | (self.tri_base + (m & META_OFFSET_MASK) as u32)
         }
     }
     /// The grid values (the kernels' `child_box` returns the same).
@@ -173,12 +194,9 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
     let mut e = [0i32; 3];
     for a in 0..3 {
         let ext = bounds.max[a] as f64 - bounds.min[a] as f64;
-        e[a] = step_exp(ext).ok_or(EncodeError::Extent {
-            layout: "q8",
-            node: i,
-            value: ext,
-            limit: 255.0 * 2f64.powi(E_MAX),
-        })?;
+        let limit = 255.0 * 2f64.powi(E_MAX);
+        let msg = || format!("spans {ext:e}, more than the {limit:e} its quantization can step over");
+        e[a] = step_exp(ext).ok_or_else(|| EncodeError { layout: "q8", node: i, msg: msg() })?;
     }
     let em = e[0].max(e[1]).max(e[2]);
     for x in &mut e {
@@ -187,7 +205,7 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
     }
     let mut node = Q8Node { p, exps: 0, child_base: 0, tri_base: 0, q: [[[0u8; B]; 3]; 2], meta: [META_EMPTY; B] };
     for a in 0..3 {
-        node.exps |= ((e[a] + 128) as u32) << (8 * a);
+        node.exps |= ((e[a] + E_BIAS) as u32) << (8 * a);
     }
     let first_inner = n.children.iter().find_map(|(_, c)| if let ChildRef::Inner(j) = c { Some(*j) } else { None });
     let first_leaf =
@@ -220,7 +238,7 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
             ChildRef::Leaf { first, count } => {
                 let off = first - node.tri_base;
                 assert!(off < 256 && (1..=16).contains(&count), "q8: leaf of node {i} at offset {off} (reorder first)");
-                (((count - 1) as u16) << 8) | off as u16
+                (((count - 1) as u16) << META_COUNT_SHIFT) | off as u16
             }
         };
     }
@@ -228,14 +246,16 @@ fn encode_node<const B: usize>(i: usize, n: &WideNode) -> Result<Q8Node<B>, Enco
 }
 
 impl Layout for Q8 {
-    const NAME: &'static str = "q8";
-    const SUMMARY: &'static str = "8-bit quantized child planes per node, compressed wide nodes (Ylitie et al. 2017)";
-    const MATHS: &'static [Math] = &[Math::F32, Math::F16];
-    const GLSL: &'static str = include_str!("../../../glsl/layout/q8.glsl");
-
-    fn needs(math: Math) -> Needs {
-        Needs { storage16: false, float16: math == Math::F16 }
-    }
+    const INFO: LayoutInfo = LayoutInfo {
+        name: "q8",
+        summary: "8-bit quantized child planes per node, compressed wide nodes (Ylitie et al. 2017)",
+        maths: &[Math::F32, Math::F16],
+        glsl: include_str!("../../../glsl/layout/q8.glsl"),
+        needs: |math| Needs { storage16: false, float16: math == Math::F16 },
+        stack_entry: |_| anchored::STACK_ENTRY,
+        glsl_constants,
+        ..LayoutInfo::DEFAULT
+    };
 
     type Node<const B: usize> = Q8Node<B>;
     type Root = ();
@@ -288,7 +308,7 @@ impl Layout for Q8 {
         Some(WideBvh { branching: w.branching, nodes, prims })
     }
 
-    fn encode<const B: usize>(_scene: &Scene, w: &WideBvh) -> Result<(Vec<Q8Node<B>>, ()), EncodeError> {
+    fn encode<const B: usize>(w: &WideBvh) -> Result<(Vec<Q8Node<B>>, ()), EncodeError> {
         w.nodes.iter().enumerate().map(|(i, n)| encode_node::<B>(i, n)).collect::<Result<Vec<_>, _>>().map(|v| (v, ()))
     }
 

@@ -1,0 +1,77 @@
+// Layout f16h-poster hooks (src/layout/f16h_poster): the poster's algorithm as written, on the
+// nodes and frames of f16h (node16.glsl, derive_child): the origin moved to the hit child's
+// entry point and converted to the child frame in fp16, box tests in fp16 without widening,
+// no error bound, no re-anchoring. Not conservative: its own CPU reference is its oracle and
+// its disagreements with f32 are reported. A moved origin that overflows fp16 is clamped to
+// +-65504 (NaN to 0), which the poster does not specify, so that no NaN enters a box test.
+//
+// Stack Entry (generated): wk = the node's frame (w.xyz, k; k = 0: inactive), o = the origin
+// in the node's frame (fp16), tp = the world parameter o stands for.
+#include "half.glsl"
+#include "node16.glsl"
+
+Entry root_entry(RayPre r, float near_t) {
+    OVEC o;
+    anchor(r, pc.root.xyz, pc.root.w, near_t, o);
+    return Entry(pc.root, o, near_t);
+}
+Entry no_entry() { return Entry(vec4(0.0), f16vec3(0.0), 0.0); }
+bool has_entry(Entry en) { return en.wk.w > 0.0; }
+float entry_t(Entry en) { return en.tp; }
+
+struct Visit { float mk; float16_t s_lim; };
+
+Visit visit_node(uint ni, Entry en, RayPre r, float best) {
+    precise float mk = lr_m * en.wk.w;
+    precise float lim = (best - en.tp) * mk;
+    return Visit(mk, float16_t(lim));
+}
+
+// The child's entry parameter, and its box (read once: child_entry derives the frame from it).
+struct ChildHit { float16_t tn; f16vec3 lo; f16vec3 hi; };
+
+bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
+    f16vec3 lo = slot_lo(ni, s);
+    f16vec3 hi = slot_hi(ni, s);
+    float16_t tn = -HINF;
+    float16_t tf = HINF;
+    for (int a = 0; a < 3; a++) {
+        precise float16_t la = lo[a] - en.o[a];
+        precise float16_t ha = hi[a] - en.o[a];
+        float16_t t0, t1;
+        if (lr_d16[a] == H0) {
+            bool inside = la <= H0 && ha >= H0;
+            t0 = inside ? -HINF : HINF;
+            t1 = inside ? HINF : -HINF;
+        } else {
+            precise float16_t x = la * lr_idir[a];
+            precise float16_t y = ha * lr_idir[a];
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+        tn = max(tn, t0);
+        tf = min(tf, t1);
+    }
+    key = float(tn);
+    h = ChildHit(tn, lo, hi);
+    return tn <= tf && tf >= H0 && tn <= v.s_lim;
+}
+
+float16_t finite16(float16_t x) { return isnan(x) ? H0 : clamp(x, float16_t(-F16_MAX), float16_t(F16_MAX)); }
+
+Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
+    HVEC3 cc; float cr; vec3 cw; float ck;
+    derive_child(en.wk.xyz, en.wk.w, h.lo, h.hi, cc, cr, cw, ck);
+    float16_t se = max(h.tn, H0);
+    float16_t r16 = float16_t(cr);
+    f16vec3 o2;
+    for (int a = 0; a < 3; a++) {
+        precise float16_t ea = en.o[a] + se * lr_d16[a];
+        precise float16_t ec = ea - cc[a];
+        precise float16_t oa = ec * r16;
+        o2[a] = finite16(oa);
+    }
+    precise float step_t = float(se) / v.mk;
+    precise float tp = en.tp + step_t;
+    return Entry(vec4(cw, ck), o2, tp);
+}

@@ -1,0 +1,333 @@
+//! The command line's arguments (clap): every subcommand and flag, typed where clap can check
+//! the value, and nothing else — the work is in [`crate::commands`].
+
+use crate::baseline::BaselineId;
+use crate::layout::LayoutId;
+use crate::precision::{FcChoice, Math};
+use crate::rays::{Camera, RayKind};
+use crate::variant::PacketImpl;
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "halftrace", version, about = "Half-precision hierarchical BVH traversal harness")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// Trace a ray set through one layout and branching factor.
+    Trace(TraceArgs),
+    /// Write a glTF binary (.glb) that instances a scene N times (rotated, scaled, on a grid):
+    /// big test scenes without shipping them.
+    Instance(InstanceArgs),
+    /// Print per-B, per-layout BVH statistics.
+    BvhStats {
+        /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
+        #[arg(long)]
+        scene: PathBuf,
+    },
+    /// List Vulkan devices, what each runs of every layout and packet size, and why the rest
+    /// would be skipped.
+    Devices(DevicesArgs),
+    /// Sweep scenes × ray kinds × layouts × B × P: validate, time, count, report.
+    Sweep(SweepArgs),
+    /// The speed ratios a kernel change is judged by (f16h ÷ f32, best reduced layout ÷ f32,
+    /// best ÷ embree, packets ÷ P = 1, f32 ÷ rq), validated, then timed in interleaved rounds:
+    /// medians with min/max.
+    Bench(BenchArgs),
+    /// Re-render report.md and the plots from one or more sweep folders (merging them).
+    Report {
+        /// Sweep folders holding results.csv.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Where to write the report (default: the first folder); a folder that is not one of
+        /// the inputs also gets the merged results.csv and results.json.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Check every variant on a device against the CPU references (what to run first on a new
+    /// GPU): writes conformance.md and conformance.csv, exits non-zero on any failure.
+    Conformance(ConformanceArgs),
+    /// Compile the default variant matrix and write one SPIR-V file per kernel.
+    Shaders {
+        /// Output folder (e.g. spirv/).
+        #[arg(long)]
+        emit: PathBuf,
+    },
+}
+
+/// A `--layout` value: one of our layouts or a baseline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LayoutArg {
+    Layout(LayoutId),
+    Baseline(BaselineId),
+}
+
+impl std::str::FromStr for LayoutArg {
+    type Err = String;
+    fn from_str(s: &str) -> Result<LayoutArg, String> {
+        match BaselineId::parse(s) {
+            Some(b) => Ok(LayoutArg::Baseline(b)),
+            None => s.parse().map(LayoutArg::Layout).map_err(|e: crate::layout::UnknownLayout| {
+                let baselines: Vec<&str> = BaselineId::all().map(|b| b.name()).collect();
+                format!("{e}, or a baseline: {}", baselines.join(", "))
+            }),
+        }
+    }
+}
+
+/// Where `trace` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    /// The Vulkan device's kernels, checked against the CPU reference.
+    Gpu,
+    /// The CPU reference alone.
+    Cpu,
+}
+
+#[derive(clap::Args)]
+pub struct TraceArgs {
+    /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Layout (f32, f16h, …) or baseline (rq: the driver's acceleration structure and ray
+    /// queries; embree); `halftrace devices` lists them.
+    #[arg(long, default_value = "f16h")]
+    pub layout: LayoutArg,
+    /// Branching factor: 2, 4, 8 or 16.
+    #[arg(long, default_value_t = 4)]
+    pub branching: usize,
+    /// Rays per packet: 1, 4, 8, 16, 32 or 64.
+    #[arg(long, default_value_t = 1)]
+    pub packet: usize,
+    /// Box-test arithmetic, for layouts with several modes (f16h: f16 = the poster's, f32 =
+    /// fp16 nodes with fp32 tests, mixed); default: the layout's first mode.
+    #[arg(long)]
+    pub math: Option<Math>,
+    /// Packet implementation (default: subgroup when P fits the device's subgroup, else hybrid
+    /// where the device has subgroup arithmetic, else shared memory).
+    #[arg(long)]
+    pub packet_impl: Option<PacketImpl>,
+    /// primary, ao, diffuse, grazing, or a FILE.npy (float32, N x 8).
+    #[arg(long, default_value = "primary")]
+    pub rays: RayKind,
+    #[arg(long, default_value_t = 256)]
+    pub width: u32,
+    #[arg(long, default_value_t = 256)]
+    pub height: u32,
+    /// eye_x,eye_y,eye_z,target_x,target_y,target_z,fov_degrees (default: frame the scene).
+    #[arg(long, value_parser = |s: &str| Camera::parse(s).map_err(|e| e.to_string()))]
+    pub camera: Option<Camera>,
+    /// Seed for ao, diffuse and grazing rays.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write hits (structured t, prim, u, v) to this .npy file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the traced rays to this .npy file.
+    #[arg(long)]
+    pub save_rays: Option<PathBuf>,
+    /// Write a shaded PNG (primary rays only).
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    /// Default: gpu when a Vulkan device can be opened.
+    #[arg(long)]
+    pub backend: Option<Backend>,
+    /// Vulkan device: index or name substring (see `halftrace devices`).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Timed dispatches after the warm-up.
+    #[arg(long, default_value_t = 10)]
+    pub repeat: usize,
+    /// Untimed warm-up dispatches.
+    #[arg(long, default_value_t = 2)]
+    pub warmup: usize,
+    /// Also run the counting kernel and print work per ray.
+    #[arg(long)]
+    pub stats: bool,
+    /// Run this kernel in place of the built-in one of the variant: a GLSL compute file
+    /// (compiled with the built-in kernel's defines and includes) or a SPIR-V module (.spv),
+    /// checked against the variant's interface, then validated and timed like the built-in.
+    #[arg(long, alias = "spirv")]
+    pub kernel: Option<PathBuf>,
+    /// Float-control execution modes of the kernel: on (round-to-nearest-even, inf/NaN
+    /// preserved), off (a build whose hits stay exact without them), auto (on where the
+    /// device has them, else off where the layout has such a build).
+    #[arg(long, default_value = "auto")]
+    pub float_controls: FcChoice,
+    /// Treat a device feature as missing (testing the fallbacks), e.g. shaderFloat16,
+    /// storageBuffer16BitAccess, floatControls, subgroupSizeControl, rayQuery.
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+    /// Seconds a dispatch may run before its kernel is declared hung (default 600).
+    #[arg(long)]
+    pub kernel_timeout: Option<f64>,
+}
+
+#[derive(clap::Args)]
+pub struct InstanceArgs {
+    /// Scene to instance (OBJ, glTF or PLY).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Number of instances.
+    #[arg(long)]
+    pub count: usize,
+    /// Seed of the rotations and scales.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The .glb file to write (an existing file is refused).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(clap::Args)]
+pub struct DevicesArgs {
+    /// Also measure the device's raw fp16 and fp32 arithmetic rates (sub, mul, min, max,
+    /// compare).
+    #[arg(long, alias = "bench")]
+    pub arith: bool,
+    /// Only this device (index or name substring; for --arith, default: the default device).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Show what would run with these features treated as missing (testing).
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+}
+
+#[derive(clap::Args)]
+pub struct SweepArgs {
+    /// TOML file with any of the keys of sweep.example.toml; flags override it.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Scene file (repeat for several).
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing, FILE.npy).
+    #[arg(long, value_delimiter = ',')]
+    pub rays: Vec<String>,
+    /// Layouts and baselines, comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<String>,
+    /// Layouts that get the B and P series, comma-separated (default f32,f16h; "all" for
+    /// every layout in --layouts); the others run at --layout-branchings only.
+    #[arg(long, value_delimiter = ',')]
+    pub series: Vec<String>,
+    /// Branching factors swept at P = 1 (series layouts).
+    #[arg(long, value_delimiter = ',')]
+    pub branchings: Vec<usize>,
+    /// Branching factors at which every layout runs with P = 1 (default 4,8).
+    #[arg(long, value_delimiter = ',', alias = "scheme-branchings")]
+    pub layout_branchings: Vec<usize>,
+    /// Packet sizes swept at B = --packet-branching.
+    #[arg(long, value_delimiter = ',')]
+    pub packets: Vec<usize>,
+    #[arg(long)]
+    pub packet_branching: Option<usize>,
+    /// Math modes, comma-separated: f16, f32, mixed.
+    #[arg(long, value_delimiter = ',')]
+    pub maths: Vec<String>,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    #[arg(long)]
+    pub warmup: Option<usize>,
+    #[arg(long)]
+    pub repeat: Option<usize>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Output folder (default reports/<UTC timestamp>/). A folder that already holds files is
+    /// refused unless --resume or --force.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Run share K of N of the job list (1 <= K <= N; deterministic, balanced by expected
+    /// cost) into --out/shard-K-of-N; merge the shards with `halftrace report`. Inside a Slurm
+    /// job array it defaults to the array task (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT).
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Continue the sweep in --out: keep its rows, run only the jobs they do not record.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace the sweep's files in --out (other files there are left alone).
+    #[arg(long)]
+    pub force: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Float-control modes of the kernels: auto, on or off (see `trace --help`).
+    #[arg(long)]
+    pub float_controls: Option<FcChoice>,
+    /// Treat a device feature as missing (testing), e.g. rayQuery.
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+    /// Seconds a dispatch may run before its kernel is declared hung (default 600).
+    #[arg(long)]
+    pub kernel_timeout: Option<f64>,
+}
+
+#[derive(clap::Args)]
+pub struct ConformanceArgs {
+    /// A covering subset (each layout, B, P, math, float-control mode and packet
+    /// implementation at least once) instead of the full cross product.
+    #[arg(long)]
+    pub quick: bool,
+    /// Scene file (repeat for several; default: the bundled scene).
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Also every .obj / .obj.gz scene in this folder.
+    #[arg(long)]
+    pub scenes_dir: Option<PathBuf>,
+    /// Vulkan device: index or name substring (see `halftrace devices`).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Output folder for conformance.md and conformance.csv (default
+    /// reports/conformance-<UTC timestamp>/).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Run under the Khronos validation layer; any message fails the run.
+    #[arg(long)]
+    pub validation: bool,
+    /// Treat a device feature as missing (testing the fallbacks).
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+}
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Scenes (OBJ, glTF or PLY); repeat the flag. Default: the bundled teapot, and the shared
+    /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) when
+    /// `../shared/scenes` has them.
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated: primary, ao, diffuse, grazing.
+    #[arg(long, default_value = "primary,ao,diffuse", value_delimiter = ',')]
+    pub rays: Vec<RayKind>,
+    /// Reduced-precision layouts to time beside f32, comma-separated (default: every
+    /// conservative one) — for a quicker check of one layout's change.
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<LayoutArg>,
+    #[arg(long, default_value_t = 256)]
+    pub width: u32,
+    #[arg(long, default_value_t = 256)]
+    pub height: u32,
+    /// Interleaved rounds (every target once per round).
+    #[arg(long, default_value_t = 5)]
+    pub rounds: usize,
+    /// Timed dispatches per target and round (after one warm-up).
+    #[arg(long, default_value_t = 5)]
+    pub repeat: usize,
+    /// Vulkan device (index or name substring).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Enable the Khronos validation layer.
+    #[arg(long)]
+    pub validation: bool,
+    /// Also write the report (Markdown) to this file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}

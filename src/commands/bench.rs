@@ -1,0 +1,57 @@
+//! `halftrace bench`: the speed ratios a kernel change is judged by.
+
+use super::outln;
+use crate::bench::{self, BenchConfig};
+use crate::cli::{BenchArgs, LayoutArg};
+use crate::rays::RayKind;
+use std::path::PathBuf;
+
+pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
+    let mut scenes = a.scene.clone();
+    if scenes.is_empty() {
+        scenes.push(PathBuf::from(crate::sweep::DEFAULT_SCENE));
+        for s in ["../shared/scenes/sponza_dabrovic.obj", "../shared/scenes/igea.obj.gz"] {
+            if std::path::Path::new(s).is_file() {
+                scenes.push(PathBuf::from(s));
+            }
+        }
+    }
+    for k in &a.rays {
+        anyhow::ensure!(
+            !matches!(k, RayKind::File(_)),
+            "--rays {k}: bench uses the generated kinds (primary, ao, diffuse, grazing)"
+        );
+    }
+    crate::rays::check_image_size(a.width, a.height).map_err(anyhow::Error::msg)?;
+    if let Some(o) = &a.out {
+        anyhow::ensure!(!o.is_dir(), "--out {} is a folder; name a file", o.display());
+    }
+    let mut layouts = Vec::new();
+    for l in &a.layouts {
+        match l {
+            LayoutArg::Layout(id) => layouts.push(*id),
+            LayoutArg::Baseline(b) => {
+                anyhow::bail!("--layouts {b}: a baseline; rq and embree are always timed when the device has them")
+            }
+        }
+    }
+    let cfg = BenchConfig {
+        scenes,
+        kinds: a.rays.clone(),
+        width: a.width,
+        height: a.height,
+        rounds: a.rounds,
+        repeat: a.repeat,
+        device: a.device.clone(),
+        validation: a.validation,
+        layouts,
+    };
+    let r = bench::run(&cfg)?;
+    let md = bench::markdown(&cfg, &r);
+    outln!("{md}");
+    if let Some(o) = &a.out {
+        crate::fsx::write_atomic(o, md.as_bytes())?;
+        outln!("report written to {}", o.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,50 @@
+//! `halftrace conformance`: every variant against its CPU reference on one device.
+
+use super::outln;
+use crate::cli::ConformanceArgs;
+use crate::conformance;
+use anyhow::Context;
+use std::path::PathBuf;
+
+pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
+    let mut scenes = a.scene.clone();
+    if let Some(d) = &a.scenes_dir {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(d)
+            .with_context(|| format!("--scenes-dir {}", d.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.to_string_lossy().ends_with(".obj") || p.to_string_lossy().ends_with(".obj.gz"))
+            .collect();
+        anyhow::ensure!(!found.is_empty(), "--scenes-dir {}: no .obj or .obj.gz scenes in it", d.display());
+        found.sort();
+        scenes.extend(found);
+    }
+    if scenes.is_empty() {
+        scenes.push(PathBuf::from(crate::sweep::DEFAULT_SCENE));
+    }
+    let out = a.out.clone().unwrap_or_else(|| {
+        let d = crate::sweep::default_out();
+        let stamp = d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
+        d.with_file_name(format!("conformance-{stamp}"))
+    });
+    let opts = conformance::Options {
+        quick: a.quick,
+        scenes,
+        device: a.device.clone(),
+        mask_features: a.mask_feature.clone(),
+        validation: a.validation,
+    };
+    let o = conformance::run(&opts, |line| eprintln!("{line}"))?;
+    conformance::write(&o, a.quick, &out)?;
+    outln!("{}", conformance::markdown(&o, a.quick));
+    let md = out.join("conformance.md");
+    outln!("written to {}", md.display());
+    anyhow::ensure!(
+        o.validation.is_empty(),
+        "{} validation layer message(s); see {}",
+        o.validation.len(),
+        md.display()
+    );
+    let fails: Vec<String> = o.failures().iter().map(|c| c.variant.kernel_name(c.imp, false)).collect();
+    anyhow::ensure!(fails.is_empty(), "{} kernel(s) failed conformance: {}", fails.len(), fails.join(", "));
+    Ok(())
+}

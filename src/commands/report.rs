@@ -1,0 +1,11 @@
+//! `halftrace report`: one report from one or more result folders.
+
+use super::outln;
+use std::path::{Path, PathBuf};
+
+pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
+    let m = crate::report::merge::merge(dirs, out)?;
+    let merged = m.results.map(|r| format!(", merged rows: {}", r.display())).unwrap_or_default();
+    outln!("{} rows from {} folder(s); report: {}{merged}", m.rows, dirs.len(), m.report.display());
+    Ok(())
+}

@@ -1,0 +1,21 @@
+//! `halftrace shaders --emit DIR`: the SPIR-V of the default matrix, one file per kernel.
+
+use super::outln;
+use crate::gpu::shader;
+use crate::variant::{spirv_matrix, KernelId};
+use anyhow::Context;
+use std::path::Path;
+
+pub fn shaders(dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for (v, imp) in spirv_matrix() {
+        for stats in [false, true] {
+            let k = KernelId::new(v, imp, stats);
+            let code = shader::compile(&k, true)?;
+            let p = dir.join(format!("{k}.spv"));
+            std::fs::write(&p, bytemuck::cast_slice(&code)).with_context(|| format!("writing {}", p.display()))?;
+            outln!("{}", p.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,208 @@
+//! Which Vulkan devices there are, what each can do ([`DeviceInfo`], read once per device),
+//! and which one `--device` picks ([`pick`]).
+
+use super::instance::Instance;
+use super::{GpuError, VkResultExt};
+use ash::vk;
+use std::ffi::CStr;
+
+/// What the harness needs to know about a device.
+#[derive(Clone, Debug)]
+pub struct DeviceInfo {
+    pub index: usize,
+    pub name: String,
+    pub kind: String,
+    pub driver: String,
+    pub api_version: String,
+    pub shader_float16: bool,
+    pub storage_16bit: bool,
+    pub shader_float64: bool,
+    pub subgroup_size: u32,
+    /// `VkSubgroupFeatureFlags` the device supports (basic, vote, arithmetic, ballot, shuffle,
+    /// shuffle relative, clustered, quad: bits 0..7).
+    pub subgroup_ops: u32,
+    pub ray_query: bool,
+    /// `bufferDeviceAddress`: kernels may read buffers through 64-bit addresses, which is how
+    /// a scene whose buffers exceed `maxStorageBufferRange` is still traced.
+    pub buffer_device_address: bool,
+    /// `maxStorageBufferRange`: the most bytes one storage-buffer binding may span.
+    pub max_storage_buffer: u64,
+    /// `maxMemoryAllocationSize`: the largest single allocation, so the largest buffer.
+    pub max_allocation: u64,
+    pub timestamp_period_ns: f32,
+    pub timestamps: bool,
+    /// Float controls the kernels declare: fp16 round-to-nearest-even and fp16/fp32
+    /// signed-zero/inf/NaN preservation (without them, drivers may skip fp16 roundings).
+    pub fp16_rte: bool,
+    pub fp32_rte: bool,
+    pub preserve_16: bool,
+    pub preserve_32: bool,
+    /// `subgroupSizeControl` with compute in its required-size stages: the subgroup size a
+    /// kernel was built for can be pinned, between these bounds.
+    pub subgroup_size_control: bool,
+    pub min_subgroup_size: u32,
+    pub max_subgroup_size: u32,
+}
+
+impl DeviceInfo {
+    /// Treats feature `name` (one of [`MASKABLE`]) as missing.
+    pub fn mask(&mut self, name: &str) -> Result<(), String> {
+        match name {
+            "shaderFloat16" => self.shader_float16 = false,
+            "storageBuffer16BitAccess" => self.storage_16bit = false,
+            "shaderFloat64" => self.shader_float64 = false,
+            "rayQuery" => self.ray_query = false,
+            "bufferDeviceAddress" => {
+                self.buffer_device_address = false;
+                self.ray_query = false;
+            }
+            "subgroupSizeControl" => {
+                self.subgroup_size_control = false;
+                (self.min_subgroup_size, self.max_subgroup_size) = (self.subgroup_size, self.subgroup_size);
+            }
+            "shaderRoundingModeRTEFloat16" => self.fp16_rte = false,
+            "shaderRoundingModeRTEFloat32" => self.fp32_rte = false,
+            "shaderSignedZeroInfNanPreserveFloat16" => self.preserve_16 = false,
+            "shaderSignedZeroInfNanPreserveFloat32" => self.preserve_32 = false,
+            "floatControls" => {
+                (self.fp16_rte, self.fp32_rte, self.preserve_16, self.preserve_32) = (false, false, false, false)
+            }
+            other => return Err(format!("unknown feature to mask: '{other}' (use one of {})", MASKABLE.join(", "))),
+        }
+        Ok(())
+    }
+}
+
+/// Every feature `--mask-feature` can hide, so each fallback runs on any device.
+pub const MASKABLE: &[&str] = &[
+    "shaderFloat16",
+    "storageBuffer16BitAccess",
+    "shaderFloat64",
+    "rayQuery",
+    "bufferDeviceAddress",
+    "subgroupSizeControl",
+    "shaderRoundingModeRTEFloat16",
+    "shaderRoundingModeRTEFloat32",
+    "shaderSignedZeroInfNanPreserveFloat16",
+    "shaderSignedZeroInfNanPreserveFloat32",
+    "floatControls",
+];
+
+/// What the harness reads of one physical device.
+pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {
+    unsafe {
+        let props = instance.get_physical_device_properties(pd);
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
+        let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
+        let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+        let exts0 = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
+        let has0 = |n: &CStr| exts0.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|x| x == n));
+        let rq_exts = has0(ash::khr::ray_query::NAME)
+            && has0(ash::khr::acceleration_structure::NAME)
+            && has0(ash::khr::deferred_host_operations::NAME);
+        let f64ok = {
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11).push_next(&mut v12);
+            if rq_exts {
+                f2 = f2.push_next(&mut asf).push_next(&mut rqf);
+            }
+            instance.get_physical_device_features2(pd, &mut f2);
+            f2.features.shader_float64 == vk::TRUE
+        };
+        let rq_ok = rq_exts
+            && asf.acceleration_structure == vk::TRUE
+            && rqf.ray_query == vk::TRUE
+            && v12.buffer_device_address == vk::TRUE;
+        let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
+        let mut drv = vk::PhysicalDeviceDriverProperties::default();
+        let mut p11 = vk::PhysicalDeviceMaintenance3Properties::default();
+        let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
+        let mut ssc = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
+        let ssc_ext = has0(ash::ext::subgroup_size_control::NAME);
+        let mut p2 = vk::PhysicalDeviceProperties2::default()
+            .push_next(&mut sub)
+            .push_next(&mut drv)
+            .push_next(&mut fc)
+            .push_next(&mut p11);
+        if ssc_ext {
+            p2 = p2.push_next(&mut ssc);
+        }
+        instance.get_physical_device_properties2(pd, &mut p2);
+        let ssc_ok = ssc_ext && {
+            let mut sf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut sf);
+            instance.get_physical_device_features2(pd, &mut f2);
+            sf.subgroup_size_control == vk::TRUE
+                && ssc.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE)
+        };
+        let qf = instance.get_physical_device_queue_family_properties(pd);
+        let timestamps =
+            qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
+        let v = props.api_version;
+        DeviceInfo {
+            index,
+            name: props.device_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default(),
+            kind: format!("{:?}", props.device_type).to_lowercase(),
+            driver: format!(
+                "{} {}",
+                drv.driver_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default(),
+                drv.driver_info_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default()
+            ),
+            api_version: format!(
+                "{}.{}.{}",
+                vk::api_version_major(v),
+                vk::api_version_minor(v),
+                vk::api_version_patch(v)
+            ),
+            shader_float16: v12.shader_float16 == vk::TRUE,
+            storage_16bit: v11.storage_buffer16_bit_access == vk::TRUE,
+            shader_float64: f64ok,
+            subgroup_size: sub.subgroup_size,
+            subgroup_ops: sub.supported_operations.as_raw(),
+            ray_query: rq_ok,
+            buffer_device_address: v12.buffer_device_address == vk::TRUE,
+            max_storage_buffer: props.limits.max_storage_buffer_range as u64,
+            max_allocation: p11.max_memory_allocation_size,
+            timestamp_period_ns: props.limits.timestamp_period,
+            timestamps,
+            fp16_rte: fc.shader_rounding_mode_rte_float16 == vk::TRUE,
+            fp32_rte: fc.shader_rounding_mode_rte_float32 == vk::TRUE,
+            preserve_16: fc.shader_signed_zero_inf_nan_preserve_float16 == vk::TRUE,
+            preserve_32: fc.shader_signed_zero_inf_nan_preserve_float32 == vk::TRUE,
+            subgroup_size_control: ssc_ok,
+            min_subgroup_size: if ssc_ok { ssc.min_subgroup_size } else { sub.subgroup_size },
+            max_subgroup_size: if ssc_ok { ssc.max_subgroup_size } else { sub.subgroup_size },
+        }
+    }
+}
+
+/// Lists every Vulkan device with the features halftrace cares about.
+pub fn list_devices() -> Result<Vec<DeviceInfo>, GpuError> {
+    let inst = Instance::new(false)?;
+    let pds = unsafe { inst.instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
+    Ok(pds.into_iter().enumerate().map(|(i, pd)| describe(&inst.instance, pd, i)).collect())
+}
+
+/// The device `--device` chooses: an index, or a case-insensitive name substring; without
+/// one, the first discrete GPU, else integrated, else virtual, else CPU.
+pub fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError> {
+    if infos.is_empty() {
+        return Err(GpuError::NoDevice);
+    }
+    if let Some(w) = want {
+        if let Ok(i) = w.parse::<usize>() {
+            return if i < infos.len() { Ok(i) } else { Err(GpuError::DeviceNotFound(w.into())) };
+        }
+        let wl = w.to_lowercase();
+        return infos
+            .iter()
+            .position(|d| d.name.to_lowercase().contains(&wl))
+            .ok_or_else(|| GpuError::DeviceNotFound(w.into()));
+    }
+    for kind in ["discrete_gpu", "integrated_gpu", "virtual_gpu", "cpu"] {
+        if let Some(i) = infos.iter().position(|d| d.kind == kind) {
+            return Ok(i);
+        }
+    }
+    Ok(0)
+}

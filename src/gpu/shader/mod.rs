@@ -1,0 +1,132 @@
+//! GLSL → SPIR-V with shaderc ([`compile`], [`compile_user`]), reading and patching SPIR-V
+//! ([`spirv`]: one instruction walker for all of it) and the checks a user's module passes
+//! before it stands in for a built-in kernel ([`check`]).
+//!
+//! Includes resolve, in order, to: `interface.glsl` (generated for the variant from the Rust
+//! definitions, see [`crate::interface`]), `layout.glsl` (the variant's layout hooks),
+//! `layout/<name>.glsl` (any registered layout's hooks), the shared files of `glsl/`
+//! (embedded, so the binary is self-contained), and — for a user's kernel — files beside it.
+
+pub mod check;
+pub mod spirv;
+
+pub use check::{check_user, validate, validate_user};
+pub use spirv::{parse_interface, read_spirv, Interface};
+
+use super::GpuError;
+use crate::interface;
+use crate::layout::LayoutId;
+use crate::variant::{KernelId, Variant};
+use std::path::{Path, PathBuf};
+
+/// The shared GLSL sources: every file directly in `glsl/` (layout hooks come from the
+/// registry), embedded by `build.rs` so a new shared header needs no list here.
+pub const SOURCES: &[(&str, &str)] = include!(concat!(env!("OUT_DIR"), "/glsl_sources.rs"));
+
+/// A shared source by file name.
+pub fn source(name: &str) -> Option<&'static str> {
+    SOURCES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+}
+
+/// What `#include` resolves to for one compilation.
+pub struct Includes {
+    /// The generated `interface.glsl`.
+    pub interface: String,
+    /// The variant's layout hooks (`layout.glsl`), if any.
+    pub layout: Option<&'static str>,
+    /// A user kernel's folder, searched last.
+    pub user_dir: Option<PathBuf>,
+}
+
+impl Includes {
+    /// The includes of a variant's kernel.
+    pub fn variant(v: &Variant) -> Includes {
+        Includes { interface: v.interface_glsl(), layout: Some(v.layout.info().glsl), user_dir: None }
+    }
+
+    /// The includes of a kernel without a layout (the ray-query baseline, the arithmetic rates).
+    pub fn plain() -> Includes {
+        Includes { interface: interface::glsl_header(None), layout: None, user_dir: None }
+    }
+
+    fn resolve(&self, req: &str) -> Result<String, String> {
+        if req == "interface.glsl" {
+            return Ok(self.interface.clone());
+        }
+        if req == "layout.glsl" {
+            return self.layout.map(str::to_string).ok_or_else(|| "layout.glsl: this kernel has no layout".to_string());
+        }
+        if let Some(name) = req.strip_prefix("layout/").and_then(|r| r.strip_suffix(".glsl")) {
+            if let Ok(l) = LayoutId::parse(name) {
+                return Ok(l.info().glsl.to_string());
+            }
+        }
+        if let Some(s) = source(req) {
+            return Ok(s.to_string());
+        }
+        if let Some(d) = &self.user_dir {
+            let p = d.join(req);
+            if let Ok(s) = std::fs::read_to_string(&p) {
+                return Ok(s);
+            }
+        }
+        Err(format!("no such include: {req}"))
+    }
+}
+
+/// Compiles one built-in kernel. `f64_fallback`: use fp64 for the watertight test's
+/// exact-zero edge case (needs `shaderFloat64`; the CPU reference always does).
+pub fn compile(k: &KernelId, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+    let src = source("trav.comp").expect("glsl/trav.comp is embedded");
+    let v = &k.variant;
+    let words =
+        compile_source(&k.name(), "trav.comp", src, &v.defines(k.imp, k.stats, f64_fallback), &Includes::variant(v))?;
+    Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
+}
+
+/// Compiles a user's GLSL kernel file with the defines and includes of the built-in kernel
+/// `k` (plus the file's own folder).
+pub fn compile_user(path: &Path, k: &KernelId, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+    let v = &k.variant;
+    let src = std::fs::read_to_string(path)
+        .map_err(|e| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot read: {e}") })?;
+    let mut inc = Includes::variant(v);
+    inc.user_dir = path.parent().map(Path::to_path_buf);
+    let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
+    let defines = v.defines(k.imp, k.stats, f64_fallback);
+    let words = compile_source(&format!("{} ({})", k.name(), path.display()), &file, &src, &defines, &inc)?;
+    Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
+}
+
+/// Compiles a shared kernel without a layout (`trav_rq.comp`, `arith.comp`), with defines.
+pub fn compile_plain(name: &str, file: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
+    let src = source(file)
+        .ok_or_else(|| GpuError::Compile { variant: name.into(), log: format!("missing source {file}") })?;
+    compile_source(name, file, src, defines, &Includes::plain())
+}
+
+/// Compiles GLSL compute source with defines; `#include`s resolve through `inc`.
+pub fn compile_source(
+    name: &str,
+    file: &str,
+    src: &str,
+    defines: &[(String, String)],
+    inc: &Includes,
+) -> Result<Vec<u32>, GpuError> {
+    let compile_err = |log: String| GpuError::Compile { variant: name.to_string(), log };
+    let compiler = shaderc::Compiler::new().map_err(|e| compile_err(format!("shaderc unavailable: {e}")))?;
+    let mut opts = shaderc::CompileOptions::new().map_err(|e| compile_err(format!("shaderc options: {e}")))?;
+    opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+    opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
+    opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
+    for (k, val) in defines {
+        opts.add_macro_definition(k, Some(val));
+    }
+    opts.set_include_callback(|req, _ty, _from, _depth| {
+        inc.resolve(req).map(|content| shaderc::ResolvedInclude { resolved_name: req.to_string(), content })
+    });
+    let art = compiler
+        .compile_into_spirv(src, shaderc::ShaderKind::Compute, file, "main", Some(&opts))
+        .map_err(|e| compile_err(e.to_string()))?;
+    Ok(art.as_binary().to_vec())
+}

@@ -1,0 +1,245 @@
+//! The one CPU traversal, generic over the layout ([`Layout`]) and the packet width. P = 1 is
+//! a packet of one ray. It is the bit-exact oracle of every kernel — hits and counters — and
+//! follows the GLSL skeleton (`glsl/trav.comp`) step for step.
+//!
+//! Packet rule (identical in the kernels):
+//! - A ray is *active* for a popped node when it hit that node's box and its closest hit so
+//!   far is not nearer than its entry bound (`Layout::entry_t`). The node is visited when any
+//!   ray is active; otherwise it is skipped. Each active ray counts the visit and its box
+//!   tests.
+//! - A child is visited when any active ray hits it. Children are ordered once per packet by
+//!   the smallest key (entry distance) among the rays that hit them, ties by slot
+//!   ([`order_children`]). Leaves are tested, in that order, by the rays that hit them (the
+//!   kernels test them in slot order: the closest hit and the counters do not depend on the
+//!   order, ties going to the lower prim); inner children are pushed farthest first.
+//! - Each ray keeps its own closest hit and its own stack entry per level (inactive rays carry
+//!   none).
+//!
+//! Packets are P consecutive rays; the last may be partial. Packet counters (nodes the packet
+//! visited, active rays summed over them) are stored in its first ray.
+
+use super::{decode_child, Encoded, Layout, Node, TriBuffer};
+use crate::base::Ray;
+use crate::base::{slab32, Closest, Counters, Hit, RayPre};
+use crate::bvh::ChildRef;
+use crate::interface::CHILD_EMPTY;
+use crate::precision::{FloatControls, Math};
+use rayon::prelude::*;
+
+/// Orders hit children by (key, slot) ascending: an insertion sort over slots given in
+/// increasing order. The kernels reach the same order without sorting (trav.comp places each
+/// inner child on the stack at its rank by (key, slot)). Keys are never NaN; −0 and +0
+/// compare equal.
+#[inline]
+pub fn order_children(v: &mut [(f32, usize)]) {
+    for i in 1..v.len() {
+        let x = v[i];
+        let mut j = i;
+        while j > 0 && v[j - 1].0 > x.0 {
+            v[j] = v[j - 1];
+            j -= 1;
+        }
+        v[j] = x;
+    }
+}
+
+/// One ray of a packet: its fp32 constants, the layout's constants, its closest hit, its
+/// counters.
+struct Lane<L: Layout> {
+    r: RayPre,
+    lr: L::Ray,
+    best: Closest,
+    c: Counters,
+}
+
+impl<L: Layout> Lane<L> {
+    fn test_leaf(&mut self, tris: &TriBuffer, first: u32, count: u32) {
+        for i in first..first + count {
+            self.c.tri_tests += 1;
+            self.best.test(&self.r, &tris.verts[i as usize], tris.ids[i as usize] as i32);
+        }
+    }
+}
+
+/// Buffers reused from packet to packet (one per worker thread).
+struct Scratch<L: Layout> {
+    lanes: Vec<Lane<L>>,
+    /// Node index per stack level.
+    stack: Vec<u32>,
+    /// P entries per stack level (`None`: the ray is inactive there).
+    entries: Vec<Option<L::Entry>>,
+    cur: Vec<Option<L::Entry>>,
+    visits: Vec<Option<L::Visit>>,
+    /// B × P box test results of the current node.
+    res: Vec<Option<(f32, L::ChildHit)>>,
+    order: Vec<(f32, usize)>,
+    pend: Vec<u32>,
+    pend_entries: Vec<Option<L::Entry>>,
+}
+
+impl<L: Layout> Scratch<L> {
+    fn new() -> Scratch<L> {
+        Scratch {
+            lanes: Vec::new(),
+            stack: Vec::new(),
+            entries: Vec::new(),
+            cur: Vec::new(),
+            visits: Vec::new(),
+            res: Vec::new(),
+            order: Vec::new(),
+            pend: Vec::new(),
+            pend_entries: Vec::new(),
+        }
+    }
+}
+
+/// Traces `rays` in packets of `p` consecutive rays (in parallel), keeping input order.
+pub fn trace_all<L: Layout, const B: usize>(
+    nodes: &[L::Node<B>],
+    root: &L::Root,
+    enc: &Encoded,
+    rays: &[Ray],
+    p: usize,
+    math: Math,
+    fc: FloatControls,
+) -> (Vec<Hit>, Vec<Counters>) {
+    let p = p.max(1);
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let mut counters = vec![Counters::default(); rays.len()];
+    let box_lo: [f32; 3] = enc.root_box.min.into();
+    let box_hi: [f32; 3] = enc.root_box.max.into();
+    rays.par_chunks(p).zip(hits.par_chunks_mut(p)).zip(counters.par_chunks_mut(p)).for_each_init(
+        Scratch::<L>::new,
+        |s, ((rays, hits), counters)| {
+            packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters)
+        },
+    );
+    (hits, counters)
+}
+
+/// Traces one packet.
+#[allow(clippy::too_many_arguments)]
+fn packet<L: Layout, const B: usize>(
+    nodes: &[L::Node<B>],
+    root: &L::Root,
+    tris: &TriBuffer,
+    root_box: ([f32; 3], [f32; 3]),
+    rays: &[Ray],
+    math: Math,
+    fc: FloatControls,
+    s: &mut Scratch<L>,
+    hits: &mut [Hit],
+    counters: &mut [Counters],
+) {
+    let p = rays.len();
+    let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries } = s;
+    lanes.clear();
+    stack.clear();
+    entries.clear();
+    let mut any_root = false;
+    for ray in rays {
+        let r = RayPre::new(ray);
+        let lr = L::ray(&r, math, fc);
+        let (near, far) = slab32(&r, root_box.0, root_box.1, r.tmin, r.tmax);
+        let e = (near <= far).then(|| L::root_entry(root, &r, &lr, near));
+        any_root |= e.is_some();
+        entries.push(e);
+        lanes.push(Lane { r, lr, best: Closest::new(ray.tmax), c: Counters { box_tests: 1, ..Default::default() } });
+    }
+    if any_root {
+        stack.push(0);
+    } else {
+        entries.clear();
+    }
+    let (mut packet_nodes, mut active_lanes) = (0u32, 0u32);
+    while let Some(ni) = stack.pop() {
+        cur.clear();
+        cur.extend(entries.drain(entries.len() - p..));
+        visits.clear();
+        let n = &nodes[ni as usize];
+        let mut active = 0;
+        for (lane, e) in lanes.iter().zip(cur.iter()) {
+            let v = e
+                .as_ref()
+                .filter(|e| L::entry_t(e) <= lane.best.t)
+                .map(|e| L::visit::<B>(n, root, e, &lane.r, &lane.lr, lane.best.t));
+            active += v.is_some() as u32;
+            visits.push(v);
+        }
+        if active == 0 {
+            continue;
+        }
+        packet_nodes += 1;
+        active_lanes += active;
+        res.clear();
+        order.clear();
+        for slot in 0..B {
+            if n.child(slot) == CHILD_EMPTY {
+                break;
+            }
+            let mut key = f32::INFINITY;
+            let mut hit = false;
+            for l in 0..p {
+                let t = match (&cur[l], &visits[l]) {
+                    (Some(e), Some(v)) => {
+                        let lane = &mut lanes[l];
+                        lane.c.box_tests += 1;
+                        L::test_child::<B>(n, slot, e, v, &lane.r, &lane.lr)
+                    }
+                    _ => None,
+                };
+                if let Some((k, _)) = t {
+                    key = key.min(k);
+                    hit = true;
+                }
+                res.push(t);
+            }
+            if hit {
+                order.push((key, slot));
+            }
+        }
+        order_children(order);
+        pend.clear();
+        pend_entries.clear();
+        for &(_, slot) in order.iter() {
+            let tests = &res[slot * p..slot * p + p];
+            match decode_child(n.child(slot)) {
+                ChildRef::Leaf { first, count } => {
+                    for (lane, t) in lanes.iter_mut().zip(tests) {
+                        if t.is_some() {
+                            lane.test_leaf(tris, first, count);
+                        }
+                    }
+                }
+                ChildRef::Inner(j) => {
+                    pend.push(j);
+                    for l in 0..p {
+                        let lane = &mut lanes[l];
+                        let e = match (&tests[l], &cur[l], &visits[l]) {
+                            (Some((_, h)), Some(e), Some(v)) => {
+                                Some(L::child_entry::<B>(n, slot, e, v, h, &lane.r, &lane.lr, &mut lane.c))
+                            }
+                            _ => None,
+                        };
+                        pend_entries.push(e);
+                    }
+                }
+            }
+        }
+        for (lane, v) in lanes.iter_mut().zip(visits.iter()) {
+            if v.is_some() {
+                lane.c.nodes += 1;
+            }
+        }
+        for k in (0..pend.len()).rev() {
+            stack.push(pend[k]);
+            entries.extend_from_slice(&pend_entries[k * p..k * p + p]);
+        }
+    }
+    for ((lane, h), c) in lanes.iter().zip(hits.iter_mut()).zip(counters.iter_mut()) {
+        *h = lane.best.hit();
+        *c = lane.c;
+    }
+    counters[0].packet_nodes = packet_nodes;
+    counters[0].active_lanes = active_lanes;
+}

@@ -1,0 +1,74 @@
+//! `report.md`: the report of one or more result folders — provenance, failures and skips,
+//! the tables ([`super::tables`]), the plots ([`super::plots`]) and the images a sweep
+//! rendered.
+
+use super::plots;
+use super::rows::{sorted, Row};
+use super::tables;
+use crate::layout::LayoutId;
+use std::path::{Path, PathBuf};
+
+/// Renders `report.md` and the plots into `out` from `rows` (from the folders `sources`).
+pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out)?;
+    let rows = &sorted(rows);
+    let r = tables::ratios(rows);
+    let by_b = tables::series(&r, true);
+    let by_p = tables::series(&r, false);
+    let mut md = String::from("# halftrace sweep report\n\n");
+    let from: Vec<String> = sources.iter().map(|p| format!("`{}`", p.display())).collect();
+    md += &format!("Rendered from {} result row(s) in: {}.\n\n", rows.len(), from.join(", "));
+    let mut devices: Vec<(String, String)> = rows.iter().map(|r| (r.device.clone(), r.driver.clone())).collect();
+    devices.sort();
+    devices.dedup();
+    for (d, drv) in &devices {
+        md += &format!("- device **{d}**, driver {drv}\n");
+    }
+    let mut versions: Vec<String> = rows.iter().map(|r| format!("{} ({})", r.version, r.commit)).collect();
+    versions.sort();
+    versions.dedup();
+    md += &format!("- halftrace {}\n", versions.join(", "));
+    let failed: Vec<&Row> = rows.iter().filter(|r| r.status.is_failed()).collect();
+    let skipped: Vec<&Row> = rows.iter().filter(|r| r.status.is_skipped()).collect();
+    let ok = rows.len() - failed.len() - skipped.len();
+    md += &format!("- variants: {ok} ok, {} failed validation, {} skipped\n\n", failed.len(), skipped.len());
+    for f in &failed {
+        md += &format!("**{}**: {} {} {}\n\n", f.status, f.scene, f.rays, f.kernel);
+    }
+    let mut skip_lines: Vec<String> =
+        skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status)).collect();
+    skip_lines.dedup();
+    for l in skip_lines {
+        md += &format!("{l}\n\n");
+    }
+    md += &tables::headline(&by_b, &by_p);
+    md += &tables::separated_effects(rows);
+    let points = tables::layout_points(rows);
+    md += &tables::layouts_table(&points);
+    md += &tables::against_baselines(rows);
+    md += &tables::every_row(rows);
+    md += "\n![Mrays/s per variant](mrays.png) ![memory per layout and B](memory.png)\n";
+    md += &images(out);
+    crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
+    plots::plots(rows, &by_b, &by_p, out)?;
+    plots::layouts_plot(&points, out)
+}
+
+/// The images section: those of the sweep's images that exist in `out`.
+fn images(out: &Path) -> String {
+    let mut imgs = vec!["render.png".to_string()];
+    imgs.extend(LayoutId::all().map(|l| format!("heat_{l}.png")));
+    imgs.extend(LayoutId::all().filter(|&l| l != LayoutId::f32()).map(|l| format!("diff_{l}_vs_f32.png")));
+    imgs.retain(|f| out.join(f).exists());
+    if imgs.is_empty() {
+        return String::new();
+    }
+    let mut md = String::from(concat!(
+        "\n## Images\n\nShaded primary render (f32 hits); nodes visited per pixel of each layout (B = 4, P = 1, ",
+        "default math; one colour scale); pixels whose hit differs from f32 (white), black when none does.\n\n",
+    ));
+    for i in imgs {
+        md += &format!("![{i}]({i}) ");
+    }
+    md + "\n"
+}

@@ -1,0 +1,297 @@
+//! Result rows: one [`Row`] per measured (device, scene, ray set, target), its typed
+//! identity ([`RowId`]) and status ([`Status`]), and their storage as `results.csv` and
+//! `results.json`, written as they come.
+
+use crate::baseline::BaselineId;
+use crate::layout::LayoutId;
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// How a measurement ended; written as `ok`, `FAILED: why` or `skipped: why`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub enum Status {
+    /// Validated (and timed, when asked).
+    #[default]
+    Ok,
+    /// Disagreed with its reference (naming the ray and both results), or hung: not timed.
+    Failed(String),
+    /// The device lacks what it needs (one line: what).
+    Skipped(String),
+}
+
+impl Status {
+    pub fn is_ok(&self) -> bool {
+        *self == Status::Ok
+    }
+
+    pub fn is_failed(&self) -> bool {
+        matches!(self, Status::Failed(_))
+    }
+
+    pub fn is_skipped(&self) -> bool {
+        matches!(self, Status::Skipped(_))
+    }
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Status::Ok => f.write_str("ok"),
+            Status::Failed(m) => write!(f, "FAILED: {m}"),
+            Status::Skipped(m) => write!(f, "skipped: {m}"),
+        }
+    }
+}
+
+impl From<Status> for String {
+    fn from(s: Status) -> String {
+        s.to_string()
+    }
+}
+
+impl TryFrom<String> for Status {
+    type Error = String;
+    fn try_from(s: String) -> Result<Status, String> {
+        if s == "ok" {
+            Ok(Status::Ok)
+        } else if let Some(m) = s.strip_prefix("FAILED: ") {
+            Ok(Status::Failed(m.to_string()))
+        } else if let Some(m) = s.strip_prefix("skipped: ") {
+            Ok(Status::Skipped(m.to_string()))
+        } else {
+            Err(format!("status '{s}' is none of ok, FAILED: …, skipped: …"))
+        }
+    }
+}
+
+/// What makes two rows the same measurement: one spelling for `--resume` (which jobs a
+/// folder already records) and `report` (which rows of merged folders collide).
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct RowId {
+    pub device: String,
+    pub driver: String,
+    pub scene: String,
+    pub rays: String,
+    pub kernel: String,
+    pub layout: String,
+    pub math: String,
+    pub branching: usize,
+    pub packet: usize,
+    pub float_controls: String,
+}
+
+impl std::fmt::Display for RowId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} | {} | {} | {} | {} | {}/{}/B{}/P{} fc {}",
+            self.device,
+            self.driver,
+            self.scene,
+            self.rays,
+            self.kernel,
+            self.layout,
+            self.math,
+            self.branching,
+            self.packet,
+            self.float_controls
+        )
+    }
+}
+
+/// A row's layout or baseline in report order: the layouts in registry order, then the
+/// baselines, then names this version does not know.
+pub fn order(name: &str) -> usize {
+    let n = LayoutId::all().count();
+    match (LayoutId::parse(name), BaselineId::parse(name)) {
+        (Ok(l), _) => LayoutId::all().position(|x| x == l).unwrap_or(usize::MAX),
+        (_, Some(b)) => n + BaselineId::all().position(|x| x == b).unwrap_or(0),
+        _ => usize::MAX,
+    }
+}
+
+/// One variant's results, with everything needed to read it alone months later.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Row {
+    pub scene: String,
+    pub triangles: usize,
+    pub rays: String,
+    pub ray_count: usize,
+    pub layout: String,
+    /// f16h math mode (f16, f32, mixed); `f32` for the f32 layout, `n/a` for rq.
+    pub math: String,
+    pub branching: usize,
+    pub packet: usize,
+    /// Float-control modes of the kernel: `on`, `off` (a build exact without them), `n/a`.
+    #[serde(default)]
+    pub float_controls: String,
+    pub kernel: String,
+    pub device: String,
+    pub driver: String,
+    pub version: String,
+    pub commit: String,
+    /// `ok`, `FAILED: …` when the variant disagreed with its CPU reference, or `skipped: …`.
+    pub status: Status,
+    pub mrays_median: f64,
+    pub mrays_min: f64,
+    pub mrays_max: f64,
+    pub ms_median: f64,
+    pub ms_min: f64,
+    pub ms_max: f64,
+    pub timed_dispatches: usize,
+    pub nodes_per_ray: f64,
+    pub box_tests_per_ray: f64,
+    pub tri_tests_per_ray: f64,
+    pub reanchors_per_ray: f64,
+    pub packet_nodes_per_packet: f64,
+    pub simd_utilisation: f64,
+    /// Node bytes of our BVH; for `rq`, the driver's acceleration-structure bytes.
+    pub bvh_bytes: u64,
+    /// BVH build (binary SAH + collapse + encode) or, for `rq`, the driver's build, ms.
+    pub build_ms: f64,
+    pub bytes_per_node: u64,
+    pub triangle_bytes: u64,
+    pub stack_bytes_per_ray: u64,
+    /// Bytes of node data fetched per ray: nodes visited × node bytes.
+    pub node_bytes_per_ray: f64,
+    pub differs_from_f32: usize,
+    pub false_misses: usize,
+    pub max_abs_dt: f64,
+    /// The device's raw fp16:fp32 arithmetic throughput ratio (`devices --arith`, geometric
+    /// mean over sub, mul, min, max, compare), measured once per sweep.
+    pub device_fp16_ratio: f64,
+}
+
+/// Keeps `results.csv` and `results.json` current: after each row both are rewritten through a
+/// temporary file and a rename ([`crate::fsx`]), so an interrupted sweep keeps every finished
+/// row and no write ever leaves a truncated file.
+pub struct Writer {
+    dir: PathBuf,
+    rows: Vec<Row>,
+}
+
+impl Writer {
+    /// A writer into `dir` that starts from `rows` (the rows a resumed sweep keeps). Nothing is
+    /// written until the first [`Writer::push`].
+    pub fn create(dir: &Path, rows: Vec<Row>) -> anyhow::Result<Writer> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(Writer { dir: dir.into(), rows })
+    }
+
+    pub fn push(&mut self, row: Row) -> anyhow::Result<()> {
+        self.rows.push(row);
+        write_rows(&self.dir, &self.rows)
+    }
+
+    pub fn rows(&self) -> &[Row] {
+        &self.rows
+    }
+}
+
+/// Whether rows of `layout` have work counters: every layout's do, a baseline's do not
+/// (unknown names, e.g. from another version, are assumed to).
+pub fn has_counters(layout: &str) -> bool {
+    BaselineId::parse(layout).is_none()
+}
+
+/// The layouts that have rows, in registry order.
+pub fn layouts_in(rows: &[&Row]) -> Vec<&'static str> {
+    LayoutId::all().map(|l| l.name()).filter(|n| rows.iter().any(|r| r.layout == *n)).collect()
+}
+
+/// The files a sweep writes into its folder (besides per-layout images, [`is_output`]).
+pub const OUTPUTS: &[&str] =
+    &["results.csv", "results.json", "report.md", "device_arith.json", "device_bench.json", "render.png"];
+/// The plots (each as `.png` and `.svg`); `schemes` is the old name of `layouts`.
+pub const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "layouts", "schemes"];
+
+/// Whether a file name is one a sweep writes (so `--force` may replace it).
+pub fn is_output(name: &str) -> bool {
+    OUTPUTS.contains(&name)
+        || PLOTS.iter().any(|p| name == format!("{p}.png") || name == format!("{p}.svg"))
+        || is_image(name)
+}
+
+/// Whether a file name is one of the images a sweep renders from its traces (the shaded
+/// render, per-layout heat maps and diff masks), not from its rows.
+pub fn is_image(name: &str) -> bool {
+    name == "render.png"
+        || (name.starts_with("heat_") && name.ends_with(".png"))
+        || (name.starts_with("diff_") && name.ends_with("_vs_f32.png"))
+}
+
+/// Rows in the report's order, whatever order they were run or merged in: by device, scene,
+/// rays, layout (registry order), math, B, P, float controls and kernel. A sweep split into
+/// shards and merged reports exactly as the unsplit sweep.
+pub fn sorted(rows: &[Row]) -> Vec<Row> {
+    let mut v = rows.to_vec();
+    let layout = |r: &Row| order(&r.layout);
+    v.sort_by(|a, b| {
+        (
+            &a.device,
+            &a.driver,
+            &a.scene,
+            &a.rays,
+            layout(a),
+            &a.layout,
+            &a.math,
+            a.branching,
+            a.packet,
+            &a.float_controls,
+            &a.kernel,
+        )
+            .cmp(&(
+                &b.device,
+                &b.driver,
+                &b.scene,
+                &b.rays,
+                layout(b),
+                &b.layout,
+                &b.math,
+                b.branching,
+                b.packet,
+                &b.float_controls,
+                &b.kernel,
+            ))
+    });
+    v
+}
+
+/// Writes `results.csv` and `results.json` of `rows` into `dir` (atomically each).
+pub fn write_rows(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut csv = csv::Writer::from_writer(Vec::new());
+    for r in rows {
+        csv.serialize(r)?;
+    }
+    let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
+    crate::fsx::write_atomic(&dir.join("results.csv"), &bytes)?;
+    crate::fsx::write_atomic(&dir.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())
+}
+
+/// Reads the rows of `DIR/results.csv`.
+pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
+    let p = dir.join("results.csv");
+    let mut r = csv::Reader::from_path(&p).with_context(|| format!("reading {}", p.display()))?;
+    r.deserialize().enumerate().map(|(i, x)| x.with_context(|| format!("{}: row {}", p.display(), i + 2))).collect()
+}
+
+impl Row {
+    /// The row's identity.
+    pub fn id(&self) -> RowId {
+        RowId {
+            device: self.device.clone(),
+            driver: self.driver.clone(),
+            scene: self.scene.clone(),
+            rays: self.rays.clone(),
+            kernel: self.kernel.clone(),
+            layout: self.layout.clone(),
+            math: self.math.clone(),
+            branching: self.branching,
+            packet: self.packet,
+            float_controls: self.float_controls.clone(),
+        }
+    }
+}

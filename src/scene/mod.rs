@@ -1,0 +1,232 @@
+//! Scenes: a triangle soup in fp32 world space ([`Scene`]) read from a Wavefront OBJ
+//! ([`obj`]), glTF 2.0 (`.gltf`, `.glb`: [`gltf`]) or PLY ([`ply`]) file, each plain or
+//! gzip-compressed (`.gz`), or made by instancing ([`instance`]). A triangle's index in the
+//! loader's order is its public `prim` id. Every error names the file and the line or element.
+
+pub mod gltf;
+pub mod instance;
+pub mod obj;
+pub mod ply;
+
+use crate::base::{Aabb, Closest, Hit, Ray, RayPre};
+use glam::Vec3;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum SceneError {
+    #[error("{path}: cannot read scene: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: not a valid gzip stream: {source}")]
+    Gzip { path: PathBuf, source: std::io::Error },
+    #[error("{path}: file is empty")]
+    EmptyFile { path: PathBuf },
+    #[error("{path}:{line}: {msg}")]
+    Malformed { path: PathBuf, line: usize, msg: String },
+    #[error("{path}:{line}: vertex coordinate is not finite ({text})")]
+    NonFinite { path: PathBuf, line: usize, text: String },
+    #[error("{path}: OBJ parse error: {msg}")]
+    Parse { path: PathBuf, msg: String },
+    /// A glTF or PLY file that does not describe triangles we can read (the message names the
+    /// element).
+    #[error("{path}: {msg}")]
+    Invalid { path: PathBuf, msg: String },
+    #[error("{path}: scene has no triangles")]
+    NoTriangles { path: PathBuf },
+    #[error("{path}: scene has {count} triangles; at most {max} are supported")]
+    TooLarge { path: PathBuf, count: usize, max: usize },
+}
+
+/// Most triangles a scene may have: leaf references keep 27 bits of triangle index.
+pub const MAX_TRIANGLES: usize = 1 << 27;
+
+/// A triangle soup in fp32 world space.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Short name (file name without `.obj`/`.obj.gz`).
+    pub name: String,
+    pub path: PathBuf,
+    /// Triangles as vertex positions, in `prim` order.
+    pub tris: Vec<[Vec3; 3]>,
+    pub bounds: Aabb,
+    /// Number of zero-area triangles (loaded, never hit).
+    pub degenerate: usize,
+    /// Non-fatal problems found while loading (e.g. a missing `.mtl`).
+    pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// Builds a scene from triangles (tests, instancing). Fails on non-finite coordinates or an
+    /// empty list.
+    pub fn from_triangles(name: &str, tris: Vec<[Vec3; 3]>) -> Result<Scene, SceneError> {
+        let path = PathBuf::from(name);
+        if tris.is_empty() {
+            return Err(SceneError::NoTriangles { path });
+        }
+        if tris.len() > MAX_TRIANGLES {
+            return Err(SceneError::TooLarge { path, count: tris.len(), max: MAX_TRIANGLES });
+        }
+        let mut bounds = Aabb::EMPTY;
+        let mut degenerate = 0;
+        for (i, t) in tris.iter().enumerate() {
+            for v in t {
+                if !v.is_finite() {
+                    return Err(SceneError::NonFinite { path, line: 0, text: format!("triangle {i}: {v:?}") });
+                }
+                bounds.grow(*v);
+            }
+            if (t[1] - t[0]).cross(t[2] - t[0]) == Vec3::ZERO {
+                degenerate += 1;
+            }
+        }
+        Ok(Scene { name: name.to_string(), path, tris, bounds, degenerate, warnings: Vec::new() })
+    }
+
+    pub fn len(&self) -> usize {
+        self.tris.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.tris.is_empty()
+    }
+
+    /// The closest hit of `ray` among every triangle, tested one by one: the oracle of the
+    /// `f32` traversal.
+    pub fn brute_force(&self, ray: &Ray) -> Hit {
+        let r = RayPre::new(ray);
+        let mut best = Closest::new(ray.tmax);
+        for (i, t) in self.tris.iter().enumerate() {
+            let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
+            best.test(&r, &v, i as i32);
+        }
+        best.hit()
+    }
+
+    /// Geometric (unnormalised) normal of triangle `prim`.
+    pub fn normal(&self, prim: usize) -> Vec3 {
+        let t = &self.tris[prim];
+        (t[1] - t[0]).cross(t[2] - t[0])
+    }
+}
+
+/// The short name a scene file gets (file name without `.gz` and its format's extension).
+pub fn scene_name(path: &Path) -> String {
+    name_and_format(path).0
+}
+
+/// A scene file's name without `.gz` and its format's extension, and the format that
+/// extension names (`None`: no known one).
+fn name_and_format(path: &Path) -> (String, Option<Format>) {
+    let f = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+    let f = f.strip_suffix(".gz").unwrap_or(&f);
+    match f.rsplit_once('.').and_then(|(stem, ext)| Some((stem, Format::of_ext(ext)?))) {
+        Some((stem, format)) => (stem.to_string(), Some(format)),
+        None => (f.to_string(), None),
+    }
+}
+
+/// A scene file's format, from its extension (after any `.gz`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Obj,
+    Gltf,
+    Ply,
+}
+
+impl Format {
+    fn of_ext(ext: &str) -> Option<Format> {
+        match ext.to_ascii_lowercase().as_str() {
+            "obj" => Some(Format::Obj),
+            "gltf" | "glb" => Some(Format::Gltf),
+            "ply" => Some(Format::Ply),
+            _ => None,
+        }
+    }
+
+    /// The format of `path` (OBJ for an unknown extension, as before other formats existed).
+    pub fn of(path: &Path) -> Format {
+        name_and_format(path).1.unwrap_or(Format::Obj)
+    }
+}
+
+/// Loads an OBJ, glTF (`.gltf`, `.glb`) or PLY file, plain or gzip-compressed (`.gz`) (a
+/// progress line when it takes over a second).
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    crate::progress::step(&format!("loading {}", path.display()), || load_quiet(path))
+}
+
+fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
+    // Only regular files: a FIFO would block and a device such as /dev/zero never ends.
+    let meta = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
+    if !meta.is_file() {
+        return Err(SceneError::Io {
+            path: path.into(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"),
+        });
+    }
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
+    let bytes = if path.extension().is_some_and(|e| e == "gz") {
+        let mut out = Vec::new();
+        flate2::read::GzDecoder::new(&bytes[..])
+            .read_to_end(&mut out)
+            .map_err(|source| SceneError::Gzip { path: path.into(), source })?;
+        out
+    } else {
+        bytes
+    };
+    if bytes.iter().all(|b| b.is_ascii_whitespace()) {
+        return Err(SceneError::EmptyFile { path: path.into() });
+    }
+    let mut warnings = Vec::new();
+    let tris = match Format::of(path) {
+        Format::Obj => {
+            let (tris, w) = obj::load(path, &bytes)?;
+            warnings = w;
+            tris
+        }
+        Format::Gltf => gltf::load(path, &bytes, &mut warnings)?,
+        Format::Ply => ply::load(path, &bytes)?,
+    };
+    drop(bytes);
+    finish(path, tris, warnings)
+}
+
+/// The scene of a loaded triangle list, with the file's name on every error and warning.
+fn finish(path: &Path, tris: Vec<[Vec3; 3]>, warnings: Vec<String>) -> Result<Scene, SceneError> {
+    let mut scene = Scene::from_triangles(&scene_name(path), tris).map_err(|e| match e {
+        SceneError::NoTriangles { .. } => SceneError::NoTriangles { path: path.into() },
+        SceneError::TooLarge { count, max, .. } => SceneError::TooLarge { path: path.into(), count, max },
+        SceneError::NonFinite { line, text, .. } => SceneError::NonFinite { path: path.into(), line, text },
+        other => other,
+    })?;
+    scene.path = path.into();
+    scene.warnings = warnings;
+    if scene.degenerate > 0 {
+        scene.warnings.push(format!(
+            "{}: {} zero-area triangles (kept; they are never hit)",
+            path.display(),
+            scene.degenerate
+        ));
+    }
+    Ok(scene)
+}
+
+fn bad(path: &Path, msg: String) -> SceneError {
+    SceneError::Invalid { path: path.into(), msg }
+}
+
+/// Triangle `i` (≥ 2) of a strip, as positions in the strip: every other one swaps its first
+/// two vertices, keeping the winding (glTF and PLY strips alike).
+fn strip_tri(i: usize) -> [usize; 3] {
+    if i.is_multiple_of(2) {
+        [i - 2, i - 1, i]
+    } else {
+        [i - 1, i - 2, i]
+    }
+}
+
+/// Triangle `i` (≥ 2) of a fan (a glTF fan, a PLY polygon), as positions in it.
+fn fan_tri(i: usize) -> [usize; 3] {
+    [0, i - 1, i]
+}

@@ -1,0 +1,158 @@
+//! The kernels themselves: the GLSL reads every node as Rust writes it, and `spirv/` is fresh, valid and really fp16.
+
+use super::*;
+use halftrace::gpu::buffer::Buffer;
+use halftrace::gpu::pipeline::ComputePipeline;
+use halftrace::gpu::shader::{self, Includes};
+use halftrace::interface::{binding, PushConstants};
+
+/// A kernel that copies every child box and child word back out through each layout's own
+/// GLSL hooks proves the layout's GLSL `Node` reads the bytes exactly as its Rust node type
+/// writes them (any drift in field order, stride or type shows as a wrong word).
+#[test]
+fn shader_reads_every_node_layout_as_rust_writes_it() {
+    let g = gpu();
+    let p = prepare(&scenes_dir().join("fandisk.obj"));
+    let src = r#"#version 460
+#include "interface.glsl"
+#include "ray.glsl"
+#include "box.glsl"
+#include "layout.glsl"
+layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Out { uint o[]; };
+void main() {
+    uint i = ray_index();
+    if (i >= pc.node_count) return;
+    uint b = i * 7u * uint(B);
+    for (uint s = 0u; s < uint(B); s++) {
+        vec3 lo, hi;
+        child_box(i, s, lo, hi);
+        for (uint a = 0u; a < 3u; a++) {
+            o[b + a * uint(B) + s] = floatBitsToUint(lo[a]);
+            o[b + (3u + a) * uint(B) + s] = floatBitsToUint(hi[a]);
+        }
+        o[b + 6u * uint(B) + s] = child_word(i, s);
+    }
+}"#;
+    for layout in LayoutId::all() {
+        for b in BRANCHINGS {
+            let enc = encode(&p, layout, b);
+            let v = Variant::new(layout, b, 1);
+            let code = shader::compile_source(
+                "node round trip",
+                "roundtrip.comp",
+                src,
+                &v.defines(PacketImpl::Single, false, false),
+                &Includes::variant(&v),
+            )
+            .unwrap();
+            let pipe = ComputePipeline::new(
+                &g,
+                "round trip",
+                &code,
+                binding::COUNT,
+                std::mem::size_of::<PushConstants>() as u32,
+            )
+            .unwrap();
+            let n = enc.node_count();
+            let mut expect = vec![0u32; n * 7 * b];
+            for node in 0..n {
+                for s in 0..b {
+                    let (lo, hi) = enc.nodes.child_box(node, s);
+                    for a in 0..3 {
+                        expect[node * 7 * b + a * b + s] = lo[a].to_bits();
+                        expect[node * 7 * b + (3 + a) * b + s] = hi[a].to_bits();
+                    }
+                    expect[node * 7 * b + 6 * b + s] = enc.nodes.child(node, s);
+                }
+            }
+            let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER | ash::vk::BufferUsageFlags::TRANSFER_SRC;
+            let nodes = Buffer::upload(&g, "nodes", &enc.nodes.to_bytes()).unwrap();
+            let out =
+                Buffer::new(&g, "out", (n * 7 * b * 4) as u64, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
+            let dummy = Buffer::new(&g, "unused", 16, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
+            pipe.bind(&[&nodes, &dummy, &dummy, &dummy, &dummy, &out]);
+            let push = PushConstants { node_count: n as u32, root: enc.push_root, ..Default::default() };
+            g.submit_and_wait(|cmd| {
+                pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(64));
+                pipe.barrier(cmd);
+            })
+            .unwrap();
+            let got: Vec<u32> = bytemuck::pod_collect_to_vec(&out.download(n * 7 * b * 4).unwrap());
+            assert_eq!(got.len(), expect.len());
+            if let Some(i) = (0..got.len()).find(|&i| got[i] != expect[i]) {
+                panic!(
+                    "{layout} B={b}: word {i} of node {} read as {:#x}, written as {:#x}",
+                    i / (7 * b),
+                    got[i],
+                    expect[i]
+                );
+            }
+        }
+    }
+    clean(&g);
+}
+
+/// SPIR-V words as (opcode, operands), through the library's one instruction walker.
+fn instructions(words: &[u32]) -> Vec<(u32, Vec<u32>)> {
+    let insts = halftrace::gpu::shader::spirv::instructions(words).expect("a module that decodes");
+    insts.iter().map(|i| (i.op, i.operands.to_vec())).collect()
+}
+
+#[test]
+fn spirv_folder_is_fresh_valid_and_really_fp16() {
+    let dir = repo("spirv");
+    let mut n = 0;
+    let expected = halftrace::variant::spirv_matrix();
+    for (v, imp) in &expected {
+        for stats in [false, true] {
+            let name = v.kernel_name(*imp, stats);
+            let p = dir.join(format!("{name}.spv"));
+            let on_disk = std::fs::read(&p)
+                .unwrap_or_else(|e| panic!("{}: {e}; run `halftrace shaders --emit spirv/`", p.display()));
+            let fresh = shader::compile(&KernelId::new(*v, *imp, stats), true).unwrap();
+            assert!(
+                on_disk == bytemuck::cast_slice::<u32, u8>(&fresh),
+                "{} is stale against glsl/; run `halftrace shaders --emit spirv/`",
+                p.display()
+            );
+            let val = Command::new("spirv-val")
+                .args(["--target-env", "vulkan1.2"])
+                .arg(&p)
+                .output()
+                .expect("spirv-val (package spirv-tools) is required");
+            assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
+            // The fp16 math modes must really compute in float16_t; fp32 math and the f32
+            // layout must not need fp16 arithmetic (they run on devices without shaderFloat16).
+            let ins = instructions(&fresh);
+            let f16_cap = ins.iter().any(|(op, o)| *op == 17 && o[0] == 9);
+            assert_eq!(f16_cap, (v.layout.info().needs)(v.math).float16, "{name}: Float16 capability");
+            // Every float-control mode the kernel relies on is declared, per width.
+            for (mode, width) in halftrace::gpu::support::float_modes(v) {
+                assert!(
+                    ins.iter().any(|(op, o)| *op == 16 && o.len() >= 3 && o[1] == mode && o[2] == width),
+                    "{name}: execution mode {mode} for fp{width} missing"
+                );
+            }
+            if v.math != Math::F32 {
+                let mut f16: Vec<u32> =
+                    ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
+                let vecs: Vec<u32> =
+                    ins.iter().filter(|(op, o)| *op == 23 && f16.contains(&o[1])).map(|(_, o)| o[0]).collect();
+                f16.extend(vecs);
+                let count = |opc: u32| ins.iter().filter(|(op, o)| *op == opc && f16.contains(&o[0])).count();
+                let (add, sub, mul) = (count(129), count(131), count(133));
+                assert!(
+                    add > 0 && sub > 0 && mul > 0,
+                    "{name}: fp16 OpFAdd {add}, OpFSub {sub}, OpFMul {mul}: box test / origin move not in float16_t"
+                );
+            }
+            n += 1;
+        }
+    }
+    let files = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "spv"))
+        .count();
+    assert_eq!(files, n, "spirv/ holds files that are not in the default matrix");
+    assert_eq!(n, 2 * expected.len());
+}
