@@ -104,8 +104,8 @@ impl Variant {
     /// The kernel's name: `trav_{layout}[_{math}]_b{B}_p{P}` (the math tag m16, m32 or mix
     /// for layouts with more than one mode), then `_subgroup` for the subgroup packet
     /// implementation and `_stats` for the counting kernel, after `_fcoff` for a kernel built
-    /// without float controls and `_addr` for one that reads the scene by address. Packets of P > 1 without a suffix use shared memory (portable
-    /// to any subgroup size).
+    /// without float controls and `_addr` for one that reads the scene by address. Packets of
+    /// P > 1 without a suffix use shared memory (portable to any subgroup size).
     pub fn kernel_name(&self, imp: PacketImpl, stats: bool) -> String {
         format!(
             "trav_{}{}_b{}_p{}{}{}{}{}",

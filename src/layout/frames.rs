@@ -159,8 +159,8 @@ pub fn glsl_constants() -> String {
     glsl_int("K_MIN_LOG2", K_MIN_LOG2) + &glsl_int("K_MAX_LOG2", K_MAX_LOG2)
 }
 
-/// Encodes a wide BVH in chained frames (`layout` names it in errors); returns the nodes (root at 0), the root frame and, for tests and
-/// statistics, the frame of every node.
+/// Encodes a wide BVH in chained frames (`layout` names it in errors); returns the nodes (root
+/// at 0), the root frame and, for tests and statistics, the frame of every node.
 pub fn encode_chained<const B: usize>(
     layout: &'static str,
     w: &WideBvh,

@@ -6,8 +6,8 @@
 //!
 //! A layout is one folder here (`src/layout/<name>/`: node type, encoder, CPU hooks, its
 //! [`LayoutInfo`]), one GLSL hooks file (`glsl/layout/<name>.glsl`) and one line in the
-//! [`layouts!`] list below (its module and the type implementing [`Layout`]). Code two or more layouts share lives beside them, each file
-//! mirrored by a GLSL header of the same name: [`half`] (fp16 box tests with an error bound,
+//! [`layouts!`] list below (its module and the type implementing [`Layout`]). Code two or more
+//! layouts share lives beside them, each file mirrored by a GLSL header of the same name: [`half`] (fp16 box tests with an error bound,
 //! `glsl/half.glsl`), [`frames`] (uniformly scaled frames, also in `half.glsl`), [`node16`]
 //! (the fp16 node, `glsl/node16.glsl`) and [`anchored`] (origins re-derived per node,
 //! `glsl/anchored.glsl`). `docs/architecture.md` walks through adding a layout.
