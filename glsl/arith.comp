@@ -5,7 +5,7 @@
 #extension GL_EXT_shader_explicit_arithmetic_types_float16 : require
 #extension GL_EXT_shader_16bit_storage : require
 layout(local_size_x = 64) in;
-layout(push_constant) uniform Push { uint iters; float seed; } pc;
+layout(push_constant) uniform Push { uint iters; float start; } pc;
 layout(std430, set = 0, binding = 0) writeonly buffer Out { float outv[]; };
 #ifdef F16
 #define T float16_t
@@ -17,7 +17,7 @@ layout(std430, set = 0, binding = 0) writeonly buffer Out { float outv[]; };
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    float s = pc.seed + float(i & 15u) * 0.0625;
+    float s = pc.start + float(i & 15u) * 0.0625;
     V y0 = V(T(s), T(s + 0.25), T(s + 0.5), T(s + 0.75));
     V y1 = V(T(0.999), T(1.001), T(0.998), T(1.002));
     V x0 = y0, x1 = y0 + y1, x2 = y0 - y1, x3 = y0 * y1;

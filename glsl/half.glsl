@@ -1,5 +1,6 @@
 // Shared fp16 machinery of the layouts that test fp16 boxes in a node frame against an origin
-// with an error bound (f16h, f16w, f16a, q8): fp16 value types per math mode, emulated
+// with an error bound (f16h, f16w, f16a, q8; f16h-poster uses its types, direction and frames
+// without the bound): fp16 value types per math mode, emulated
 // roundings, the anchored origin, the per-ray fp16 direction, the widened slab test, the visit
 // bounds, and the chained frames' derivation. Mirrors src/layout/half.rs (the bound is argued
 // there), src/layout/frames.rs and src/fp16.rs; every constant (OCAP, EMAX, …, TWO_M*,

@@ -15,7 +15,7 @@ use crate::layout::LayoutId;
 use crate::precision::Math;
 use crate::rays::{RayKind, RayParams};
 use crate::report::Status;
-use crate::runner::{Plan, RaySetId, RaySpec, Runner, Target, Timing};
+use crate::runner::{Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
 use crate::variant::Variant;
 use anyhow::Context;
 use std::collections::BTreeMap;
@@ -126,7 +126,7 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
         cfg.rounds, cfg.repeat
     );
     let baselines: Vec<BaselineId> = BaselineId::all().collect();
-    let mut runner = Runner::new(Some(&g), &baselines, Default::default())?;
+    let mut runner = Runner::new(Some(&g), &baselines, Options { retime: true, ..Default::default() })?;
     let mut ratios = Vec::new();
     let mut speeds = Vec::new();
     let mut largest = (0usize, String::new());

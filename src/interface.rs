@@ -84,7 +84,7 @@ pub mod binding {
     pub const COUNT: u32 = 6;
 }
 
-/// Floats per ray in the rays buffer: `ox oy oz tmin dx dy dz tmax` (`rays::Ray`).
+/// Floats per ray in the rays buffer: `ox oy oz tmin dx dy dz tmax` (`base::Ray`).
 pub const RAY_FLOATS: u32 = 8;
 /// The `prim` a kernel writes for a ray whose traversal stack overflowed.
 pub const PRIM_OVERFLOW: i32 = -2;

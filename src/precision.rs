@@ -17,7 +17,6 @@ pub enum Math {
 }
 
 impl Math {
-    pub const ALL: [Math; 3] = [Math::F16, Math::F32, Math::Mixed];
     /// Name in flags, configs and reports: f16, f32, mixed.
     pub fn name(self) -> &'static str {
         match self {

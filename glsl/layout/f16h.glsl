@@ -3,8 +3,9 @@
 // MATH_F32, MATH_MIXED) with a carried error bound, re-anchored from the fp32 world ray when
 // it grows too large. Mirrors src/layout/f16h/hooks.rs operation for operation (the box test
 // and frames: half.glsl); the bound is argued in src/layout/half.rs and hooks.rs. Every
-// constant comes from interface.glsl (generated from the Rust ones). FC_OFF: the build for devices without float controls (hooks.rs, "Without float
-// controls"): conversions to fp16 and the frame's fp32 additions emulated with integer
+// constant comes from interface.glsl (generated from the Rust ones). FC_OFF: the build for
+// devices without float controls (hooks.rs, "Without float controls"; the box test's margins:
+// half.rs): conversions to fp16 and the frame's fp32 additions emulated with integer
 // operations, products saturated instead of overflowing, no inf or NaN anywhere, every
 // rounding allowed a full ulp.
 //

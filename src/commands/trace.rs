@@ -32,7 +32,10 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
         let names: Vec<&str> = maths.iter().map(|m| m.name()).collect();
         anyhow::bail!("--math {}: layout {layout} has {}", math.name(), names.join(", "));
     }
-    let variant = Variant::new(layout, a.branching, a.packet).with_math(math);
+    let mut variant = Variant::new(layout, a.branching, a.packet).with_math(math);
+    if a.float_controls == FcChoice::Off {
+        variant = variant.with_fc(FloatControls::Off);
+    }
     let backend = match a.backend {
         Some(b) => b,
         None if a.kernel.is_some() => Backend::Gpu,
@@ -43,16 +46,17 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
         Backend::Gpu => Some(open(a)?),
         Backend::Cpu => None,
     };
-    let mut runner = Runner::new(g.as_ref(), &[], Options { frugal: true })?;
+    let mut runner = Runner::new(g.as_ref(), &[], Options { frugal: true, ..Default::default() })?;
     let (set, build_ms) = inputs(&mut runner, a)?;
     let (name, tris) = runner.current_scene().map(|s| (s.name.clone(), s.len())).expect("loaded");
     let n = runner.rays(set).rays.len();
     outln!("scene {name} ({tris} triangles), variant {variant}, rays {}: {n} rays", a.rays);
     let (hits, counters) = match &g {
         None => {
-            let fc = if a.float_controls == FcChoice::Off { FloatControls::Off } else { FloatControls::On };
+            // Encoded first, so that the time is the traversal's alone.
+            runner.encode(layout, a.branching)?;
             let t = Instant::now();
-            let (hits, counters) = runner.reference(&variant.with_fc(fc), set)?;
+            let (hits, counters) = runner.reference(&variant, set)?;
             let secs = t.elapsed().as_secs_f64();
             let rate = n as f64 / secs / 1e6;
             outln!("backend cpu (reference): {:.1} ms, {rate:.2} Mrays/s; BVH build {build_ms:.1} ms", secs * 1e3);
@@ -175,7 +179,7 @@ fn trace_baseline(a: &TraceArgs, b: BaselineId) -> anyhow::Result<()> {
         return Err(na(flag));
     }
     let g = open(a)?;
-    let mut runner = Runner::new(Some(&g), &[b], Options { frugal: true })?;
+    let mut runner = Runner::new(Some(&g), &[b], Options { frugal: true, ..Default::default() })?;
     let (set, _) = inputs(&mut runner, a)?;
     let (name, tris) = runner.current_scene().map(|s| (s.name.clone(), s.len())).expect("loaded");
     let n = runner.rays(set).rays.len();

@@ -185,7 +185,10 @@ impl<'g> AccelScene<'g> {
         });
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         if let Err(e) = r {
-            unsafe { self.loader.destroy_acceleration_structure(handle, None) };
+            // A hung build may still write into it: then it is left to the process's end.
+            if !gpu.hung() {
+                unsafe { self.loader.destroy_acceleration_structure(handle, None) };
+            }
             return Err(e);
         }
         Ok((handle, sizes.acceleration_structure_size, ms))

@@ -13,13 +13,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 /// How to open a device.
-/// How to open a device.
 #[derive(Clone, Debug, Default)]
 pub struct ContextOptions {
     /// Index or case-insensitive name substring; default: first discrete GPU, else
     /// integrated, else virtual, else CPU (lavapipe), else anything.
     pub device: Option<String>,
-    /// Feature names to treat as missing (tests of the fallbacks): any of [`MASKABLE`]
+    /// Feature names to treat as missing (tests of the fallbacks): any of [`crate::gpu::MASKABLE`]
     /// (`floatControls`: every rounding and preserve mode).
     pub mask_features: Vec<String>,
     /// Enable VK_LAYER_KHRONOS_validation if installed (also `HALFTRACE_VALIDATION=1`).
@@ -243,7 +242,10 @@ impl Gpu {
                 let fence = d.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
                 let cmds = [cmd];
                 let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
-                d.queue_submit(self.queue, &submit, fence).vk("vkQueueSubmit")?;
+                if let Err(r) = d.queue_submit(self.queue, &submit, fence) {
+                    d.destroy_fence(fence, None);
+                    return Err(GpuError::Vk { call: "vkQueueSubmit", result: r });
+                }
                 match d.wait_for_fences(&[fence], true, self.kernel_timeout.as_nanos().min(u64::MAX as u128) as u64) {
                     Err(vk::Result::TIMEOUT) => {
                         self.hung.store(true, Ordering::SeqCst);

@@ -34,10 +34,6 @@ impl Source {
             Source::Glsl(path.into())
         }
     }
-
-    pub fn is_user(&self) -> bool {
-        *self != Source::Builtin
-    }
 }
 
 /// A traversal kernel ready to dispatch.

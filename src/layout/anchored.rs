@@ -7,7 +7,7 @@
 //! # fp32 math (`Math::F32`)
 //! The stored box is decoded to world fp32 (one rounding, monotone: [`decode_plane`]), which
 //! still contains the true box; the robust fp32 slab test of the `f32` layout follows
-//! (`trace::slab32`), so no ray that reaches the true box within its interval is rejected.
+//! (`base::slab32`), so no ray that reaches the true box within its interval is rejected.
 //! Stack entries carry the child's entry distance, as in `f32`.
 //!
 //! # fp16 math (`Math::F16`)

@@ -1,6 +1,7 @@
 //! fp16 box tests against a ray origin that carries an error bound, shared by every layout
 //! that stores child boxes as fp16 in a uniformly scaled node frame ([`super::frames`]) —
-//! `f16h`, `f16w`, `f16a`, `q8` — and by the poster's `f16h-poster` (its direction). The box
+//! `f16h`, `f16w`, `f16a`, `q8` — and by the poster's `f16h-poster` (its fp16 types, direction
+//! and frames, without the bound). The box
 //! tests run in IEEE half arithmetic (`half::f16`, one rounding per operation) or in the other
 //! math modes, conservative, so a traversal returns exactly the fp32 closest hit.
 //! `glsl/half.glsl` does the same operations in the same order; every constant below reaches

@@ -1,6 +1,7 @@
 //! The fp16 node: every child box as fp16 in one frame, structure of arrays, then the child
-//! words — the node of `f16h` and `f16h-poster` (chained frames), and inside `f16w`'s and
-//! `f16a`'s nodes. `glsl/node16.glsl` declares the same struct.
+//! words — the node of `f16h` and `f16h-poster` (chained frames) and, wrapped, of `f16w`.
+//! `glsl/node16.glsl` declares the same struct; `f16a`'s GLSL node is it with the frame in
+//! front (`NODE16_HEAD`), its Rust node (`F16aNode`) spells the same fields out.
 //!
 //! Byte layout for branching B (16·B bytes): `lo` f16[3][B] at 0, `hi` f16[3][B] at 6·B,
 //! `child` u32[B] at 12·B. B=2: 32 bytes, B=4: 64, B=8: 128, B=16: 256.

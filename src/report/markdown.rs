@@ -3,7 +3,7 @@
 //! rendered.
 
 use super::plots;
-use super::rows::{sorted, Row};
+use super::rows::{sorted, Row, Status};
 use super::tables;
 use crate::layout::LayoutId;
 use std::path::{Path, PathBuf};
@@ -33,13 +33,17 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     let ok = rows.len() - failed.len() - skipped.len();
     md += &format!("- variants: {ok} ok, {} failed validation, {} skipped\n\n", failed.len(), skipped.len());
     for f in &failed {
-        md += &format!("**{}**: {} {} {}\n\n", f.status, f.scene, f.rays, f.kernel);
+        md += &format!("**FAILED**: {} {} {}: {}\n\n", f.scene, f.rays, f.kernel, f.status);
     }
+    let why = |s: &Status| match s {
+        Status::Skipped(why) => why.clone(),
+        other => other.to_string(),
+    };
     let mut skip_lines: Vec<String> =
-        skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, f.status)).collect();
+        skipped.iter().map(|f| format!("{} on {}: {}", f.kernel, f.device, why(&f.status))).collect();
     skip_lines.dedup();
     for l in skip_lines {
-        md += &format!("{l}\n\n");
+        md += &format!("Skipped: {l}\n\n");
     }
     md += &tables::headline(&by_b, &by_p);
     md += &tables::separated_effects(rows);

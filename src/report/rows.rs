@@ -271,11 +271,31 @@ pub fn write_rows(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     crate::fsx::write_atomic(&dir.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())
 }
 
-/// Reads the rows of `DIR/results.csv`.
+/// Reads the rows of `DIR/results.csv`. Rows of a renamed layout read under its current name
+/// (its kernel names too), so a resume or a merge over older results matches them.
 pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
     let p = dir.join("results.csv");
     let mut r = csv::Reader::from_path(&p).with_context(|| format!("reading {}", p.display()))?;
-    r.deserialize().enumerate().map(|(i, x)| x.with_context(|| format!("{}: row {}", p.display(), i + 2))).collect()
+    let rows: Vec<Row> = r
+        .deserialize()
+        .enumerate()
+        .map(|(i, x)| x.with_context(|| format!("{}: row {}", p.display(), i + 2)))
+        .collect::<anyhow::Result<_>>()?;
+    Ok(rows.into_iter().map(current_names).collect())
+}
+
+/// A row with its layout's current name (and its built-in kernel's name with it).
+fn current_names(mut r: Row) -> Row {
+    if let Ok(l) = LayoutId::parse(&r.layout) {
+        if l.name() != r.layout {
+            let old = format!("trav_{}_", r.layout);
+            if let Some(rest) = r.kernel.strip_prefix(&old) {
+                r.kernel = format!("trav_{}_{rest}", l.name());
+            }
+            r.layout = l.name().to_string();
+        }
+    }
+    r
 }
 
 impl Row {

@@ -174,7 +174,6 @@ pub fn layout_label(r: &Row) -> String {
 /// (device, registry order, label, B) → point.
 pub fn layout_points(rows: &[Row]) -> BTreeMap<(String, usize, String, usize), LayoutPoint> {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && has_counters(&r.layout)).collect();
-    let order = |l: &str| LayoutId::all().position(|x| x.name() == l).unwrap_or(usize::MAX);
     let mut acc: BTreeMap<(String, usize, String, usize), LayoutPoint> = BTreeMap::new();
     for h in ok.iter().filter(|r| LayoutId::parse(&r.layout).is_ok() && !r.kernel.is_empty()) {
         let Some(f) = ok.iter().find(|f| {
@@ -188,7 +187,7 @@ pub fn layout_points(rows: &[Row]) -> BTreeMap<(String, usize, String, usize), L
             continue;
         };
         let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
-        let e = acc.entry((h.device.clone(), order(&h.layout), layout_label(h), h.branching)).or_default();
+        let e = acc.entry((h.device.clone(), super::rows::order(&h.layout), layout_label(h), h.branching)).or_default();
         e.n += 1;
         for (i, v) in [
             div(h.mrays_median, f.mrays_median),

@@ -146,32 +146,37 @@ pub fn validate_then_time(
     plan: Plan,
 ) -> anyhow::Result<Measurement> {
     let label = tracer.label();
+    // A conservative layout's CPU reference must be f32's hits before any kernel is compared
+    // with it.
+    if let Reference::Exact { hits, conservative: true, .. } = reference {
+        if let Err(e) = compare(&label, "hits", "the f32 reference", rays, hits, f32_hits, 0, Hit::same_bits) {
+            let failure = format!("{e} (its CPU reference: a conservative layout must return the f32 hits)");
+            return Ok(Measurement { failure: Some(failure), ..Measurement::none() });
+        }
+    }
+    // Device errors (a hung kernel above all) end the measurement as errors; disagreements
+    // are its failure.
     let first = tracer.dispatch(rays, 0, 1)?;
     let vs_f32 = agreement(&first.hits, f32_hits);
     let mut m = Measurement { hits: first.hits, vs_f32, ..Measurement::none() };
-    if let Reference::Exact { hits, counters, conservative, counter_slack } = reference {
-        let mut check = || -> Result<(), String> {
-            if conservative {
-                compare(&label, "hits", "the f32 reference", rays, hits, f32_hits, 0, Hit::same_bits).map_err(|e| {
-                    format!("{e} (its CPU reference already differs: a conservative layout must return the f32 hits)")
-                })?;
-            }
-            compare(&label, "hits", CPU, rays, &m.hits, hits, 0, Hit::same_bits)?;
-            if plan.count {
-                if let Some(c) = tracer.count(rays) {
-                    let c = c.map_err(|e| format!("{e:#}"))?;
-                    compare(&format!("{label} (counting)"), "hits", CPU, rays, &c.hits, hits, 0, Hit::same_bits)?;
-                    let got = c.counters.expect("a counting pass returns counters");
-                    m.counter_diffs =
-                        compare(&label, "counters", CPU, rays, &got, counters, counter_slack, |a, b| a == b)?;
-                    m.counters = Some(got);
-                }
-            }
-            Ok(())
-        };
-        if let Err(f) = check() {
+    if let Reference::Exact { hits, counters, counter_slack, .. } = reference {
+        if let Err(f) = compare(&label, "hits", CPU, rays, &m.hits, hits, 0, Hit::same_bits) {
             m.failure = Some(f);
             return Ok(m);
+        }
+        if let Some(c) = if plan.count { tracer.count(rays) } else { None } {
+            let c = c?;
+            let got = c.counters.expect("a counting pass returns counters");
+            let checked = compare(&format!("{label} (counting)"), "hits", CPU, rays, &c.hits, hits, 0, Hit::same_bits)
+                .and_then(|_| compare(&label, "counters", CPU, rays, &got, counters, counter_slack, |a, b| a == b));
+            m.counters = Some(got);
+            match checked {
+                Ok(diffs) => m.counter_diffs = diffs,
+                Err(f) => {
+                    m.failure = Some(f);
+                    return Ok(m);
+                }
+            }
         }
     }
     if plan.repeat > 0 {

@@ -37,14 +37,17 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use target::{retime, status, BaselineTracer, KernelTracer};
 
-/// How a runner keeps memory.
+/// How a runner keeps what it made.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Options {
     /// One measurement of one ray set (`trace`): every host array goes as soon as the device
     /// holds it or nothing needs it any more — the f32 reference encoding once the rays have
     /// their hits, the binary BVH once the layout is encoded, the layout's host nodes and
-    /// triangles once uploaded. Anything asked for later is rebuilt.
+    /// triangles once uploaded; no CPU reference is kept. Anything asked for later is rebuilt.
     pub frugal: bool,
+    /// Keep the hits of every validated (target, ray set), so that measuring it again only
+    /// times it (`bench`'s interleaved rounds). Off, every measurement validates.
+    pub retime: bool,
 }
 
 /// A BVH encoded in one layout at one B, on the host and then on the device.
@@ -63,6 +66,8 @@ type CpuReference = (Vec<Hit>, Vec<Counters>);
 /// What a scene's measurements share.
 struct SceneState<'g> {
     path: PathBuf,
+    /// Which load of a scene this is (ray set ids carry it).
+    epoch: u64,
     scene: Scene,
     /// The binary BVH (rebuilt when needed after a frugal drop).
     bin: Option<BinaryBvh>,
@@ -74,8 +79,9 @@ struct SceneState<'g> {
     /// The latest CPU references (the few a layout × B's kernels share).
     refs: Vec<(RefKey, CpuReference)>,
     baselines: HashMap<BaselineId, Box<dyn BaselineScene + 'g>>,
-    /// Hits of each (tracer, ray set) validated so far: later measurements only time.
-    validated: HashMap<(Tracing, RaySetId), Vec<Hit>>,
+    /// With `Options::retime`: the hits of each (tracer, ray set) validated so far, and
+    /// whether its counters were checked too.
+    validated: HashMap<(Tracing, RaySetId), (bool, Vec<Hit>)>,
 }
 
 /// What validated hits are keyed by.
@@ -96,12 +102,14 @@ pub struct Runner<'g> {
     /// Baselines prepared on the device, or why the device cannot run them.
     baselines: HashMap<BaselineId, Result<Box<dyn BaselineDevice<'g> + 'g>, String>>,
     scene: Option<SceneState<'g>>,
+    /// Scenes loaded so far.
+    loads: u64,
 }
 
 impl<'g> Runner<'g> {
     /// A runner on `gpu` (`None`: CPU references only), with `baselines` prepared on it.
     pub fn new(gpu: Option<&'g Gpu>, baselines: &[BaselineId], opts: Options) -> anyhow::Result<Runner<'g>> {
-        let mut r = Runner { gpu, opts, kernels: HashMap::new(), baselines: HashMap::new(), scene: None };
+        let mut r = Runner { gpu, opts, kernels: HashMap::new(), baselines: HashMap::new(), scene: None, loads: 0 };
         if let Some(g) = gpu {
             for &b in baselines {
                 let dev = match b.imp().unavailable(&g.info) {
@@ -128,8 +136,10 @@ impl<'g> Runner<'g> {
             let t = Instant::now();
             let bin = bvh::build_binary(&scene);
             let binary_ms = t.elapsed().as_secs_f64() * 1e3;
+            self.loads += 1;
             self.scene = Some(SceneState {
                 path: path.into(),
+                epoch: self.loads,
                 scene,
                 bin: Some(bin),
                 binary_ms,
@@ -165,13 +175,20 @@ impl<'g> Runner<'g> {
         self.scene.as_mut().expect("Runner::scene first")
     }
 
+    /// The index of a ray set of the current scene.
+    fn index(&self, id: RaySetId) -> usize {
+        let s = self.scene.as_ref().expect("Runner::scene first");
+        assert_eq!(id.epoch, s.epoch, "a ray set of another scene");
+        id.index
+    }
+
     /// The rays of a set made earlier.
     pub fn rays(&self, id: RaySetId) -> &RaySet {
-        &self.scene.as_ref().expect("Runner::scene first").sets[id.0]
+        &self.scene.as_ref().expect("Runner::scene first").sets[self.index(id)]
     }
 
     /// The ray set `spec` of the current scene, made once: generated (ao and diffuse from the
-    /// primary hits of the same parameters) or read, then traced by the f32 reference.
+    /// primary rays of the same parameters and their f32 hits) or read.
     pub fn ray_set(&mut self, spec: &RaySpec) -> anyhow::Result<RaySetId> {
         let id = self.make_set(spec)?;
         if self.opts.frugal {
@@ -181,25 +198,54 @@ impl<'g> Runner<'g> {
     }
 
     fn make_set(&mut self, spec: &RaySpec) -> anyhow::Result<RaySetId> {
-        if let Some(i) = self.state().sets.iter().position(|s| s.spec == *spec) {
-            return Ok(RaySetId(i));
+        let epoch = self.state().epoch;
+        if let Some(index) = self.state().sets.iter().position(|s| s.spec == *spec) {
+            return Ok(RaySetId { epoch, index });
         }
         let prim = match spec.kind {
-            RayKind::Ao | RayKind::Diffuse => Some(self.make_set(&RaySpec { kind: RayKind::Primary, ..spec.clone() })?),
+            RayKind::Ao | RayKind::Diffuse => {
+                let p = self.make_set(&RaySpec { kind: RayKind::Primary, ..spec.clone() })?;
+                self.ensure_f32_hits(p)?;
+                Some(p)
+            }
             _ => None,
         };
         self.ensure_bin();
+        let s = self.state();
+        let primary = prim.map(|p| {
+            let set = &s.sets[p.index];
+            (&set.rays[..], set.f32_hits.as_deref().expect("made above"))
+        });
+        let rays = rays::generate(&s.scene, s.bin.as_ref().expect("built"), spec, primary)?;
+        s.sets.push(RaySet { spec: spec.clone(), rays, f32_hits: None });
+        Ok(RaySetId { epoch, index: s.sets.len() - 1 })
+    }
+
+    /// The f32 reference's hits on ray set `id` (traced once, when first asked for).
+    pub fn f32_hits(&mut self, id: RaySetId) -> anyhow::Result<&[Hit]> {
+        self.ensure_f32_hits(id)?;
+        let i = self.index(id);
+        Ok(self.state().sets[i].f32_hits.as_deref().expect("just traced"))
+    }
+
+    fn ensure_f32_hits(&mut self, id: RaySetId) -> anyhow::Result<()> {
+        let i = self.index(id);
+        if self.state().sets[i].f32_hits.is_some() {
+            return Ok(());
+        }
         if self.state().f32_ref.is_none() {
+            self.ensure_bin();
             let s = self.scene.as_ref().expect("current");
             let enc = Encoded::new(&s.scene, s.bin.as_ref().expect("built"), LayoutId::f32(), 4)?;
             self.state().f32_ref = Some(enc);
         }
         let s = self.state();
-        let primary = prim.map(|p| (&s.sets[p.0].rays[..], &s.sets[p.0].f32_hits[..]));
-        let rays = rays::generate(&s.scene, s.bin.as_ref().expect("built"), spec, primary)?;
-        let f32_hits = s.f32_ref.as_ref().expect("just made").reference_default(&rays).0;
-        s.sets.push(RaySet { spec: spec.clone(), rays, f32_hits });
-        Ok(RaySetId(s.sets.len() - 1))
+        let hits = s.f32_ref.as_ref().expect("just made").reference_default(&s.sets[i].rays).0;
+        s.sets[i].f32_hits = Some(hits);
+        if self.opts.frugal {
+            self.release_f32_reference();
+        }
+        Ok(())
     }
 
     /// Makes sure the current scene has its binary BVH (rebuilt if a frugal run dropped it).
@@ -217,12 +263,22 @@ impl<'g> Runner<'g> {
         }
     }
 
-    /// Frees the encoding of `layout` at `b` (host and device) and its references.
+    /// Frees the encoding of `layout` at `b` (host and device), its references and what was
+    /// validated on it.
     pub fn release(&mut self, layout: LayoutId, b: usize) {
         if let Some(s) = self.scene.as_mut() {
             s.encodings.remove(&(layout, b));
             s.refs.retain(|(k, _)| (k.0, k.1) != (layout, b));
+            s.validated.retain(|(t, _), _| {
+                !matches!(t, Tracing::Kernel(k, _) if (k.variant.layout, k.variant.branching) == (layout, b))
+            });
         }
+    }
+
+    /// Encodes `layout` at `b` for the current scene, unless it is (so that a later reference
+    /// or upload does not include the encoding's time).
+    pub fn encode(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<()> {
+        self.encoding(layout, b).map(|_| ())
     }
 
     /// The host encoding of `layout` at `b`, encoded once (again after a frugal drop).
@@ -271,27 +327,32 @@ impl<'g> Runner<'g> {
         Ok(())
     }
 
-    /// The CPU reference of `v` on ray set `set` (the latest few are kept).
+    /// The CPU reference of `v` on ray set `set` (the latest few are kept, unless frugal).
     pub fn reference(&mut self, v: &Variant, set: RaySetId) -> anyhow::Result<(Vec<Hit>, Vec<Counters>)> {
         let key = (v.layout, v.branching, v.packet, v.math, v.fc, set);
         if let Some((_, r)) = self.state().refs.iter().find(|(k, _)| *k == key) {
             return Ok(r.clone());
         }
+        let i = self.index(set);
         self.encoding(v.layout, v.branching)?;
-        let s = self.scene.as_mut().expect("current");
+        let frugal = self.opts.frugal;
+        let s = self.state();
         let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
-        let r = enc.reference(&s.sets[set.0].rays, v.packet, v.math, v.fc);
-        if s.refs.len() == KEPT_REFERENCES {
-            s.refs.remove(0);
+        let r = enc.reference(&s.sets[i].rays, v.packet, v.math, v.fc);
+        if !frugal {
+            if s.refs.len() == KEPT_REFERENCES {
+                s.refs.remove(0);
+            }
+            s.refs.push((key, r.clone()));
         }
-        s.refs.push((key, r.clone()));
         Ok(r)
     }
 
     /// Measures `target` on ray set `set` as `plan` says: the device's build of it is resolved
     /// (a variant the device cannot run, or a baseline it lacks, is skipped with the reason),
-    /// validated (once per target and ray set), then timed.
+    /// validated (with `Options::retime`, once per target and ray set), then timed.
     pub fn measure(&mut self, target: &Target, set: RaySetId, plan: Plan) -> anyhow::Result<Outcome> {
+        self.index(set);
         match target {
             Target::Kernel(k) => self.measure_kernel(k, set, plan),
             Target::Baseline(b) => self.measure_baseline(*b, set, plan),
@@ -301,6 +362,21 @@ impl<'g> Runner<'g> {
     /// The kernel the device runs for `k` (float controls resolved), or why it cannot.
     pub fn resolve(&self, k: &KernelTarget) -> anyhow::Result<Result<Variant, String>> {
         Ok(support::resolve(&self.gpu()?.info, k.variant, k.fc))
+    }
+
+    /// The hits `key` was validated with, when it was validated with counters if `count`.
+    fn validated(&self, key: &(Tracing, RaySetId), count: bool) -> Option<Vec<Hit>> {
+        let (counted, hits) = self.scene.as_ref()?.validated.get(key)?;
+        (*counted || !count).then(|| hits.clone())
+    }
+
+    fn remember(&mut self, key: (Tracing, RaySetId), m: &Measurement, count: bool) {
+        if self.opts.retime && m.failure.is_none() {
+            let e = self.state().validated.entry(key).or_insert((count, Vec::new()));
+            if e.1.is_empty() || count {
+                *e = (count || e.0, m.hits.clone());
+            }
+        }
     }
 
     fn measure_kernel(&mut self, k: &KernelTarget, set: RaySetId, plan: Plan) -> anyhow::Result<Outcome> {
@@ -317,8 +393,11 @@ impl<'g> Runner<'g> {
             Err(why) => return Ok(skipped(k.variant.name(false), why)),
         };
         let (name, _) = self.name(k);
-        // The reference first: in frugal mode uploading frees the host encoding.
-        let (ref_hits, ref_counters) = self.reference(&v, set).with_context(|| name.clone())?;
+        // The f32 hits, then the reference, then the upload: in frugal mode each step frees
+        // what the one before needed.
+        self.ensure_f32_hits(set)?;
+        let frugal = self.opts.frugal;
+        let reference = if frugal { Some(self.reference(&v, set).with_context(|| name.clone())?) } else { None };
         self.upload(v.layout, v.branching).with_context(|| name.clone())?;
         let facts = self.state().encodings[&(v.layout, v.branching)].facts;
         // A scene beyond one storage buffer is read by address; the name stays the variant's.
@@ -331,28 +410,34 @@ impl<'g> Runner<'g> {
                 Err(e) => return Err(anyhow::Error::new(e).context(name)),
             }
         }
+        let key = (Tracing::Kernel(id, k.source.clone()), set);
+        let validated = self.validated(&key, plan.count);
+        let reference = match (&validated, reference) {
+            (Some(_), _) => None,
+            (None, Some(r)) => Some(r),
+            (None, None) => Some(self.reference(&v, set).with_context(|| name.clone())?),
+        };
         let s = self.scene.as_ref().expect("current");
-        let rs = &s.sets[set.0];
+        let rs = &s.sets[set.index];
+        let f32_hits = rs.f32_hits.as_deref().expect("traced above");
         let bvh = s.encodings[&(v.layout, v.branching)].bvh.as_ref().expect("uploaded");
         let timed = self.kernels[&(id, k.source.clone())].as_ref().expect("a timed kernel is always built");
         let counting = self.kernels.get(&(id.with_stats(true), k.source.clone())).and_then(Option::as_ref);
         let tracer = KernelTracer { gpu, bvh, timed, counting: counting.filter(|_| plan.count) };
-        let key = (Tracing::Kernel(id, k.source.clone()), set);
-        let m = match s.validated.get(&key) {
-            Some(hits) => retime(&tracer, &rs.rays, hits, &rs.f32_hits, plan)?,
-            None => {
-                let slack =
-                    if v.fc == FloatControls::Off { (FC_OFF_COUNTER_BOUND * rs.rays.len() as f64) as usize } else { 0 };
+        let m = match (validated, reference) {
+            (Some(hits), _) => retime(&tracer, &rs.rays, &hits, f32_hits, plan)?,
+            (None, Some((hits, counters))) => {
+                let n = rs.rays.len();
+                let slack = if v.fc == FloatControls::Off { (FC_OFF_COUNTER_BOUND * n as f64) as usize } else { 0 };
                 let conservative = v.layout.info().conservative;
-                let (hits, counters) = (&ref_hits, &ref_counters);
+                let (hits, counters) = (&hits, &counters);
                 let reference = measure::Reference::Exact { hits, counters, conservative, counter_slack: slack };
-                measure::validate_then_time(&tracer, &rs.rays, reference, &rs.f32_hits, plan)
+                measure::validate_then_time(&tracer, &rs.rays, reference, f32_hits, plan)
                     .with_context(|| name.clone())?
             }
+            (None, None) => unreachable!("a reference is made when nothing was validated"),
         };
-        if m.failure.is_none() {
-            self.state().validated.entry(key).or_insert_with(|| m.hits.clone());
-        }
+        self.remember(key, &m, plan.count);
         Ok(Outcome { status: status(&m), kernel: Some(id), name, m, facts })
     }
 
@@ -373,22 +458,24 @@ impl<'g> Runner<'g> {
 
     fn measure_baseline(&mut self, b: BaselineId, set: RaySetId, plan: Plan) -> anyhow::Result<Outcome> {
         let name = b.imp().kernel().to_string();
-        let dev = match self.baselines.get(&b) {
-            Some(Ok(d)) => d,
-            Some(Err(why)) => {
-                let m = Measurement::none();
-                return Ok(Outcome {
-                    status: Status::Skipped(why.clone()),
-                    kernel: None,
-                    name,
-                    m,
-                    facts: Facts::default(),
-                });
-            }
-            None => anyhow::bail!("baseline {b} was not prepared on this runner"),
+        let none = |status: Status, name: String| Outcome {
+            status,
+            kernel: None,
+            name,
+            m: Measurement::none(),
+            facts: Facts::default(),
         };
+        match self.baselines.get(&b) {
+            Some(Ok(_)) => {}
+            Some(Err(why)) => return Ok(none(Status::Skipped(why.clone()), name)),
+            None => anyhow::bail!("baseline {b} was not prepared on this runner"),
+        }
+        self.ensure_f32_hits(set)?;
+        let key = (Tracing::Baseline(b), set);
+        let validated = self.validated(&key, false);
         let s = self.scene.as_mut().expect("Runner::scene first");
         if !s.baselines.contains_key(&b) {
+            let dev = self.baselines[&b].as_ref().expect("prepared");
             let built = dev.scene(&s.scene).with_context(|| format!("{b} on {}", s.scene.name))?;
             s.baselines.insert(b, built);
         }
@@ -399,16 +486,14 @@ impl<'g> Runner<'g> {
             triangle_bytes: (s.scene.len() * 36) as u64,
             ..Facts::default()
         };
-        let rs = &s.sets[set.0];
+        let rs = &s.sets[set.index];
+        let f32_hits = rs.f32_hits.as_deref().expect("traced above");
         let tracer = BaselineTracer { name: &name, scene: bs.as_ref() };
-        let key = (Tracing::Baseline(b), set);
-        let m = match s.validated.get(&key) {
-            Some(hits) => retime(&tracer, &rs.rays, hits, &rs.f32_hits, plan)?,
-            None => measure::validate_then_time(&tracer, &rs.rays, measure::Reference::Agreement, &rs.f32_hits, plan)?,
+        let m = match validated {
+            Some(hits) => retime(&tracer, &rs.rays, &hits, f32_hits, plan)?,
+            None => measure::validate_then_time(&tracer, &rs.rays, measure::Reference::Agreement, f32_hits, plan)?,
         };
-        if m.failure.is_none() {
-            s.validated.entry(key).or_insert_with(|| m.hits.clone());
-        }
+        self.remember(key, &m, false);
         Ok(Outcome { status: status(&m), kernel: None, name, m, facts })
     }
 }

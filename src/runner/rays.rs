@@ -15,16 +15,21 @@ pub struct RaySpec {
     pub params: RayParams,
 }
 
-/// Rays and the f32 reference's hits for them (layout f32, B = 4, single rays).
+/// Rays and, once something needs them, the f32 reference's hits for them (layout f32, B = 4,
+/// single rays: [`super::Runner::f32_hits`]).
 pub struct RaySet {
     pub spec: RaySpec,
     pub rays: Vec<Ray>,
-    pub f32_hits: Vec<Hit>,
+    pub f32_hits: Option<Vec<Hit>>,
 }
 
-/// A ray set of the current scene.
+/// A ray set of one scene: that scene's load (`epoch`) and the set's index there. A ray set of
+/// another scene is refused, not read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct RaySetId(pub(super) usize);
+pub struct RaySetId {
+    pub(super) epoch: u64,
+    pub(super) index: usize,
+}
 
 /// The rays of `spec` on `scene`. Ao and diffuse rays start at `primary`: the primary rays of
 /// the same parameters and their f32 hits.

@@ -90,8 +90,8 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
             eprintln!("shard {}/{}: {} of {} jobs", s.k, s.n, jobs.len(), all);
         }
     }
-    let mut ex =
-        Executor { runner: Runner::new(Some(&g), &cfg.baselines(), Default::default())?, cfg, gpu: &g, images: None };
+    let runner = Runner::new(Some(&g), &cfg.baselines(), Default::default())?;
+    let mut ex = Executor { runner, cfg, gpu: &g, images: None, scene: None, measured: HashSet::new() };
     let done: HashSet<RowId> = kept.iter().map(Row::id).collect();
     let jobs: Vec<Job> = jobs.into_iter().filter(|j| !done.contains(&ex.identity(j).id())).collect();
     let resumed = kept.len();
@@ -182,6 +182,10 @@ struct Executor<'a, 'g> {
     cfg: &'a Config,
     gpu: &'g Gpu,
     images: Option<Images>,
+    /// The scene of the jobs run last (its warnings are printed once).
+    scene: Option<usize>,
+    /// The ray kinds measured on it: once all are, the f32 reference encoding is freed.
+    measured: HashSet<usize>,
 }
 
 impl Executor<'_, '_> {
@@ -235,13 +239,27 @@ impl Executor<'_, '_> {
 
     fn run_job(&mut self, job: &Job, bar: &indicatif::ProgressBar) -> anyhow::Result<Row> {
         let (scene, _) = self.runner.scene(&self.cfg.scenes[job.scene])?;
-        for w in &scene.warnings {
-            bar.suspend(|| eprintln!("warning: {w}"));
+        if self.scene != Some(job.scene) {
+            for w in &scene.warnings {
+                bar.suspend(|| eprintln!("warning: {w}"));
+            }
+            (self.scene, self.measured) = (Some(job.scene), HashSet::new());
         }
         let triangles = scene.len();
         let set = self.runner.ray_set(&self.spec(job))?;
         let plan = Plan { warmup: self.cfg.warmup, repeat: self.cfg.repeat, count: true };
-        let o = self.runner.measure(&job.target, set, plan)?;
+        let o = match job.user {
+            Some(i) => self
+                .runner
+                .measure(&job.target, set, plan)
+                .with_context(|| format!("[[kernel]] '{}'", self.cfg.kernel[i].name)),
+            None => self.runner.measure(&job.target, set, plan),
+        }?;
+        // Every ray set of the scene has its f32 hits now: the reference encoding can go.
+        self.measured.insert(job.rays);
+        if self.measured.len() == jobs::kinds(self.cfg).len() {
+            self.runner.release_f32_reference();
+        }
         let mut row = self.identity(job);
         row.triangles = triangles;
         row.ray_count = self.runner.rays(set).rays.len();
@@ -290,15 +308,16 @@ impl Executor<'_, '_> {
     /// After a scene's last job: its images (the first scene only).
     fn finish_scene(&mut self, out: &Path) -> anyhow::Result<()> {
         let Some(img) = self.images.take() else { return Ok(()) };
+        let f32_hits = self.runner.f32_hits(img.set)?.to_vec();
         let scene = self.runner.current_scene().expect("the images' scene is current");
         let set = self.runner.rays(img.set);
         let (w, h) = (self.cfg.width, self.cfg.height);
-        crate::images::render(&out.join("render.png"), scene, &set.rays, &set.f32_hits, w, h)?;
+        crate::images::render(&out.join("render.png"), scene, &set.rays, &f32_hits, w, h)?;
         let max = img.layouts.iter().flat_map(|(_, _, n)| n.iter().cloned()).fold(0.0, f64::max);
         for (layout, hits, nodes) in &img.layouts {
             crate::images::heat_map(&out.join(format!("heat_{layout}.png")), w, h, nodes, max)?;
             if *layout != LayoutId::f32() {
-                let mask: Vec<bool> = hits.iter().zip(&set.f32_hits).map(|(a, b)| !a.same_bits(b)).collect();
+                let mask: Vec<bool> = hits.iter().zip(&f32_hits).map(|(a, b)| !a.same_bits(b)).collect();
                 crate::images::mask_image(&out.join(format!("diff_{layout}_vs_f32.png")), w, h, &mask)?;
             }
         }

@@ -101,11 +101,8 @@ fn user_kernels_are_checked_then_validated_and_timed() {
     std::fs::write(&truncated, &good[..good.len() / 2 / 4 * 4 + 4]).unwrap();
     // Cut exactly after an instruction in the middle: still not a complete module.
     let words: Vec<u32> = bytemuck::pod_collect_to_vec(&good);
-    let (mut i, mut cut) = (5, 5);
-    while i < words.len() / 2 {
-        cut = i;
-        i += (words[i] >> 16) as usize;
-    }
+    let insts = shader::spirv::instructions(&words).unwrap();
+    let cut = insts.iter().map(|i| i.start).take_while(|&s| s < words.len() / 2).last().unwrap();
     let clean_cut = tmp("clean_cut.spv");
     std::fs::write(&clean_cut, bytemuck::cast_slice::<u32, u8>(&words[..cut])).unwrap();
     let odd = tmp("odd.spv");

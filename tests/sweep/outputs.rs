@@ -49,10 +49,10 @@ fn small_sweep_writes_consistent_outputs() {
     // modes, plus rq and embree: 22, × 2 ray kinds
     let rows = read_rows(&out).unwrap();
     assert_eq!(rows.len(), 44);
-    let bench: halftrace::gpu::arith::ArithRates =
+    let arith: halftrace::gpu::arith::ArithRates =
         serde_json::from_str(&std::fs::read_to_string(out.join("device_arith.json")).unwrap()).unwrap();
-    assert_eq!(bench.ops.len(), 5);
-    assert!(bench.fp16_ratio > 0.0 && rows.iter().all(|r| r.device_fp16_ratio == bench.fp16_ratio));
+    assert_eq!(arith.ops.len(), 5);
+    assert!(arith.fp16_ratio > 0.0 && rows.iter().all(|r| r.device_fp16_ratio == arith.fp16_ratio));
     let json: Vec<Row> = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     assert_eq!(json, rows, "results.json and results.csv disagree");
     // no empty field, one row per variant

@@ -89,11 +89,11 @@ fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
     let sub = |bit: u32| i.subgroup_ops & (1 << bit) != 0;
     Some(match cap {
         1 => ("Shader", true),
-        9 => ("Float16", i.shader_float16),
+        op::FLOAT16 => ("Float16", i.shader_float16),
         10 => ("Float64", i.shader_float64),
         4433 => ("StorageBuffer16BitAccess", i.storage_16bit),
-        4466 => ("SignedZeroInfNanPreserve", i.preserve_16 || i.preserve_32),
-        4467 => ("RoundingModeRTE", i.fp16_rte || i.fp32_rte),
+        op::SIGNED_ZERO_INF_NAN_PRESERVE => ("SignedZeroInfNanPreserve", i.preserve_16 || i.preserve_32),
+        op::ROUNDING_MODE_RTE => ("RoundingModeRTE", i.fp16_rte || i.fp32_rte),
         61 => ("GroupNonUniform", sub(0)),
         62 => ("GroupNonUniformVote", sub(1)),
         63 => ("GroupNonUniformArithmetic", sub(2)),
@@ -102,14 +102,14 @@ fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
         66 => ("GroupNonUniformShuffleRelative", sub(5)),
         67 => ("GroupNonUniformClustered", sub(6)),
         68 => ("GroupNonUniformQuad", sub(7)),
-        5347 => ("PhysicalStorageBufferAddresses", i.buffer_device_address),
+        op::PHYSICAL_STORAGE_BUFFER_ADDRESSES => ("PhysicalStorageBufferAddresses", i.buffer_device_address),
         _ => return None,
     })
 }
 
-/// Checks that a user's module can stand in for the kernel of variant `v` (implementation
-/// `imp`, counting or not) on `gpu`; returns the module, or an error that names the file and
-/// what differs.
+/// Checks that a user's module can stand in for built-in kernel `k` (its variant, packet
+/// implementation, counting or not) on `gpu`; returns the module, or an error that names the
+/// file and what differs.
 pub fn check_user(path: &Path, words: &[u32], k: &KernelId, gpu: &Gpu) -> Result<Vec<u32>, GpuError> {
     let (v, imp, stats) = (&k.variant, k.imp, k.stats);
     let name = k.name();
