@@ -315,3 +315,22 @@ impl Row {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Results written before a layout was renamed read under its current name, kernel too.
+    #[test]
+    fn rows_of_a_renamed_layout_read_under_its_current_name() {
+        let dir = std::env::temp_dir().join(format!("halftrace-rows-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let row = |layout: &str, kernel: &str| Row { layout: layout.into(), kernel: kernel.into(), ..Row::default() };
+        let old = [row("f16h-seed", "trav_f16h-seed_b4_p1"), row("rq", "trav_rq"), row("f16h", "mine")];
+        write_rows(&dir, &old).unwrap();
+        let got: Vec<(String, String)> = read_rows(&dir).unwrap().into_iter().map(|r| (r.layout, r.kernel)).collect();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let want = [("f16h-poster", "trav_f16h-poster_b4_p1"), ("rq", "trav_rq"), ("f16h", "mine")];
+        assert_eq!(got, want.map(|(l, k)| (l.to_string(), k.to_string())));
+    }
+}
