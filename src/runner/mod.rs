@@ -3,15 +3,18 @@
 //! as it is asked for:
 //!
 //! - one scene at a time, its binary SAH BVH built once ([`Runner::scene`]);
-//! - ray sets by spec, each with the f32 reference's hits ([`Runner::ray_set`]);
+//! - ray sets by spec ([`Runner::ray_set`]), with the f32 reference's hits traced when first
+//!   needed ([`Runner::f32_hits`]);
 //! - per layout × B the encoded BVH and its device copy (freed with [`Runner::release`]);
-//! - CPU references per layout × B × P × math × float controls × ray set;
+//! - the latest CPU references per layout × B × P × math × float controls × ray set;
 //! - kernels per [`KernelId`] and source, baselines per device and per scene;
 //!
-//! and measures every [`Target`] the same way ([`Runner::measure`]): resolve what the device
-//! runs (or skip, saying why), validate against the reference ([`measure`]), then time. A
-//! target already validated on a ray set is only timed again.
+//! (the scene's share in `cache.rs`) and measures every [`Target`] the same way
+//! ([`Runner::measure`]): resolve what the device runs (or skip, saying why), validate against
+//! the reference ([`measure`]), then time. With [`Options::retime`] a target already validated
+//! on a ray set is only timed again.
 
+mod cache;
 pub mod measure;
 pub mod rays;
 pub mod target;
@@ -20,21 +23,16 @@ pub use measure::{Measurement, Plan, Timing, Tracer};
 pub use rays::{RaySet, RaySetId, RaySpec};
 pub use target::{Facts, KernelTarget, Outcome, Target};
 
-use crate::base::{Counters, Hit};
-use crate::baseline::{BaselineDevice, BaselineId, BaselineScene};
-use crate::bvh::{self, BinaryBvh};
-use crate::gpu::{self, support, Gpu, GpuBvh, GpuError, Kernel, Source};
-use crate::layout::{Encoded, LayoutId};
-use crate::precision::{FloatControls, Math};
-use crate::rays::RayKind;
+use crate::base::Hit;
+use crate::baseline::{BaselineDevice, BaselineId};
+use crate::gpu::{self, support, Gpu, GpuError, Kernel, Source};
+use crate::precision::FloatControls;
 use crate::report::Status;
-use crate::scene::Scene;
 use crate::variant::{KernelId, PacketImpl, Variant};
 use anyhow::Context;
+use cache::SceneState;
 use measure::FC_OFF_COUNTER_BOUND;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
 use target::{retime, status, BaselineTracer, KernelTracer};
 
 /// How a runner keeps what it made.
@@ -50,49 +48,12 @@ pub struct Options {
     pub retime: bool,
 }
 
-/// A BVH encoded in one layout at one B, on the host and then on the device.
-struct Resident<'g> {
-    /// The host encoding (dropped in frugal mode once uploaded; re-encoded when needed).
-    enc: Option<Encoded>,
-    bvh: Option<GpuBvh<'g>>,
-    facts: Facts,
-}
-
-/// The reference of a kernel target on a ray set.
-type RefKey = (LayoutId, usize, usize, Math, FloatControls, RaySetId);
-/// A CPU reference: hits and counters.
-type CpuReference = (Vec<Hit>, Vec<Counters>);
-
-/// What a scene's measurements share.
-struct SceneState<'g> {
-    path: PathBuf,
-    /// Which load of a scene this is (ray set ids carry it).
-    epoch: u64,
-    scene: Scene,
-    /// The binary BVH (rebuilt when needed after a frugal drop).
-    bin: Option<BinaryBvh>,
-    binary_ms: f64,
-    /// The f32 layout at B = 4: the reference every result is compared with.
-    f32_ref: Option<Encoded>,
-    sets: Vec<RaySet>,
-    encodings: HashMap<(LayoutId, usize), Resident<'g>>,
-    /// The latest CPU references (the few a layout × B's kernels share).
-    refs: Vec<(RefKey, CpuReference)>,
-    baselines: HashMap<BaselineId, Box<dyn BaselineScene + 'g>>,
-    /// With `Options::retime`: the hits of each (tracer, ray set) validated so far, and
-    /// whether its counters were checked too.
-    validated: HashMap<(Tracing, RaySetId), (bool, Vec<Hit>)>,
-}
-
 /// What validated hits are keyed by.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 enum Tracing {
     Kernel(KernelId, Source),
     Baseline(BaselineId),
 }
-
-/// How many CPU references a scene keeps.
-const KEPT_REFERENCES: usize = 8;
 
 pub struct Runner<'g> {
     gpu: Option<&'g Gpu>,
@@ -127,39 +88,6 @@ impl<'g> Runner<'g> {
         self.gpu.ok_or_else(|| anyhow::anyhow!("no Vulkan device open (CPU reference only)"))
     }
 
-    /// Makes the scene at `path` current (loading it and building its binary BVH when it is
-    /// not already); returns it and the build time (ms).
-    pub fn scene(&mut self, path: &Path) -> anyhow::Result<(&Scene, f64)> {
-        if self.scene.as_ref().is_none_or(|s| s.path != path) {
-            self.scene = None;
-            let scene = crate::scene::load(path)?;
-            let t = Instant::now();
-            let bin = bvh::build_binary(&scene);
-            let binary_ms = t.elapsed().as_secs_f64() * 1e3;
-            self.loads += 1;
-            self.scene = Some(SceneState {
-                path: path.into(),
-                epoch: self.loads,
-                scene,
-                bin: Some(bin),
-                binary_ms,
-                f32_ref: None,
-                sets: Vec::new(),
-                encodings: HashMap::new(),
-                refs: Vec::new(),
-                baselines: HashMap::new(),
-                validated: HashMap::new(),
-            });
-        }
-        let s = self.scene.as_ref().expect("just made");
-        Ok((&s.scene, s.binary_ms))
-    }
-
-    /// The current scene, if any.
-    pub fn current_scene(&self) -> Option<&Scene> {
-        self.scene.as_ref().map(|s| &s.scene)
-    }
-
     /// The name a kernel target's results go under (the built-in kernel's name in the packet
     /// implementation the device uses, reading the scene bound) and the float controls the
     /// device builds it with (`None`: the device cannot run it).
@@ -169,183 +97,6 @@ impl<'g> Runner<'g> {
             Ok(v) => (v.kernel_name(imp_of(g, &v, k.imp), false), Some(v.fc)),
             Err(_) => (k.variant.name(false), None),
         }
-    }
-
-    fn state(&mut self) -> &mut SceneState<'g> {
-        self.scene.as_mut().expect("Runner::scene first")
-    }
-
-    /// The index of a ray set of the current scene.
-    fn index(&self, id: RaySetId) -> usize {
-        let s = self.scene.as_ref().expect("Runner::scene first");
-        assert_eq!(id.epoch, s.epoch, "a ray set of another scene");
-        id.index
-    }
-
-    /// The rays of a set made earlier.
-    pub fn rays(&self, id: RaySetId) -> &RaySet {
-        &self.scene.as_ref().expect("Runner::scene first").sets[self.index(id)]
-    }
-
-    /// The ray set `spec` of the current scene, made once: generated (ao and diffuse from the
-    /// primary rays of the same parameters and their f32 hits) or read.
-    pub fn ray_set(&mut self, spec: &RaySpec) -> anyhow::Result<RaySetId> {
-        let id = self.make_set(spec)?;
-        if self.opts.frugal {
-            self.release_f32_reference();
-        }
-        Ok(id)
-    }
-
-    fn make_set(&mut self, spec: &RaySpec) -> anyhow::Result<RaySetId> {
-        let epoch = self.state().epoch;
-        if let Some(index) = self.state().sets.iter().position(|s| s.spec == *spec) {
-            return Ok(RaySetId { epoch, index });
-        }
-        let prim = match spec.kind {
-            RayKind::Ao | RayKind::Diffuse => {
-                let p = self.make_set(&RaySpec { kind: RayKind::Primary, ..spec.clone() })?;
-                self.ensure_f32_hits(p)?;
-                Some(p)
-            }
-            _ => None,
-        };
-        self.ensure_bin();
-        let s = self.state();
-        let primary = prim.map(|p| {
-            let set = &s.sets[p.index];
-            (&set.rays[..], set.f32_hits.as_deref().expect("made above"))
-        });
-        let rays = rays::generate(&s.scene, s.bin.as_ref().expect("built"), spec, primary)?;
-        s.sets.push(RaySet { spec: spec.clone(), rays, f32_hits: None });
-        Ok(RaySetId { epoch, index: s.sets.len() - 1 })
-    }
-
-    /// The f32 reference's hits on ray set `id` (traced once, when first asked for).
-    pub fn f32_hits(&mut self, id: RaySetId) -> anyhow::Result<&[Hit]> {
-        self.ensure_f32_hits(id)?;
-        let i = self.index(id);
-        Ok(self.state().sets[i].f32_hits.as_deref().expect("just traced"))
-    }
-
-    fn ensure_f32_hits(&mut self, id: RaySetId) -> anyhow::Result<()> {
-        let i = self.index(id);
-        if self.state().sets[i].f32_hits.is_some() {
-            return Ok(());
-        }
-        if self.state().f32_ref.is_none() {
-            self.ensure_bin();
-            let s = self.scene.as_ref().expect("current");
-            let enc = Encoded::new(&s.scene, s.bin.as_ref().expect("built"), LayoutId::f32(), 4)?;
-            self.state().f32_ref = Some(enc);
-        }
-        let s = self.state();
-        let hits = s.f32_ref.as_ref().expect("just made").reference_default(&s.sets[i].rays).0;
-        s.sets[i].f32_hits = Some(hits);
-        if self.opts.frugal {
-            self.release_f32_reference();
-        }
-        Ok(())
-    }
-
-    /// Makes sure the current scene has its binary BVH (rebuilt if a frugal run dropped it).
-    fn ensure_bin(&mut self) {
-        let s = self.state();
-        if s.bin.is_none() {
-            s.bin = Some(bvh::build_binary(&s.scene));
-        }
-    }
-
-    /// Drops the f32 reference encoding (a big scene's memory); it is rebuilt if needed.
-    pub fn release_f32_reference(&mut self) {
-        if let Some(s) = self.scene.as_mut() {
-            s.f32_ref = None;
-        }
-    }
-
-    /// Frees the encoding of `layout` at `b` (host and device), its references and what was
-    /// validated on it.
-    pub fn release(&mut self, layout: LayoutId, b: usize) {
-        if let Some(s) = self.scene.as_mut() {
-            s.encodings.remove(&(layout, b));
-            s.refs.retain(|(k, _)| (k.0, k.1) != (layout, b));
-            s.validated.retain(|(t, _), _| {
-                !matches!(t, Tracing::Kernel(k, _) if (k.variant.layout, k.variant.branching) == (layout, b))
-            });
-        }
-    }
-
-    /// Encodes `layout` at `b` for the current scene, unless it is (so that a later reference
-    /// or upload does not include the encoding's time).
-    pub fn encode(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<()> {
-        self.encoding(layout, b).map(|_| ())
-    }
-
-    /// The host encoding of `layout` at `b`, encoded once (again after a frugal drop).
-    fn encoding(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<&Encoded> {
-        let have = self.state().encodings.get(&(layout, b)).is_some_and(|r| r.enc.is_some());
-        if !have {
-            self.ensure_bin();
-            let t = Instant::now();
-            let s = self.scene.as_ref().expect("current");
-            let enc = Encoded::new(&s.scene, s.bin.as_ref().expect("built"), layout, b)?;
-            let frugal = self.opts.frugal;
-            let s = self.state();
-            let facts = Facts {
-                bvh_bytes: enc.node_bytes() as u64,
-                node_size: enc.node_size() as u64,
-                triangle_bytes: enc.tris.bytes() as u64,
-                build_ms: s.binary_ms + t.elapsed().as_secs_f64() * 1e3,
-                ..Facts::default()
-            };
-            let r = s.encodings.entry((layout, b)).or_insert(Resident { enc: None, bvh: None, facts });
-            r.enc = Some(enc);
-            if frugal {
-                s.bin = None;
-            }
-        }
-        Ok(self.state().encodings[&(layout, b)].enc.as_ref().expect("just made"))
-    }
-
-    /// The device copy of `layout` at `b`, uploaded once.
-    fn upload(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<()> {
-        if self.state().encodings.get(&(layout, b)).is_some_and(|r| r.bvh.is_some()) {
-            return Ok(());
-        }
-        let gpu = self.gpu()?;
-        self.encoding(layout, b)?;
-        let frugal = self.opts.frugal;
-        let r = self.state().encodings.get_mut(&(layout, b)).expect("encoded");
-        let what = || format!("{layout}, B={b}");
-        let bvh = if frugal {
-            GpuBvh::upload_owned(gpu, r.enc.take().expect("encoded")).with_context(what)?
-        } else {
-            GpuBvh::upload(gpu, r.enc.as_ref().expect("encoded")).with_context(what)?
-        };
-        (r.facts.buffers, r.facts.upload_bytes) = (bvh.buffers, bvh.bytes);
-        r.bvh = Some(bvh);
-        Ok(())
-    }
-
-    /// The CPU reference of `v` on ray set `set` (the latest few are kept, unless frugal).
-    pub fn reference(&mut self, v: &Variant, set: RaySetId) -> anyhow::Result<(Vec<Hit>, Vec<Counters>)> {
-        let key = (v.layout, v.branching, v.packet, v.math, v.fc, set);
-        if let Some((_, r)) = self.state().refs.iter().find(|(k, _)| *k == key) {
-            return Ok(r.clone());
-        }
-        let i = self.index(set);
-        self.encoding(v.layout, v.branching)?;
-        let frugal = self.opts.frugal;
-        let s = self.state();
-        let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
-        let r = enc.reference(&s.sets[i].rays, v.packet, v.math, v.fc);
-        if !frugal {
-            if s.refs.len() == KEPT_REFERENCES {
-                s.refs.remove(0);
-            }
-            s.refs.push((key, r.clone()));
-        }
-        Ok(r)
     }
 
     /// Measures `target` on ray set `set` as `plan` says: the device's build of it is resolved
