@@ -51,6 +51,15 @@ pub enum Cmd {
     /// Check every variant on a device against the CPU references (what to run first on a new
     /// GPU): writes conformance.md and conformance.csv, exits non-zero on any failure.
     Conformance(ConformanceArgs),
+    /// The compiler's view: build each kernel on RADV null devices (AMD's shader compiler for a
+    /// GPU family, no GPU needed) or on a device whose driver reports pipeline statistics, and
+    /// write registers, scratch, occupancy and the fp16 instruction mix per kernel (isa.md,
+    /// isa.csv, isa.json, plots). Nothing runs.
+    Isa(IsaArgs),
+    /// Print the RADV null devices listed with RADV_FORCE_FAMILY as set (how `isa` and `devices`
+    /// learn which families the installed RADV knows: RADV aborts on the others).
+    #[command(hide = true)]
+    ProbeFamily,
     /// Compile the default variant matrix and write one SPIR-V file per kernel.
     Shaders {
         /// Output folder (e.g. spirv/).
@@ -295,6 +304,45 @@ pub struct ConformanceArgs {
     /// Treat a device feature as missing (testing the fallbacks).
     #[arg(long, hide = true)]
     pub mask_feature: Vec<String>,
+}
+
+#[derive(clap::Args)]
+pub struct IsaArgs {
+    /// RADV GPU families, comma-separated (e.g. navi31,navi21,vega10; `all`: every family the
+    /// installed RADV knows, listed by `halftrace devices`). Default, without --device:
+    /// polaris10, vega10, navi10, navi21, navi31, gfx1201 (GCN4 to RDNA4).
+    #[arg(long, value_delimiter = ',')]
+    pub family: Vec<String>,
+    /// A Vulkan device (index or name substring) whose driver exposes
+    /// VK_KHR_pipeline_executable_properties; repeat for several.
+    #[arg(long)]
+    pub device: Vec<String>,
+    /// Layouts beside f32, comma-separated (default: every layout).
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    /// Every layout and math at B = 4, P = 1 only.
+    #[arg(long, conflicts_with = "full")]
+    pub quick: bool,
+    /// Every layout, math, B and P, every packet implementation, float controls on and off.
+    #[arg(long)]
+    pub full: bool,
+    /// Output folder (default reports/isa-<UTC timestamp>/). Its isa.* files, if any, are
+    /// refused unless --force; other files there are left alone (a sweep folder may hold both).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace the isa files in --out.
+    #[arg(long)]
+    pub force: bool,
+    /// Also write each kernel's internal representations (NIR, ACO IR, disassembly) under
+    /// disasm/<family>/.
+    #[arg(long)]
+    pub disasm: bool,
+    /// Run under the Khronos validation layer; any message fails the run.
+    #[arg(long)]
+    pub validation: bool,
+    /// No line per kernel.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(clap::Args)]

@@ -19,6 +19,8 @@ fn main() {
         Cmd::Instance(a) => commands::instance(a),
         Cmd::Devices(a) => commands::devices(a),
         Cmd::Conformance(a) => commands::conformance(a),
+        Cmd::Isa(a) => commands::isa(a),
+        Cmd::ProbeFamily => commands::probe_family(),
         Cmd::Shaders { emit } => commands::shaders(emit),
         Cmd::Sweep(a) => commands::sweep(a),
         Cmd::Bench(a) => commands::bench(a),

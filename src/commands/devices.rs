@@ -47,9 +47,31 @@ pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
             d.preserve_16,
             d.preserve_32
         );
-        for line in plan(d) {
-            outln!("   {line}");
+        outln!(
+            "   pipeline statistics (VK_KHR_pipeline_executable_properties, for `isa`): {}",
+            if d.pipeline_statistics { "yes" } else { "no" }
+        );
+        if d.compile_only {
+            outln!(
+                "   COMPILE ONLY: RADV's null device (RADV_FORCE_FAMILY) builds pipelines with AMD's compiler but runs \
+                 nothing; trace, sweep, bench and conformance refuse it — `halftrace isa --device {}` reads its \
+                 compiler's statistics",
+                d.index
+            );
         }
+        for line in plan(d) {
+            outln!("   {}", if d.compile_only { line.replace("runs", "builds") } else { line });
+        }
+    }
+    let known = crate::isa::known_families(&std::env::current_exe()?);
+    if known.is_empty() {
+        outln!("\nRADV null devices (isa --family): none open here (RADV is Debian's mesa-vulkan-drivers)");
+    } else {
+        let names: Vec<String> = known.iter().map(|f| format!("{} ({})", f.name, f.generation)).collect();
+        outln!(
+            "\nRADV null devices (`halftrace isa --family F`, AMD's compiler without the GPU): {}",
+            names.join(", ")
+        );
     }
     outln!("\nlayouts and baselines (--layout):");
     for l in LayoutId::all() {

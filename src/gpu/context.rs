@@ -30,6 +30,11 @@ pub struct ContextOptions {
     /// How long one submission may run before it is declared hung (default
     /// [`DEFAULT_KERNEL_TIMEOUT_S`]).
     pub kernel_timeout_s: Option<f64>,
+    /// Open the device to read its compiler's view (`isa`): every pipeline is built with
+    /// its statistics and internal representations captured (needs
+    /// `VK_KHR_pipeline_executable_properties`), and a compile-only device is accepted.
+    /// Without it a compile-only device is refused, naming `isa`.
+    pub statistics: bool,
 }
 
 /// Seconds a submission may take before the kernel is declared hung: generous, since one
@@ -38,6 +43,9 @@ pub const DEFAULT_KERNEL_TIMEOUT_S: f64 = 600.0;
 
 /// The logical device, its command pool and its allocator.
 struct Logical {
+    /// False on a compile-only device, where a wait crashes the driver (nothing was
+    /// submitted there, so nothing is pending).
+    wait_on_drop: bool,
     device: ash::Device,
     pool: vk::CommandPool,
     allocator: Option<Mutex<Allocator>>,
@@ -46,7 +54,9 @@ struct Logical {
 impl Drop for Logical {
     fn drop(&mut self) {
         unsafe {
-            let _ = self.device.device_wait_idle();
+            if self.wait_on_drop {
+                let _ = self.device.device_wait_idle();
+            }
             if self.pool != vk::CommandPool::null() {
                 self.device.destroy_command_pool(self.pool, None);
             }
@@ -68,6 +78,8 @@ pub struct Gpu {
     pub(crate) pool: vk::CommandPool,
     pub info: DeviceInfo,
     pub validation_enabled: bool,
+    /// Pipelines capture their statistics and internal representations ([`ContextOptions::statistics`]).
+    pub(crate) capture: bool,
     kernel_timeout: std::time::Duration,
     /// Set when a submission did not finish in time: the device is still running it, so
     /// nothing it may use is destroyed any more (the process ends without freeing it).
@@ -106,6 +118,13 @@ impl Gpu {
         for m in &opts.mask_features {
             info.mask(m).map_err(GpuError::Other)?;
         }
+        if info.compile_only && !opts.statistics {
+            return Err(GpuError::CompileOnly(info.name.clone()));
+        }
+        if opts.statistics && !info.pipeline_statistics {
+            let feature = "VK_KHR_pipeline_executable_properties (the compiler's statistics, for `isa`)".into();
+            return Err(GpuError::MissingFeature { device: info.name.clone(), feature });
+        }
         // No feature is required up front: each variant needs what its layout and math use
         // (gpu::support), and what a device lacks becomes one skipped line per variant.
         if !info.timestamps {
@@ -117,7 +136,7 @@ impl Gpu {
             .iter()
             .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0)
             .expect("a device with compute timestamps has such a queue family") as u32;
-        let logical = Self::create_device(&inst, physical, &info, qfi)?;
+        let logical = Self::create_device(&inst, physical, &info, qfi, opts.statistics)?;
         let queue = unsafe { logical.device.get_device_queue(qfi, 0) };
         let timeout = opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).max(0.001);
         Ok(Gpu {
@@ -128,6 +147,7 @@ impl Gpu {
             pool: logical.pool,
             info,
             validation_enabled: inst.validation(),
+            capture: opts.statistics,
             kernel_timeout: std::time::Duration::from_secs_f64(timeout),
             hung: AtomicBool::new(false),
             logical: ManuallyDrop::new(logical),
@@ -142,6 +162,7 @@ impl Gpu {
         physical: vk::PhysicalDevice,
         info: &DeviceInfo,
         qfi: u32,
+        statistics: bool,
     ) -> Result<Logical, GpuError> {
         let prio = [1.0f32];
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
@@ -153,6 +174,8 @@ impl Gpu {
         let mut sscf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true);
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
+        let mut pef =
+            vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default().pipeline_executable_info(true);
         let base = vk::PhysicalDeviceFeatures::default().shader_float64(info.shader_float64);
         let mut exts: Vec<*const std::ffi::c_char> = Vec::new();
         if rq {
@@ -164,6 +187,9 @@ impl Gpu {
         }
         if info.subgroup_size_control {
             exts.push(ash::ext::subgroup_size_control::NAME.as_ptr());
+        }
+        if statistics {
+            exts.push(ash::khr::pipeline_executable_properties::NAME.as_ptr());
         }
         let mut dinfo = vk::DeviceCreateInfo::default()
             .queue_create_infos(&qinfo)
@@ -177,9 +203,13 @@ impl Gpu {
         if info.subgroup_size_control {
             dinfo = dinfo.push_next(&mut sscf);
         }
+        if statistics {
+            dinfo = dinfo.push_next(&mut pef);
+        }
         let device = unsafe { inst.instance.create_device(physical, &dinfo, None) }.vk("vkCreateDevice")?;
         // From here on, dropping `logical` destroys what exists.
-        let mut logical = Logical { device, pool: vk::CommandPool::null(), allocator: None };
+        let mut logical =
+            Logical { wait_on_drop: !info.compile_only, device, pool: vk::CommandPool::null(), allocator: None };
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(qfi)
             .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
@@ -221,6 +251,9 @@ impl Gpu {
     /// kernel timeout: past it the work is declared hung ([`GpuError::Hung`]) and its command
     /// buffer and fence are left to the device.
     pub fn submit_and_wait(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
+        if self.info.compile_only {
+            return Err(GpuError::CompileOnly(self.info.name.clone()));
+        }
         let d = &self.device;
         unsafe {
             let cmd = d

@@ -42,6 +42,12 @@ pub struct DeviceInfo {
     pub subgroup_size_control: bool,
     pub min_subgroup_size: u32,
     pub max_subgroup_size: u32,
+    /// `VK_KHR_pipeline_executable_properties` with `pipelineExecutableInfo`: the driver
+    /// reports each pipeline's compiler statistics and internal representations (`isa`).
+    pub pipeline_statistics: bool,
+    /// A device that compiles pipelines but runs nothing (RADV's null device for a
+    /// `RADV_FORCE_FAMILY`): only `isa` uses it.
+    pub compile_only: bool,
 }
 
 impl DeviceInfo {
@@ -135,13 +141,21 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             sf.subgroup_size_control == vk::TRUE
                 && ssc.required_subgroup_size_stages.contains(vk::ShaderStageFlags::COMPUTE)
         };
+        let stats_ok = has0(ash::khr::pipeline_executable_properties::NAME) && {
+            let mut pf = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default();
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut pf);
+            instance.get_physical_device_features2(pd, &mut f2);
+            pf.pipeline_executable_info == vk::TRUE
+        };
         let qf = instance.get_physical_device_queue_family_properties(pd);
         let timestamps =
             qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
         let v = props.api_version;
+        let name = props.device_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
         DeviceInfo {
             index,
-            name: props.device_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default(),
+            compile_only: is_null_device(&name, drv.driver_id),
+            name,
             kind: format!("{:?}", props.device_type).to_lowercase(),
             driver: format!(
                 "{} {}",
@@ -172,8 +186,16 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             subgroup_size_control: ssc_ok,
             min_subgroup_size: if ssc_ok { ssc.min_subgroup_size } else { sub.subgroup_size },
             max_subgroup_size: if ssc_ok { ssc.max_subgroup_size } else { sub.subgroup_size },
+            pipeline_statistics: stats_ok,
         }
     }
+}
+
+/// Whether a device is RADV's null device: what `RADV_FORCE_FAMILY` opens where no AMD GPU is
+/// (named "Null hardware (RADV FAMILY)"). It builds pipelines with AMD's compiler, but a
+/// submission or a wait on it crashes the process.
+fn is_null_device(name: &str, driver: vk::DriverId) -> bool {
+    driver == vk::DriverId::MESA_RADV && name.starts_with("Null hardware")
 }
 
 /// Lists every Vulkan device with the features halftrace cares about.
@@ -184,7 +206,8 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>, GpuError> {
 }
 
 /// The device `--device` chooses: an index, or a case-insensitive name substring; without
-/// one, the first discrete GPU, else integrated, else virtual, else CPU.
+/// one, the first discrete GPU, else integrated, else virtual, else CPU — a device that can
+/// run before a compile-only one.
 pub fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError> {
     if infos.is_empty() {
         return Err(GpuError::NoDevice);
@@ -199,9 +222,11 @@ pub fn pick(infos: &[DeviceInfo], want: Option<&str>) -> Result<usize, GpuError>
             .position(|d| d.name.to_lowercase().contains(&wl))
             .ok_or_else(|| GpuError::DeviceNotFound(w.into()));
     }
-    for kind in ["discrete_gpu", "integrated_gpu", "virtual_gpu", "cpu"] {
-        if let Some(i) = infos.iter().position(|d| d.kind == kind) {
-            return Ok(i);
+    for compile_only in [false, true] {
+        for kind in ["discrete_gpu", "integrated_gpu", "virtual_gpu", "cpu"] {
+            if let Some(i) = infos.iter().position(|d| d.kind == kind && d.compile_only == compile_only) {
+                return Ok(i);
+            }
         }
     }
     Ok(0)

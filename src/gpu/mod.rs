@@ -13,8 +13,10 @@ pub mod buffer;
 pub mod bvh;
 pub mod context;
 pub mod device;
+pub mod executable;
 pub(crate) mod instance;
 pub mod kernel;
+pub mod null;
 pub mod pipeline;
 pub mod shader;
 pub mod support;
@@ -51,6 +53,8 @@ pub enum GpuError {
     Unsupported(String),
     #[error("the device did not finish a submission within {secs} s (a kernel that never terminates?); it is still busy with it, so nothing more can run on it in this process")]
     Hung { secs: f64 },
+    #[error("'{0}' is a compile-only device (RADV's null device, opened by RADV_FORCE_FAMILY): it builds pipelines but cannot run them; read its compiler's statistics with `halftrace isa --device '{0}'` (or `halftrace isa --family F`), or choose another device with --device")]
+    CompileOnly(String),
     #[error("{0}")]
     Other(String),
 }

@@ -106,7 +106,13 @@ impl<'g> ComputePipeline<'g> {
             if subgroup.is_some() {
                 stage = stage.push_next(&mut size_info);
             }
-            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout)];
+            let flags = if gpu.capture {
+                vk::PipelineCreateFlags::CAPTURE_STATISTICS_KHR
+                    | vk::PipelineCreateFlags::CAPTURE_INTERNAL_REPRESENTATIONS_KHR
+            } else {
+                vk::PipelineCreateFlags::empty()
+            };
+            let info = [vk::ComputePipelineCreateInfo::default().flags(flags).stage(stage).layout(p.layout)];
             p.pipeline = d
                 .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
                 .map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
@@ -127,6 +133,11 @@ impl<'g> ComputePipeline<'g> {
                 .vk("vkAllocateDescriptorSets")?[0];
         }
         Ok(p)
+    }
+
+    /// The raw pipeline (for [`super::executable`]).
+    pub(crate) fn raw(&self) -> vk::Pipeline {
+        self.pipeline
     }
 
     /// Points binding i at `buffers[i]`.

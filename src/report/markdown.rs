@@ -8,8 +8,23 @@ use super::tables;
 use crate::layout::LayoutId;
 use std::path::{Path, PathBuf};
 
-/// Renders `report.md` and the plots into `out` from `rows` (from the folders `sources`).
+/// Renders `report.md` and the plots into `out` from `rows` (from the folders `sources`), with
+/// the compiler view of every `isa.json` among the sources.
 pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<()> {
+    let mut isa_rows = Vec::new();
+    for s in sources {
+        isa_rows.extend(super::isa::read(s)?.unwrap_or_default());
+    }
+    render_with(rows, &isa_rows, out, sources)
+}
+
+/// [`render`] with the compiler-view rows given.
+pub fn render_with(
+    rows: &[Row],
+    isa_rows: &[super::isa::IsaRow],
+    out: &Path,
+    sources: &[PathBuf],
+) -> anyhow::Result<()> {
     std::fs::create_dir_all(out)?;
     let rows = &sorted(rows);
     let r = tables::ratios(rows);
@@ -17,7 +32,7 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     let by_p = tables::series(&r, false);
     let mut md = String::from("# halftrace sweep report\n\n");
     let from: Vec<String> = sources.iter().map(|p| format!("`{}`", p.display())).collect();
-    md += &format!("Rendered from {} result row(s) in: {}.\n\n", rows.len(), from.join(", "));
+    md += &format!("Rendered from {} result row(s) in: {}.\n\n", rows.len() + isa_rows.len(), from.join(", "));
     let mut devices: Vec<(String, String)> = rows.iter().map(|r| (r.device.clone(), r.driver.clone())).collect();
     devices.sort();
     devices.dedup();
@@ -45,6 +60,12 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     for l in skip_lines {
         md += &format!("Skipped: {l}\n\n");
     }
+    if rows.is_empty() {
+        // Only the compiler's view (isa folders).
+        md += &super::isa::section(isa_rows, 2);
+        crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
+        return super::isa::plot(isa_rows, out);
+    }
     md += &tables::headline(&by_b, &by_p);
     md += &tables::separated_effects(rows);
     let points = tables::layout_points(rows);
@@ -53,6 +74,11 @@ pub fn render(rows: &[Row], out: &Path, sources: &[PathBuf]) -> anyhow::Result<(
     md += &tables::every_row(rows);
     md += "\n![Mrays/s per variant](mrays.png) ![memory per layout and B](memory.png)\n";
     md += &images(out);
+    if !isa_rows.is_empty() {
+        md += "\n";
+        md += &super::isa::section(isa_rows, 2);
+        super::isa::plot(isa_rows, out)?;
+    }
     crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
     plots::plots(rows, &by_b, &by_p, out)?;
     plots::layouts_plot(&points, out)

@@ -22,6 +22,8 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
     // Identity of a row → (folder, CSV line) of its first occurrence.
     let mut seen: HashMap<RowId, (usize, usize)> = HashMap::new();
     let mut canon = Vec::new();
+    let mut isa_rows: Vec<super::isa::IsaRow> = Vec::new();
+    let mut isa_seen: HashMap<(String, String, String, String), usize> = HashMap::new();
     for (i, d) in dirs.iter().enumerate() {
         let c = d.canonicalize().unwrap_or_else(|_| d.clone());
         if let Some(j) = canon.iter().position(|x| *x == c) {
@@ -29,7 +31,25 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
             anyhow::bail!("{} is named twice (as {a} and {b}): its rows would count twice", c.display());
         }
         canon.push(c);
-        for (k, r) in read_rows(d)?.into_iter().enumerate() {
+        let isa = super::isa::read(d)?;
+        // A folder of `isa` alone has no results.csv.
+        let sweep_rows = if isa.is_some() && !d.join("results.csv").exists() { Vec::new() } else { read_rows(d)? };
+        for r in isa.unwrap_or_default() {
+            let id = (r.device.clone(), r.driver.clone(), r.kernel.clone(), r.packet_impl.clone());
+            if let Some(f) = isa_seen.get(&id) {
+                anyhow::bail!(
+                    "{}/isa.json and {}/isa.json both hold {} on {} ({}); report the folders separately",
+                    dirs[*f].display(),
+                    d.display(),
+                    r.kernel,
+                    r.device,
+                    r.driver
+                );
+            }
+            isa_seen.insert(id, i);
+            isa_rows.push(r);
+        }
+        for (k, r) in sweep_rows.into_iter().enumerate() {
             let id = r.id();
             if let Some(&(f, line)) = seen.get(&id) {
                 anyhow::bail!(
@@ -53,7 +73,17 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
             "--out {} already holds results.csv; name a new folder for the merged report",
             out.display()
         );
-        write_rows(&out, &sorted(&rows))?;
+        anyhow::ensure!(
+            !out.join("isa.json").exists(),
+            "--out {} already holds isa.json; name a new folder for the merged report",
+            out.display()
+        );
+        if !rows.is_empty() || isa_rows.is_empty() {
+            write_rows(&out, &sorted(&rows))?;
+        }
+        if !isa_rows.is_empty() {
+            super::isa::write(&out, &super::isa::sorted(&isa_rows))?;
+        }
         // The images a sweep renders (render, heat maps, diff masks) come along from the
         // folder that has them, so the merged report shows what the unsplit one does.
         for d in dirs {
@@ -65,6 +95,10 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
             }
         }
     }
-    super::render(&rows, &out, dirs)?;
-    Ok(Merged { rows: rows.len(), report: out.join("report.md"), results: own.then(|| out.join("results.csv")) })
+    super::markdown::render_with(&rows, &isa_rows, &out, dirs)?;
+    Ok(Merged {
+        rows: rows.len() + isa_rows.len(),
+        report: out.join("report.md"),
+        results: own.then(|| out.join(if rows.is_empty() { "isa.json" } else { "results.csv" })),
+    })
 }

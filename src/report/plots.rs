@@ -99,13 +99,16 @@ fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) ->
             labels.push(l.label.clone());
         }
     }
-    let width = 520 * panels.len().max(1) as u32 + 80;
+    // Up to three panels a row.
+    let cols = panels.len().clamp(1, 3);
+    let grid = (panels.len().max(1).div_ceil(cols), cols);
+    let (width, height) = (520 * cols as u32 + 80, 520 * grid.0 as u32);
     macro_rules! draw {
         ($root:expr) => {{
             let root = $root;
             root.fill(&WHITE)?;
             let root = root.titled(title, ("sans-serif", 22))?;
-            let areas = root.split_evenly((1, panels.len().max(1)));
+            let areas = root.split_evenly(grid);
             for (panel, area) in panels.iter().zip(areas.iter()) {
                 let mut xs: Vec<usize> = panel.lines.iter().flat_map(|l| l.pts.iter().map(|p| p.0)).collect();
                 xs.sort();
@@ -187,11 +190,11 @@ fn chart(out: &Path, name: &str, title: &str, ylabel: &str, panels: &[Panel]) ->
         }};
     }
     crate::fsx::with_temp(&out.join(format!("{name}.png")), |png| {
-        draw!(BitMapBackend::new(png, (width, 520)).into_drawing_area());
+        draw!(BitMapBackend::new(png, (width, height)).into_drawing_area());
         Ok(())
     })?;
     crate::fsx::with_temp(&out.join(format!("{name}.svg")), |svg| {
-        draw!(SVGBackend::new(svg, (width, 520)).into_drawing_area());
+        draw!(SVGBackend::new(svg, (width, height)).into_drawing_area());
         Ok(())
     })
 }
@@ -211,6 +214,29 @@ fn line_chart(
         lines: lines.iter().map(|(l, p)| Line { label: l.clone(), pts: p.clone(), bars: Vec::new() }).collect(),
     };
     chart(out, name, title, ylabel, &[panel])
+}
+
+/// Named lines of (x, y) points.
+pub type Lines = Vec<(String, Vec<(usize, f64)>)>;
+
+/// Panels of plain lines, each (caption, lines), three a row.
+pub fn panels(
+    out: &Path,
+    name: &str,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    panels: &[(String, Lines)],
+) -> anyhow::Result<()> {
+    let panels: Vec<Panel> = panels
+        .iter()
+        .map(|(caption, lines)| Panel {
+            caption: caption.clone(),
+            xlabel: xlabel.into(),
+            lines: lines.iter().map(|(l, p)| Line { label: l.clone(), pts: p.clone(), bars: Vec::new() }).collect(),
+        })
+        .collect();
+    chart(out, name, title, ylabel, &panels)
 }
 
 fn ratio_lines(s: &Series) -> Vec<(String, Vec<(usize, f64)>)> {

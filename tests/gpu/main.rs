@@ -9,6 +9,7 @@ mod baselines;
 mod common;
 mod conformance;
 mod devices;
+mod isa;
 mod kernels;
 mod user;
 

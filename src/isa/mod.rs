@@ -1,0 +1,261 @@
+//! `halftrace isa`: the compiler's view. Builds each kernel of a matrix on each chosen device
+//! — RADV null devices by family (AMD's production compiler, no GPU needed) or any device whose
+//! driver exposes `VK_KHR_pipeline_executable_properties` — and reads what the driver says of
+//! it: its statistics (registers, spills, scratch, LDS, code size, instruction mix, waves per
+//! SIMD) and its disassembly ([`counts`]: packed and scalar fp16, fp32, scratch traffic). One
+//! [`IsaRow`] per kernel × device; nothing is dispatched.
+
+pub mod counts;
+
+use crate::bvh::BRANCHINGS;
+use crate::gpu::executable::executables;
+use crate::gpu::null::{self, Family};
+use crate::gpu::{self, ContextOptions, Gpu, GpuError, Kernel, Source};
+use crate::layout::LayoutId;
+use crate::precision::FcChoice;
+use crate::report::isa::IsaRow;
+use crate::report::Status;
+use crate::variant::{KernelId, PacketImpl, Variant, PACKETS};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Which kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Matrix {
+    /// Every layout and math at B = 4, P = 1.
+    Quick,
+    /// The default sweep's matrix ([`Variant::matrix`]), each P in the device's implementation.
+    Default,
+    /// Every layout, math, B and P; every packet implementation of each P > 1; float controls
+    /// on, and off where the layout has such a build.
+    Full,
+}
+
+/// One kernel to build: the variant (float controls resolved per device when `fc` is auto)
+/// and the packet implementation (`None`: the device's choice).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Build {
+    pub variant: Variant,
+    pub fc: FcChoice,
+    pub imp: Option<PacketImpl>,
+}
+
+/// The kernels of `m` for `layouts` (empty: every layout).
+pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<Build> {
+    let keep = |l: LayoutId| layouts.is_empty() || layouts.contains(&l) || l == LayoutId::f32();
+    let auto = |v: Variant| Build { variant: v, fc: FcChoice::Auto, imp: None };
+    let mut out = Vec::new();
+    match m {
+        Matrix::Quick => {
+            for l in LayoutId::all().filter(|&l| keep(l)) {
+                for &math in l.info().maths {
+                    out.push(auto(Variant::new(l, 4, 1).with_math(math)));
+                }
+            }
+        }
+        Matrix::Default => out.extend(Variant::matrix().into_iter().filter(|v| keep(v.layout)).map(auto)),
+        Matrix::Full => {
+            for l in LayoutId::all().filter(|&l| keep(l)) {
+                let fcs: &[FcChoice] =
+                    if l.info().float_controls_off { &[FcChoice::On, FcChoice::Off] } else { &[FcChoice::On] };
+                for &math in l.info().maths {
+                    for b in BRANCHINGS {
+                        for p in PACKETS {
+                            let imps: &[Option<PacketImpl>] = if p == 1 {
+                                &[Some(PacketImpl::Single)]
+                            } else {
+                                &[Some(PacketImpl::Subgroup), Some(PacketImpl::Shared), Some(PacketImpl::Hybrid)]
+                            };
+                            for &fc in fcs {
+                                for &imp in imps {
+                                    out.push(Build { variant: Variant::new(l, b, p).with_math(math), fc, imp });
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Where kernels are built.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Target {
+    /// RADV's null device of a family.
+    Family(String),
+    /// A device by index or name (its driver must expose pipeline statistics).
+    Device(String),
+}
+
+/// What `isa` does.
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub targets: Vec<Target>,
+    pub builds: Vec<Build>,
+    /// Write every kernel's internal representations (NIR, the compiler's IR, disassembly)
+    /// under `disasm/<device>/` of the output folder.
+    pub disasm: Option<PathBuf>,
+    pub validation: bool,
+}
+
+/// What a run produced.
+pub struct Summary {
+    pub rows: Vec<IsaRow>,
+    /// Validation-layer messages, per device label.
+    pub validation_messages: Vec<String>,
+}
+
+/// Opens a target for statistics.
+fn open(t: &Target, validation: bool) -> Result<(Gpu, Option<Family>), GpuError> {
+    match t {
+        Target::Family(f) => Ok((null::open(f, validation)?, null::family(f))),
+        Target::Device(d) => {
+            let g = Gpu::new(&ContextOptions {
+                device: Some(d.clone()),
+                validation,
+                statistics: true,
+                ..Default::default()
+            })?;
+            let fam = null::family_of(&g.info.name);
+            Ok((g, fam))
+        }
+    }
+}
+
+/// A file-name-safe spelling of a device label.
+fn slug(s: &str) -> String {
+    let t: String = s.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '-' }).collect();
+    t.split('-').filter(|p| !p.is_empty()).collect::<Vec<_>>().join("-")
+}
+
+/// Builds every kernel of `cfg` on every target; `each` sees each row as it is made.
+pub fn run(cfg: &Config, mut each: impl FnMut(&IsaRow)) -> anyhow::Result<Summary> {
+    let mut rows = Vec::new();
+    let mut messages = Vec::new();
+    for t in &cfg.targets {
+        let (g, fam) = open(t, cfg.validation)?;
+        let amd = g.info.driver.to_lowercase().contains("radv") || g.info.driver.to_lowercase().contains("amd");
+        let flat_scratch = !matches!(fam.map(|f| f.generation), Some("GCN1" | "GCN2" | "GCN3" | "GCN4"));
+        let label = match fam {
+            Some(f) => f.name.to_string(),
+            None => slug(&g.info.name),
+        };
+        for b in &cfg.builds {
+            let row =
+                build_one(&g, fam, b, amd, flat_scratch, cfg.disasm.as_deref().map(|d| d.join(&label)).as_deref())?;
+            each(&row);
+            rows.push(row);
+        }
+        messages.extend(g.validation_messages().into_iter().map(|m| format!("{}: {m}", g.info.name)));
+    }
+    crate::report::isa::set_ratios(&mut rows);
+    Ok(Summary { rows, validation_messages: messages })
+}
+
+/// One kernel on one device: its row, skipped when the device lacks what it needs, failed
+/// when the driver refuses it.
+fn build_one(
+    g: &Gpu,
+    fam: Option<Family>,
+    b: &Build,
+    amd: bool,
+    flat_scratch: bool,
+    disasm: Option<&Path>,
+) -> anyhow::Result<IsaRow> {
+    let v = b.variant;
+    let mut row = IsaRow {
+        device: g.info.name.clone(),
+        family: fam.map(|f| f.name.to_string()).unwrap_or_default(),
+        generation: fam.map(|f| f.generation.to_string()).unwrap_or_default(),
+        driver: g.info.driver.clone(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        commit: env!("HALFTRACE_COMMIT").into(),
+        layout: v.layout.name().into(),
+        math: v.math.name().into(),
+        branching: v.branching,
+        packet: v.packet,
+        ..IsaRow::default()
+    };
+    let imp = b.imp.unwrap_or_else(|| gpu::kernel::choose_impl(g, &v, None));
+    row.packet_impl = format!("{imp:?}").to_lowercase();
+    let resolved = match gpu::support::resolve(&g.info, v, b.fc) {
+        Ok(r) => r,
+        Err(why) => {
+            row.kernel = KernelId::new(v, imp, false).name();
+            row.float_controls = v.fc.name().into();
+            row.status = Status::Skipped(why);
+            return Ok(row);
+        }
+    };
+    let k = KernelId::new(resolved, imp, false);
+    row.kernel = k.name();
+    row.float_controls = resolved.fc.name().into();
+    let t0 = Instant::now();
+    let kernel = match Kernel::build(g, &k, &Source::Builtin) {
+        Ok(k) => k,
+        Err(GpuError::Unsupported(why)) => {
+            row.status = Status::Skipped(why);
+            return Ok(row);
+        }
+        Err(e) => {
+            row.status = Status::Failed(format!("did not build: {e}"));
+            return Ok(row);
+        }
+    };
+    row.build_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let exes = executables(g, &kernel.pipe)?;
+    let Some(e) = exes.first() else {
+        row.status = Status::Failed("the driver reports no executable for the pipeline".into());
+        return Ok(row);
+    };
+    row.subgroup_size = e.subgroup_size;
+    row.stats = e.statistics.iter().map(|s| (s.name.clone(), s.value)).collect();
+    row.fill_known();
+    if amd {
+        if let Some((_, asm)) = e.representations.iter().find(|(n, _)| n.to_lowercase().contains("assembly")) {
+            row.asm = Some(counts::count(asm, flat_scratch));
+        }
+    }
+    if let Some(dir) = disasm {
+        std::fs::create_dir_all(dir)?;
+        for (name, text) in &e.representations {
+            crate::fsx::write_atomic(&dir.join(format!("{}.{}.txt", row.kernel, slug(name))), text.as_bytes())?;
+        }
+    }
+    Ok(row)
+}
+
+/// The families of [`null::FAMILIES`] the installed RADV opens a null device for. RADV
+/// aborts the process on a family it does not know, so each is tried in a child process:
+/// `exe probe-family` (the halftrace binary) with `RADV_FORCE_FAMILY` set, a few tens of
+/// milliseconds each, eight at a time.
+pub fn known_families(exe: &Path) -> Vec<Family> {
+    let probe = |f: &Family| -> bool {
+        std::process::Command::new(exe)
+            .arg("probe-family")
+            .env("RADV_FORCE_FAMILY", f.name)
+            .stdin(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .output()
+            .is_ok_and(|o| {
+                o.status.success() && String::from_utf8_lossy(&o.stdout).lines().any(|l| null::family_of(l) == Some(*f))
+            })
+    };
+    let mut ok = vec![false; null::FAMILIES.len()];
+    for (chunk, flags) in null::FAMILIES.chunks(8).zip(ok.chunks_mut(8)) {
+        std::thread::scope(|s| {
+            let hs: Vec<_> = chunk.iter().map(|f| s.spawn(move || probe(f))).collect();
+            for (h, flag) in hs.into_iter().zip(flags.iter_mut()) {
+                *flag = h.join().unwrap_or(false);
+            }
+        });
+    }
+    null::FAMILIES.iter().zip(ok).filter(|(_, k)| *k).map(|(f, _)| *f).collect()
+}
+
+/// The families `isa` builds for by default: those of [`null::DEFAULT_FAMILIES`] in `known`.
+pub fn default_families(known: &[Family]) -> Vec<String> {
+    null::DEFAULT_FAMILIES.iter().filter(|n| known.iter().any(|k| k.name == **n)).map(|n| n.to_string()).collect()
+}

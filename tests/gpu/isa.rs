@@ -1,0 +1,115 @@
+//! `halftrace isa` on RADV's null device for RDNA3 (AMD's compiler, no GPU): every kernel of
+//! the default matrix builds and reports the driver's statistics and its disassembly's mix,
+//! under the validation layer; `report` renders the folder; and null devices are refused by
+//! every command that would run on them, naming `isa`.
+
+use super::*;
+use halftrace::isa::{plan, Matrix};
+use halftrace::report::isa::IsaRow;
+
+const RADV_ICD: &str = "/usr/share/vulkan/icd.d/radeon_icd.json";
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("halftrace-isa-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn isa_builds_every_kernel_on_a_null_device() {
+    assert!(
+        std::path::Path::new(RADV_ICD).exists(),
+        "{RADV_ICD} is missing: RADV (mesa-vulkan-drivers, scripts/install-deps.sh) provides the null devices"
+    );
+    let out = tmp("navi31");
+    let bin = env!("CARGO_BIN_EXE_halftrace");
+    let o = Command::new(bin)
+        .args(["isa", "--family", "navi31", "--validation", "--quiet", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "isa failed:\n{stdout}\n{stderr}");
+    let rows: Vec<IsaRow> = serde_json::from_str(&std::fs::read_to_string(out.join("isa.json")).unwrap()).unwrap();
+    assert_eq!(rows.len(), plan(Matrix::Default, &[]).len(), "one row per kernel of the default matrix");
+    for r in &rows {
+        assert!(r.status.is_ok(), "{} on {}: {}", r.kernel, r.device, r.status);
+        assert_eq!(r.family, "navi31");
+        assert_eq!(r.generation, "RDNA3");
+        for (what, v) in
+            [("VGPRs", r.vgprs), ("scratch", r.scratch_bytes), ("waves", r.waves_per_simd), ("instr", r.instructions)]
+        {
+            assert!(v.is_some_and(|v| v > 0.0), "{}: no {what} statistic ({:?})", r.kernel, r.stats);
+        }
+        let a = r.asm.unwrap_or_else(|| panic!("{}: no disassembly counts", r.kernel));
+        assert!(a.valu > 0 && a.scratch_loads.is_some() && a.scratch_stores.is_some(), "{}: {a:?}", r.kernel);
+        // The disassembly's vector ALU count is the driver's, but for what it could not decode.
+        let driver = r.valu.unwrap() as u64;
+        assert!(a.valu <= driver && driver <= a.valu + a.undecoded, "{}: {a:?} against VALU {driver}", r.kernel);
+        let q = r.vs_f32.unwrap_or_else(|| panic!("{}: no ratio to f32", r.kernel));
+        if r.layout == "f32" {
+            assert_eq!((q.vgprs, q.scratch), (Some(1.0), Some(1.0)));
+        }
+    }
+    // f16h's stack entry is larger than f32's: more scratch at every B (P = 1), every math.
+    for r in rows.iter().filter(|r| r.layout == "f16h" && r.packet == 1) {
+        let f = rows.iter().find(|f| f.layout == "f32" && f.packet == 1 && f.branching == r.branching).unwrap();
+        assert!(
+            r.scratch_bytes > f.scratch_bytes,
+            "{}: scratch {:?} not above f32's {:?}",
+            r.kernel,
+            r.scratch_bytes,
+            f.scratch_bytes
+        );
+    }
+    // The fp16-math kernels compute in fp16 (scalar or packed); fp32-math ones hardly.
+    for r in rows.iter().filter(|r| r.math == "f16") {
+        let a = r.asm.unwrap();
+        assert!(a.packed_f16 + a.scalar_f16 > 100, "{}: {a:?}", r.kernel);
+    }
+    let md = std::fs::read_to_string(out.join("isa.md")).unwrap();
+    assert!(md.contains("## Compiler view") && md.contains("navi31 (RDNA3)"), "{md}");
+    for f in ["isa.csv", "isa_vgprs.png", "isa_scratch.svg"] {
+        assert!(out.join(f).exists(), "{f} not written");
+    }
+    // A second run into the folder is refused without --force, and leaves it as it was.
+    let again = Command::new(bin).args(["isa", "--family", "navi31", "--quick", "--out"]).arg(&out).output().unwrap();
+    assert!(!again.status.success() && String::from_utf8_lossy(&again.stderr).contains("--force"));
+    assert_eq!(std::fs::read_to_string(out.join("isa.md")).unwrap(), md);
+    // `report` renders an isa folder (alone here; beside sweep folders in the same way).
+    let merged = tmp("merged");
+    let o = Command::new(bin).arg("report").arg(&out).arg("--out").arg(&merged).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = std::fs::read_to_string(merged.join("report.md")).unwrap();
+    assert!(report.contains("## Compiler view") && report.contains("| f16h f16 | 4 |"), "{report}");
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&merged);
+}
+
+/// A null device runs nothing (a wait on it crashes inside RADV): every command that would run
+/// refuses it by name and points to `isa`, exiting 1 rather than crashing.
+#[test]
+fn null_devices_are_refused_by_the_commands_that_run() {
+    let scene = format!("{}/scenes/teapot.obj", env!("CARGO_MANIFEST_DIR"));
+    let out = tmp("refused");
+    let o = out.to_string_lossy().to_string();
+    let runs: [&[&str]; 4] = [
+        &["trace", "--scene", &scene, "--width", "8", "--height", "8"],
+        &["sweep", "--scene", &scene, "--width", "8", "--height", "8", "--layouts", "f32", "--quiet", "--out", &o],
+        &["bench", "--scene", &scene, "--width", "8", "--height", "8", "--rounds", "1", "--layouts", "f16h"],
+        &["conformance", "--quick", "--scene", &scene, "--out", &o],
+    ];
+    for args in runs {
+        let r = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+            .args(args)
+            .env("VK_ICD_FILENAMES", RADV_ICD)
+            .env("RADV_FORCE_FAMILY", "navi31")
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{}: {err}", args[0]);
+        assert!(err.contains("compile-only") && err.contains("halftrace isa"), "{}: {err}", args[0]);
+    }
+    assert!(!out.join("results.csv").exists(), "a refused sweep wrote rows");
+    let _ = std::fs::remove_dir_all(&out);
+}
