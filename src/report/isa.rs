@@ -138,9 +138,11 @@ impl IsaRow {
 }
 
 /// Sets every ok row's ratios to its f32 kernel (same device, driver, B, P, packet
-/// implementation).
+/// implementation and float controls).
 pub fn set_ratios(rows: &mut [IsaRow]) {
-    let key = |r: &IsaRow| (r.device.clone(), r.driver.clone(), r.branching, r.packet, r.packet_impl.clone());
+    let key = |r: &IsaRow| {
+        (r.device.clone(), r.driver.clone(), r.branching, r.packet, r.packet_impl.clone(), r.float_controls.clone())
+    };
     let base: BTreeMap<_, IsaRow> =
         rows.iter().filter(|r| r.layout == "f32" && r.status.is_ok()).map(|r| (key(r), r.clone())).collect();
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
