@@ -5,6 +5,7 @@ use super::outln;
 use crate::cli::IsaArgs;
 use crate::isa::{self, Matrix, Target};
 use crate::report::isa::IsaRow;
+use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -58,6 +59,16 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         targets.push(Target::Family(f));
     }
     targets.extend(a.device.iter().cloned().map(Target::Device));
+    // Each device once: a repeated name would give rows `report` refuses as duplicates.
+    let mut seen = Vec::new();
+    targets.retain(|t| {
+        if seen.contains(t) {
+            false
+        } else {
+            seen.push(t.clone());
+            true
+        }
+    });
     let matrix = match (a.quick, a.full) {
         (true, _) => Matrix::Quick,
         (_, true) => Matrix::Full,
@@ -68,30 +79,47 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         let name = d.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
         d.with_file_name(format!("isa-{name}"))
     });
-    let held: Vec<&str> = OUTPUTS.iter().copied().filter(|f| out.join(f).exists()).collect();
+    let held: Vec<&str> = OUTPUTS.iter().chain(&["disasm"]).copied().filter(|f| out.join(f).exists()).collect();
     anyhow::ensure!(
         held.is_empty() || a.force,
         "{} already holds {} from an earlier isa run; name another --out, or --force to replace them",
         out.display(),
         held.join(", ")
     );
-    let disasm: Option<PathBuf> = a.disasm.then(|| out.join("disasm"));
+    // The representations go to a folder of their own first, which replaces disasm/ only once
+    // the run has succeeded (a failed run leaves the earlier one as it was).
+    let disasm: Option<PathBuf> = a.disasm.then(|| out.join(format!(".disasm-{}.tmp", std::process::id())));
     let cfg = isa::Config { targets, builds: isa::plan(matrix, &a.layouts), disasm, validation: a.validation };
     let quiet = a.quiet;
     let mut stdout_err = None;
-    let s = isa::run(&cfg, |r| {
+    let result = isa::run(&cfg, |r| {
         if !quiet && stdout_err.is_none() {
             use std::io::Write as _;
             if let Err(e) = writeln!(std::io::stdout(), "{}", line(r)) {
                 stdout_err = Some(e);
             }
         }
-    })?;
-    if let Some(e) = stdout_err {
-        return Err(e.into());
-    }
+    });
+    let s = match (result, stdout_err) {
+        (Ok(s), None) => s,
+        (r, e) => {
+            if let Some(d) = &cfg.disasm {
+                let _ = std::fs::remove_dir_all(d);
+            }
+            return Err(r.err().unwrap_or_else(|| e.map(anyhow::Error::from).expect("one of the two failed")));
+        }
+    };
     crate::report::isa::write(&out, &s.rows)?;
     crate::report::isa::render(&s.rows, &out)?;
+    if let Some(tmp) = &cfg.disasm {
+        let dest = out.join("disasm");
+        if dest.exists() {
+            std::fs::remove_dir_all(&dest).with_context(|| format!("replacing {}", dest.display()))?;
+        }
+        if tmp.exists() {
+            std::fs::rename(tmp, &dest).with_context(|| format!("moving the representations to {}", dest.display()))?;
+        }
+    }
     let skipped = s.rows.iter().filter(|r| r.status.is_skipped()).count();
     let failed: Vec<&str> = s.rows.iter().filter(|r| r.status.is_failed()).map(|r| r.kernel.as_str()).collect();
     outln!(

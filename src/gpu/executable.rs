@@ -89,7 +89,8 @@ fn representations(
     let mut count = irs.len() as u32;
     let fp = ext.fp().get_pipeline_executable_internal_representations_khr;
     let r = unsafe { fp(gpu.device.handle(), einfo, &mut count, irs.as_mut_ptr()) };
-    if r != vk::Result::SUCCESS && r != vk::Result::INCOMPLETE {
+    // INCOMPLETE would mean a text cut short: an error too.
+    if r != vk::Result::SUCCESS {
         return Err(GpuError::Vk { call: "vkGetPipelineExecutableInternalRepresentationsKHR", result: r });
     }
     Ok(irs

@@ -87,7 +87,8 @@ pub fn family_of(device: &str) -> Option<Family> {
 }
 
 /// Runs `f` with `RADV_FORCE_FAMILY=name` (RADV reads it when an instance enumerates its
-/// devices), then puts the variable back as it was.
+/// devices), then puts the variable back as it was. Changing the environment is sound only
+/// while no other thread reads it: `isa` opens its devices from its one thread.
 fn with_family<T>(name: &str, f: impl FnOnce() -> T) -> T {
     let old = std::env::var_os("RADV_FORCE_FAMILY");
     std::env::set_var("RADV_FORCE_FAMILY", name);

@@ -22,7 +22,8 @@ fn instruction(c: &mut AsmCounts, ops: &[String], flat_scratch: bool) {
 /// One operation's class.
 fn op(c: &mut AsmCounts, m: &str, flat_scratch: bool) {
     if let Some(rest) = m.strip_prefix("v_") {
-        if rest.starts_with("pk_") && m.contains("_f16") {
+        // Packed: v_pk_*_f16, and the dot products of fp16 pairs (v_dot2_f32_f16, …).
+        if (rest.starts_with("pk_") || rest.starts_with("dot2")) && m.contains("_f16") {
             c.packed_f16 += 1;
         } else if rest.starts_with("cvt_") {
             c.conversions += 1;

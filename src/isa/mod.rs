@@ -12,7 +12,7 @@ use crate::gpu::executable::executables;
 use crate::gpu::null::{self, Family};
 use crate::gpu::{self, ContextOptions, Gpu, GpuError, Kernel, Source};
 use crate::layout::LayoutId;
-use crate::precision::FcChoice;
+use crate::precision::{FcChoice, FloatControls};
 use crate::report::isa::IsaRow;
 use crate::report::Status;
 use crate::variant::{KernelId, PacketImpl, Variant, PACKETS};
@@ -137,10 +137,11 @@ pub fn run(cfg: &Config, mut each: impl FnMut(&IsaRow)) -> anyhow::Result<Summar
     for t in &cfg.targets {
         let (g, fam) = open(t, cfg.validation)?;
         let amd = g.info.driver.to_lowercase().contains("radv") || g.info.driver.to_lowercase().contains("amd");
-        let flat_scratch = !matches!(fam.map(|f| f.generation), Some("GCN1" | "GCN2" | "GCN3" | "GCN4"));
-        let label = match fam {
-            Some(f) => f.name.to_string(),
-            None => slug(&g.info.name),
+        // GFX9 on has scratch_* instructions; an AMD device of unknown generation may not.
+        let flat_scratch = matches!(fam.map(|f| f.generation), Some(g) if !g.starts_with("GCN") || g == "GCN5");
+        let label = match t {
+            Target::Family(f) => f.clone(),
+            Target::Device(_) => slug(&g.info.name),
         };
         for b in &cfg.builds {
             let row =
@@ -183,8 +184,10 @@ fn build_one(
     let resolved = match gpu::support::resolve(&g.info, v, b.fc) {
         Ok(r) => r,
         Err(why) => {
-            row.kernel = KernelId::new(v, imp, false).name();
-            row.float_controls = v.fc.name().into();
+            // Named as asked: --full asks for both float-control modes of a layout.
+            let asked = v.with_fc(if b.fc == FcChoice::Off { FloatControls::Off } else { FloatControls::On });
+            row.kernel = KernelId::new(asked, imp, false).name();
+            row.float_controls = asked.fc.name().into();
             row.status = Status::Skipped(why);
             return Ok(row);
         }
@@ -205,7 +208,13 @@ fn build_one(
         }
     };
     row.build_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let exes = executables(g, &kernel.pipe)?;
+    let exes = match executables(g, &kernel.pipe) {
+        Ok(e) => e,
+        Err(e) => {
+            row.status = Status::Failed(format!("built, but its statistics could not be read: {e}"));
+            return Ok(row);
+        }
+    };
     let Some(e) = exes.first() else {
         row.status = Status::Failed("the driver reports no executable for the pipeline".into());
         return Ok(row);

@@ -119,11 +119,17 @@ impl IsaRow {
             (v[5], v[6], v[7], v[8], v[9]);
     }
 
-    /// `layout` or `layout math` for layouts with several math modes.
+    /// `layout` or `layout math` for layouts with several math modes, then `fc off` for a
+    /// kernel built without float controls.
     pub fn label(&self) -> String {
-        match LayoutId::parse(&self.layout) {
+        let l = match LayoutId::parse(&self.layout) {
             Ok(l) if l.info().maths.len() == 1 => self.layout.clone(),
             _ => format!("{} {}", self.layout, self.math),
+        };
+        if self.float_controls == "off" {
+            format!("{l} fc off")
+        } else {
+            l
         }
     }
 
@@ -145,13 +151,20 @@ pub fn set_ratios(rows: &mut [IsaRow]) {
     };
     let base: BTreeMap<_, IsaRow> =
         rows.iter().filter(|r| r.layout == "f32" && r.status.is_ok()).map(|r| (key(r), r.clone())).collect();
+    // An fp16 layout may build without float controls where f32 builds with them (or the
+    // other way round): then the f32 kernel of the other mode.
+    let other = |r: &IsaRow| {
+        let mut k = key(r);
+        k.5 = if k.5 == "off" { "on".into() } else { "off".into() };
+        k
+    };
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         (Some(0.0), Some(_)) => Some(1.0),
         _ => None,
     };
     for r in rows.iter_mut() {
-        r.vs_f32 = match base.get(&key(r)) {
+        r.vs_f32 = match base.get(&key(r)).or_else(|| base.get(&other(r))) {
             Some(f) if r.status.is_ok() => Some(VsF32 {
                 vgprs: ratio(r.vgprs, f.vgprs),
                 scratch: ratio(r.scratch_bytes, f.scratch_bytes),
@@ -356,7 +369,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
         "{h} Compiler view\n\n{} kernel build(s) on {} device(s) ({} ok, {} skipped, {} failed): the statistics the driver \
          reports through VK_KHR_pipeline_executable_properties and the instruction mix of its disassembly. A null \
          device (RADV_FORCE_FAMILY) is AMD's compiler for that GPU without the GPU: nothing ran. Ratios (×) are to \
-         the f32 kernel of the same device, B and P.\n\n",
+         the f32 kernel of the same device, B, P and packet implementation (and float controls, where it has them).\n\n",
         rows.len(),
         devices.len(),
         ok.len(),

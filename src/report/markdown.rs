@@ -60,7 +60,7 @@ pub fn render_with(
     for l in skip_lines {
         md += &format!("Skipped: {l}\n\n");
     }
-    if rows.is_empty() {
+    if rows.is_empty() && !isa_rows.is_empty() {
         // Only the compiler's view (isa folders).
         md += &super::isa::section(isa_rows, 2);
         crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;

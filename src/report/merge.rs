@@ -23,7 +23,7 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
     let mut seen: HashMap<RowId, (usize, usize)> = HashMap::new();
     let mut canon = Vec::new();
     let mut isa_rows: Vec<super::isa::IsaRow> = Vec::new();
-    let mut isa_seen: HashMap<(String, String, String, String), usize> = HashMap::new();
+    let mut isa_seen: HashMap<(String, String, String, String, String), usize> = HashMap::new();
     for (i, d) in dirs.iter().enumerate() {
         let c = d.canonicalize().unwrap_or_else(|_| d.clone());
         if let Some(j) = canon.iter().position(|x| *x == c) {
@@ -35,7 +35,8 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
         // A folder of `isa` alone has no results.csv.
         let sweep_rows = if isa.is_some() && !d.join("results.csv").exists() { Vec::new() } else { read_rows(d)? };
         for r in isa.unwrap_or_default() {
-            let id = (r.device.clone(), r.driver.clone(), r.kernel.clone(), r.packet_impl.clone());
+            let id =
+                (r.device.clone(), r.driver.clone(), r.kernel.clone(), r.packet_impl.clone(), r.float_controls.clone());
             if let Some(f) = isa_seen.get(&id) {
                 anyhow::bail!(
                     "{}/isa.json and {}/isa.json both hold {} on {} ({}); report the folders separately",
