@@ -75,6 +75,27 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
 #endif
 }
 
+#ifdef HALF_PAIRS
+// Children s and s + 1 tested together (half_test2; trav.comp's TEST_PAIRS loop).
+#define TEST_PAIRS 1
+bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1) {
+    HVEC3 lo0, hi0, lo1, hi1;
+    local_box(v.f, ni, s, lo0, hi0);
+    local_box(v.f, ni, s + 1u, lo1, hi1);
+    f16vec2 lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = f16vec2(lo0[a], lo1[a]);
+        hi[a] = f16vec2(hi0[a], hi1[a]);
+    }
+    vec2 tn, tn_lb;
+    bvec2 hit = half_test2(v.o, v.h, lo, hi, tn, tn_lb);
+    h0 = ChildHit(tn.x, tn_lb.x);
+    h1 = ChildHit(tn.y, tn_lb.y);
+    key = tn;
+    return hit;
+}
+#endif
+
 Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
 #ifdef MATH_F32
     return Entry(h.tn);

@@ -278,6 +278,84 @@ vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
 #endif
 }
 
+#if !defined(MATH_F32) && !defined(FC_OFF)
+// Two box tests at once (two children of a node), on f16vec2 lanes: the operations of slab16
+// (MATH_F16) or of slab_math's mixed path (fp16 differences and products, fp32 min/max), each
+// lane rounded exactly as the scalar test rounds it, so a GPU compiler can pack the fp16 ones
+// two to a register (v_pk_* on AMD, HFMA2/HMNMX2 on NVIDIA) and both results equal two scalar
+// tests bit for bit (min and max are exact). Returns (tn, tn_lb, tf_ub) per lane as fp32.
+#define HALF_PAIRS 1
+// lo[a], hi[a]: axis a of both boxes (box 0 in x, box 1 in y).
+void slab16x2(OVEC o, HALF w, f16vec2 lo[3], f16vec2 hi[3], out vec2 tn, out vec2 tn_lb, out vec2 tf_ub) {
+    f16vec2 w2 = f16vec2(w);
+#ifdef MATH_MIXED
+    // fp16 differences and products, fp32 min, max and bounds (slab_math's mixed path).
+    vec2 tn2 = vec2(-INF);
+    vec2 tf2 = vec2(INF);
+#else
+    f16vec2 tn2 = f16vec2(-UNB16);
+    f16vec2 tf2 = f16vec2(UNB16);
+#endif
+    for (int a = 0; a < 3; a++) {
+        f16vec2 o2 = f16vec2(o[a]);
+        precise f16vec2 la = (lo[a] - o2) - w2;
+        precise f16vec2 ha = (hi[a] - o2) + w2;
+#ifdef MATH_MIXED
+        vec2 t0, t1;
+        if (lr_d16[a] == H0) {
+            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
+            t0 = mix(vec2(INF), vec2(-INF), inside);
+            t1 = -t0;
+        } else {
+            f16vec2 id = f16vec2(lr_idir[a]);
+            precise f16vec2 x16 = la * id;
+            precise f16vec2 y16 = ha * id;
+            vec2 x = vec2(x16);
+            vec2 y = vec2(y16);
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+#else
+        f16vec2 t0, t1;
+        if (lr_d16[a] == H0) {
+            // la <= 0 && ha >= 0, one comparison a lane: max(la, -ha) <= 0 (exact).
+            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
+            t0 = mix(f16vec2(UNB16), f16vec2(-UNB16), inside);
+            t1 = -t0;
+        } else {
+            f16vec2 id = f16vec2(lr_idir[a]);
+            precise f16vec2 x = la * id;
+            precise f16vec2 y = ha * id;
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+#endif
+        tn2 = max(tn2, t0);
+        tf2 = min(tf2, t1);
+    }
+#ifdef MATH_MIXED
+    tn = tn2;
+    precise vec2 lb = tn2 * mix(vec2(1.0 + 1.0 / 256.0), vec2(1.0 - 1.0 / 256.0), greaterThan(tn2, vec2(0.0)));
+    precise vec2 ub = tf2 * mix(vec2(1.0 - 1.0 / 256.0), vec2(1.0 + 1.0 / 256.0), greaterThan(tf2, vec2(0.0)));
+    tn_lb = lb;
+    tf_ub = ub;
+#else
+    // x * (x > 0 ? down : up) with the factor chosen by x's sign bit, both lanes in one 32-bit
+    // integer operation: the same product, as a zero's factor does not matter (±0 either way)
+    // and no NaN occurs (half.rs, slab16).
+    const uint DOWN2 = 0x3bf83bf8u;                 // fp16(1 - 1/256) in both halves
+    const uint FLIP2 = 0x3bf83bf8u ^ 0x3c043c04u; // to fp16(1 + 1/256)
+    uint sn = (packFloat2x16(tn2) >> 15) & 0x00010001u;
+    uint sf = (packFloat2x16(tf2) >> 15) & 0x00010001u;
+    precise f16vec2 lb = tn2 * unpackFloat2x16(DOWN2 ^ (sn * 0xffffu & FLIP2));
+    precise f16vec2 ub = tf2 * unpackFloat2x16(DOWN2 ^ ((sf ^ 0x00010001u) * 0xffffu & FLIP2));
+    tn = vec2(tn2);
+    tn_lb = vec2(lb);
+    tf_ub = vec2(ub);
+#endif
+}
+#endif
+
 // Quantities fixed for one visit of one node by one ray (half.rs, half_visit): node frame scale k,
 // origin error e, the world parameter tp the origin stands for, the entry bound tlo.
 struct HVisit {
@@ -326,6 +404,24 @@ bool half_test(OVEC o, HVisit v, HVEC3 lo, HVEC3 hi, out float tn, out float tn_
     return q.y <= q.z && q.z >= float(v.lower) && q.y <= float(v.s_lim);
 }
 
+#ifdef HALF_PAIRS
+// Two box tests under one visit, as two half_test calls would give them (slab16x2; lo[a], hi[a]:
+// axis a of both boxes).
+bvec2 half_test2(OVEC o, HVisit v, f16vec2 lo[3], f16vec2 hi[3], out vec2 tn, out vec2 tn_lb) {
+    if (!v.prec) {
+        tn = vec2(float(v.lower));
+        tn_lb = tn;
+        return bvec2(true);
+    }
+    vec2 ub;
+    slab16x2(o, v.w, lo, hi, tn, tn_lb, ub);
+    // tn_lb <= ub && ub >= lower && tn_lb <= s_lim, two comparisons a lane (max is exact).
+    bvec2 a = lessThanEqual(max(tn_lb, vec2(float(v.lower))), ub);
+    bvec2 b = lessThanEqual(tn_lb, vec2(float(v.s_lim)));
+    return bvec2(a.x && b.x, a.y && b.y);
+}
+#endif
+
 // A lower bound of the world parameter of anything that matters in a hit child (half.rs,
 // half_child_tlo).
 float half_child_tlo(HVisit v, float tp, float tlo, float tn_lb) {
@@ -352,6 +448,12 @@ void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float 
     precise float inv_k = 1.0 / pk;
 #endif
     float wmax = 0.0;
+#if !defined(FC_OFF) && !defined(MATH_F32)
+    // The centre's fp16 (lo + hi) * 0.5: x and y on f16vec2 lanes (packed), z alone.
+    precise f16vec2 cxy = (lo.xy + hi.xy) * f16vec2(0.5);
+    precise float16_t cz = (lo.z + hi.z) * float16_t(0.5);
+    f16vec3 c3 = f16vec3(cxy, cz);
+#endif
     for (int a = 0; a < 3; a++) {
         float l = float(lo[a]);
         float u = float(hi[a]);
@@ -377,8 +479,8 @@ void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float 
         precise float hs = rte16(s16) * 0.5;
         float ch = rte16(hs);
 #else
-        // fp16 arithmetic: compilers may fold an f32->f16->f32 round trip away.
-        precise float16_t ch = (lo[a] + hi[a]) * float16_t(0.5);
+        // fp16 arithmetic (c3): compilers may fold an f32->f16->f32 round trip away.
+        float16_t ch = c3[a];
 #endif
         c[a] = ch;
         float cf = float(ch);

@@ -21,3 +21,10 @@ void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     lo = vec3(slot_lo(ni, s));
     hi = vec3(slot_hi(ni, s));
 }
+
+#ifdef HALF_PAIRS
+// Axis a of slots s and s + 1 (s even) as the lanes of one f16vec2: adjacent halves in the
+// node, one 32-bit word, no packing.
+f16vec2 pair_lo(uint ni, uint s, int a) { return f16vec2(nodes[ni].lo[a * B + s], nodes[ni].lo[a * B + s + 1]); }
+f16vec2 pair_hi(uint ni, uint s, int a) { return f16vec2(nodes[ni].hi[a * B + s], nodes[ni].hi[a * B + s + 1]); }
+#endif

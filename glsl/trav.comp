@@ -17,6 +17,8 @@
 //   float entry_t(Entry e)                      skip the node when it exceeds the closest hit
 //   Visit visit_node(uint ni, Entry e, RayPre r, float best_t)   per node and active ray
 //   bool  test_child(uint ni, uint s, Entry e, Visit v, RayPre r, out float key, out ChildHit h)
+//   (optional, with TEST_PAIRS defined) bvec2 test_pair(uint ni, uint s, Entry e, Visit v,
+//         RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1): slots s and s + 1 at once
 //   Entry child_entry(uint ni, uint s, Entry e, Visit v, ChildHit h, RayPre r, inout uint reanchors)
 #include "interface.glsl"
 #include "ray.glsl"
@@ -61,6 +63,39 @@ void main() {
         float key[B];
         ChildHit ch[B];
         [[unroll]] for (uint s = 0u; s < uint(B); s++) key[s] = INF;
+#ifdef TEST_PAIRS
+        // Two children per test (the layout's test_pair: packed fp16 arithmetic), the same
+        // results and counts as testing them one by one; a lone last child is tested in a
+        // pair with the (in-bounds, ignored) slot after it.
+        uint nc = uint(B);
+        [[unroll]] for (uint s = 0u; s < uint(B); s++) {
+            cw[s] = child_word(ni, s);
+            if (cw[s] == CHILD_EMPTY) {
+                nc = s;
+                break;
+            }
+        }
+        if (act) {
+            [[unroll]] for (uint s = 0u; s < uint(B); s += 2u) {
+                if (s >= nc) break;
+                bool two = s + 1u < nc;
+                cnt.y += two ? 2u : 1u;
+                vec2 k;
+                ChildHit h0, h1;
+                bvec2 hit = test_pair(ni, s, en, v, r, k, h0, h1);
+                if (hit.x) {
+                    mask |= 1u << s;
+                    key[s] = k.x;
+                    ch[s] = h0;
+                }
+                if (two && hit.y) {
+                    mask |= 2u << s;
+                    key[s + 1u] = k.y;
+                    ch[s + 1u] = h1;
+                }
+            }
+        }
+#else
         [[unroll]] for (uint s = 0u; s < uint(B); s++) {
             cw[s] = child_word(ni, s);
             if (cw[s] == CHILD_EMPTY) break;
@@ -74,6 +109,7 @@ void main() {
                 ch[s] = h;
             }
         }
+#endif
         // One reduction over the packet: active rays, the union of hit children, each hit
         // child's smallest key. A node no ray is active for is skipped (nothing was tested).
         uint nact;

@@ -57,6 +57,45 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
     return tn <= tf && tf >= H0 && tn <= v.s_lim;
 }
 
+// Children s and s + 1 tested together on f16vec2 lanes (packed fp16; trav.comp's TEST_PAIRS
+// loop): lane by lane the operations of test_child, so the same results bit for bit.
+#define TEST_PAIRS 1
+bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1) {
+    f16vec2 lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = pair_lo(ni, s, a);
+        hi[a] = pair_hi(ni, s, a);
+    }
+    f16vec2 tn = f16vec2(-HINF);
+    f16vec2 tf = f16vec2(HINF);
+    for (int a = 0; a < 3; a++) {
+        f16vec2 o2 = f16vec2(en.o[a]);
+        precise f16vec2 la = lo[a] - o2;
+        precise f16vec2 ha = hi[a] - o2;
+        f16vec2 t0, t1;
+        if (lr_d16[a] == H0) {
+            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
+            t0 = mix(f16vec2(HINF), f16vec2(-HINF), inside);
+            t1 = -t0;
+        } else {
+            f16vec2 id = f16vec2(lr_idir[a]);
+            precise f16vec2 x = la * id;
+            precise f16vec2 y = ha * id;
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+        tn = max(tn, t0);
+        tf = min(tf, t1);
+    }
+    key = vec2(tn);
+    h0 = ChildHit(tn.x, f16vec3(lo[0].x, lo[1].x, lo[2].x), f16vec3(hi[0].x, hi[1].x, hi[2].x));
+    h1 = ChildHit(tn.y, f16vec3(lo[0].y, lo[1].y, lo[2].y), f16vec3(hi[0].y, hi[1].y, hi[2].y));
+    // tn <= tf && tf >= 0 && tn <= s_lim, two comparisons a lane (max is exact).
+    bvec2 a = lessThanEqual(max(tn, f16vec2(H0)), tf);
+    bvec2 b = lessThanEqual(tn, f16vec2(v.s_lim));
+    return bvec2(a.x && b.x, a.y && b.y);
+}
+
 float16_t finite16(float16_t x) { return isnan(x) ? H0 : clamp(x, float16_t(-F16_MAX), float16_t(F16_MAX)); }
 
 Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inout uint reanchors) {
@@ -64,13 +103,16 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     derive_child(en.wk.xyz, en.wk.w, h.lo, h.hi, cc, cr, cw, ck);
     float16_t se = max(h.tn, H0);
     float16_t r16 = float16_t(cr);
-    f16vec3 o2;
-    for (int a = 0; a < 3; a++) {
-        precise float16_t ea = en.o[a] + se * lr_d16[a];
-        precise float16_t ec = ea - cc[a];
-        precise float16_t oa = ec * r16;
-        o2[a] = finite16(oa);
-    }
+    // x and y on f16vec2 lanes (packed), z alone; per axis the same operations.
+    precise f16vec2 eaxy = en.o.xy + f16vec2(se) * lr_d16.xy;
+    precise float16_t eaz = en.o.z + se * lr_d16.z;
+    precise f16vec2 ecxy = eaxy - cc.xy;
+    precise float16_t ecz = eaz - cc.z;
+    precise f16vec2 oaxy = ecxy * f16vec2(r16);
+    precise float16_t oaz = ecz * r16;
+    // finite16 of x and y on lanes: the clamp packed, NaN (compared a lane) to 0.
+    f16vec2 cxy = clamp(oaxy, f16vec2(-F16_MAX), f16vec2(F16_MAX));
+    f16vec3 o2 = f16vec3(mix(cxy, f16vec2(H0), isnan(oaxy)), finite16(oaz));
     precise float step_t = float(se) / v.mk;
     precise float tp = en.tp + step_t;
     return Entry(vec4(cw, ck), o2, tp);

@@ -39,6 +39,30 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
     return hit;
 }
 
+#ifdef HALF_PAIRS
+// Children s and s + 1 tested together (half_test2; trav.comp's TEST_PAIRS loop).
+#define TEST_PAIRS 1
+bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1) {
+    f16vec2 lo[3], hi[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = pair_lo(ni, s, a);
+        hi[a] = pair_hi(ni, s, a);
+    }
+    h0.lo = f16vec3(lo[0].x, lo[1].x, lo[2].x);
+    h0.hi = f16vec3(hi[0].x, hi[1].x, hi[2].x);
+    h1.lo = f16vec3(lo[0].y, lo[1].y, lo[2].y);
+    h1.hi = f16vec3(hi[0].y, hi[1].y, hi[2].y);
+    vec2 tn, tn_lb;
+    bvec2 hit = half_test2(en.o, v, lo, hi, tn, tn_lb);
+    h0.tn = tn.x;
+    h0.tn_lb = tn_lb.x;
+    h1.tn = tn.y;
+    h1.tn_lb = tn_lb.y;
+    key = tn;
+    return hit;
+}
+#endif
+
 // The stack entry of a hit inner child (hooks.rs, child_entry): its frame, and the origin
 // moved into it in fp16, or re-anchored from the fp32 world ray when the bound grows too large
 // (counted in `reanchors`).
@@ -63,6 +87,26 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     if (v.prec && cr <= R_MAX && fits) {
         float emag = 0.0, ecmag = 0.0, omag = 0.0;
         bool finite = true;
+#if !defined(MATH_F32) && !defined(FC_OFF)
+        // The move of x and y on f16vec2 lanes (packed), z alone: per axis the operations of
+        // the loop below, rounded the same.
+        float16_t s_e = TO_HALF(se);
+        float16_t r16c = float16_t(cr);
+        precise f16vec2 eaxy = en.o.xy + f16vec2(s_e) * lr_d16.xy;
+        precise float16_t eaz = en.o.z + s_e * lr_d16.z;
+        precise f16vec2 ecxy = eaxy - cc.xy;
+        precise float16_t ecz = eaz - cc.z;
+        precise f16vec2 oaxy = ecxy * f16vec2(r16c);
+        precise float16_t oaz = ecz * r16c;
+        o2 = f16vec3(oaxy, oaz);
+        f16vec3 ea3 = f16vec3(eaxy, eaz), ec3 = f16vec3(ecxy, ecz);
+        for (int a = 0; a < 3; a++) {
+            emag = max(emag, abs(float(ea3[a])));
+            ecmag = max(ecmag, abs(float(ec3[a])));
+            omag = max(omag, abs(float(o2[a])));
+            finite = finite && !isinf(o2[a]) && !isnan(o2[a]);
+        }
+#else
         for (int a = 0; a < 3; a++) {
 #ifdef MATH_F32
             precise float ea = en.o[a] + se * float(lr_d16[a]);
@@ -94,6 +138,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
             finite = finite && !isinf(oa) && !isnan(oa);
 #endif
         }
+#endif
         precise float step_t = se / v.mk;
         precise float tpn = en.tp + step_t;
         float wmax = max(max(max(0.0, abs(cw.x)), abs(cw.y)), abs(cw.z));
