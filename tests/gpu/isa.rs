@@ -62,10 +62,12 @@ fn isa_builds_every_kernel_on_a_null_device() {
             f.scratch_bytes
         );
     }
-    // The fp16-math kernels compute in fp16 (scalar or packed); fp32-math ones hardly.
-    for r in rows.iter().filter(|r| r.math == "f16") {
+    // The fp16-math kernels compute in fp16, their box tests packed two children to a
+    // register (v_pk_*_f16: glsl/half.glsl, slab16x2).
+    for r in rows.iter().filter(|r| r.math == "f16" || r.math == "mixed") {
         let a = r.asm.unwrap();
-        assert!(a.packed_f16 + a.scalar_f16 > 100, "{}: {a:?}", r.kernel);
+        assert!(a.packed_f16 + a.scalar_f16 > 50, "{}: {a:?}", r.kernel);
+        assert!(a.packed_f16 >= 30, "{}: only {} packed fp16 instructions ({a:?})", r.kernel, a.packed_f16);
     }
     let md = std::fs::read_to_string(out.join("isa.md")).unwrap();
     assert!(md.contains("## Compiler view") && md.contains("navi31 (RDNA3)"), "{md}");
