@@ -279,12 +279,55 @@ vec3 slab_math(OVEC o, HALF w, HVEC3 lo, HVEC3 hi) {
 }
 
 #if !defined(MATH_F32) && !defined(FC_OFF)
+// Packed fp16 (f16vec2 lanes) for the builds with float controls and fp16 storage math.
+#define HALF_PAIRS 1
+// The fp16 origin move of f16h and f16h-poster: ea = o + s * d, ec = ea - c, the result ec * r,
+// x and y on f16vec2 lanes (packed), z alone; per axis the scalar operations, rounded the same.
+f16vec3 move16(f16vec3 o, float16_t s, f16vec3 c, float16_t r, out f16vec3 ea, out f16vec3 ec) {
+    precise f16vec2 eaxy = o.xy + f16vec2(s) * lr_d16.xy;
+    precise float16_t eaz = o.z + s * lr_d16.z;
+    precise f16vec2 ecxy = eaxy - c.xy;
+    precise float16_t ecz = eaz - c.z;
+    precise f16vec2 oaxy = ecxy * f16vec2(r);
+    precise float16_t oaz = ecz * r;
+    ea = f16vec3(eaxy, eaz);
+    ec = f16vec3(ecxy, ecz);
+    return f16vec3(oaxy, oaz);
+}
+
+// The fp16 slab of two boxes on lanes (slab16's loop; lo[a], hi[a]: axis a of both boxes,
+// box 0 in x, box 1 in y), each widened by w2 when `widen` (a constant at every call, so no
+// subtraction of 0 is left where it is false): (tn, tf) per lane.
+void slab16x2_span(f16vec3 o, bool widen, f16vec2 w2, f16vec2 lo[3], f16vec2 hi[3], out f16vec2 tn, out f16vec2 tf) {
+    tn = f16vec2(-UNB16);
+    tf = f16vec2(UNB16);
+    for (int a = 0; a < 3; a++) {
+        f16vec2 o2 = f16vec2(o[a]);
+        precise f16vec2 la = widen ? (lo[a] - o2) - w2 : lo[a] - o2;
+        precise f16vec2 ha = widen ? (hi[a] - o2) + w2 : hi[a] - o2;
+        f16vec2 t0, t1;
+        if (lr_d16[a] == H0) {
+            // la <= 0 && ha >= 0, one comparison a lane: max(la, -ha) <= 0 (exact).
+            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
+            t0 = mix(f16vec2(UNB16), f16vec2(-UNB16), inside);
+            t1 = -t0;
+        } else {
+            f16vec2 id = f16vec2(lr_idir[a]);
+            precise f16vec2 x = la * id;
+            precise f16vec2 y = ha * id;
+            t0 = min(x, y);
+            t1 = max(x, y);
+        }
+        tn = max(tn, t0);
+        tf = min(tf, t1);
+    }
+}
+
 // Two box tests at once (two children of a node), on f16vec2 lanes: the operations of slab16
 // (MATH_F16) or of slab_math's mixed path (fp16 differences and products, fp32 min/max), each
 // lane rounded exactly as the scalar test rounds it, so a GPU compiler can pack the fp16 ones
 // two to a register (v_pk_* on AMD, HFMA2/HMNMX2 on NVIDIA) and both results equal two scalar
 // tests bit for bit (min and max are exact). Returns (tn, tn_lb, tf_ub) per lane as fp32.
-#define HALF_PAIRS 1
 // lo[a], hi[a]: axis a of both boxes (box 0 in x, box 1 in y).
 void slab16x2(OVEC o, HALF w, f16vec2 lo[3], f16vec2 hi[3], out vec2 tn, out vec2 tn_lb, out vec2 tf_ub) {
     f16vec2 w2 = f16vec2(w);
@@ -292,15 +335,10 @@ void slab16x2(OVEC o, HALF w, f16vec2 lo[3], f16vec2 hi[3], out vec2 tn, out vec
     // fp16 differences and products, fp32 min, max and bounds (slab_math's mixed path).
     vec2 tn2 = vec2(-INF);
     vec2 tf2 = vec2(INF);
-#else
-    f16vec2 tn2 = f16vec2(-UNB16);
-    f16vec2 tf2 = f16vec2(UNB16);
-#endif
     for (int a = 0; a < 3; a++) {
         f16vec2 o2 = f16vec2(o[a]);
         precise f16vec2 la = (lo[a] - o2) - w2;
         precise f16vec2 ha = (hi[a] - o2) + w2;
-#ifdef MATH_MIXED
         vec2 t0, t1;
         if (lr_d16[a] == H0) {
             bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
@@ -315,31 +353,17 @@ void slab16x2(OVEC o, HALF w, f16vec2 lo[3], f16vec2 hi[3], out vec2 tn, out vec
             t0 = min(x, y);
             t1 = max(x, y);
         }
-#else
-        f16vec2 t0, t1;
-        if (lr_d16[a] == H0) {
-            // la <= 0 && ha >= 0, one comparison a lane: max(la, -ha) <= 0 (exact).
-            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
-            t0 = mix(f16vec2(UNB16), f16vec2(-UNB16), inside);
-            t1 = -t0;
-        } else {
-            f16vec2 id = f16vec2(lr_idir[a]);
-            precise f16vec2 x = la * id;
-            precise f16vec2 y = ha * id;
-            t0 = min(x, y);
-            t1 = max(x, y);
-        }
-#endif
         tn2 = max(tn2, t0);
         tf2 = min(tf2, t1);
     }
-#ifdef MATH_MIXED
     tn = tn2;
     precise vec2 lb = tn2 * mix(vec2(1.0 + 1.0 / 256.0), vec2(1.0 - 1.0 / 256.0), greaterThan(tn2, vec2(0.0)));
     precise vec2 ub = tf2 * mix(vec2(1.0 - 1.0 / 256.0), vec2(1.0 + 1.0 / 256.0), greaterThan(tf2, vec2(0.0)));
     tn_lb = lb;
     tf_ub = ub;
 #else
+    f16vec2 tn2, tf2;
+    slab16x2_span(o, true, w2, lo, hi, tn2, tf2);
     // x * (x > 0 ? down : up) with the factor chosen by x's sign bit, both lanes in one 32-bit
     // integer operation: the same product, as a zero's factor does not matter (±0 either way)
     // and no NaN occurs (half.rs, slab16).

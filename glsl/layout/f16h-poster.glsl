@@ -66,27 +66,9 @@ bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out 
         lo[a] = pair_lo(ni, s, a);
         hi[a] = pair_hi(ni, s, a);
     }
-    f16vec2 tn = f16vec2(-HINF);
-    f16vec2 tf = f16vec2(HINF);
-    for (int a = 0; a < 3; a++) {
-        f16vec2 o2 = f16vec2(en.o[a]);
-        precise f16vec2 la = lo[a] - o2;
-        precise f16vec2 ha = hi[a] - o2;
-        f16vec2 t0, t1;
-        if (lr_d16[a] == H0) {
-            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
-            t0 = mix(f16vec2(HINF), f16vec2(-HINF), inside);
-            t1 = -t0;
-        } else {
-            f16vec2 id = f16vec2(lr_idir[a]);
-            precise f16vec2 x = la * id;
-            precise f16vec2 y = ha * id;
-            t0 = min(x, y);
-            t1 = max(x, y);
-        }
-        tn = max(tn, t0);
-        tf = min(tf, t1);
-    }
+    // Not widened: the poster's test.
+    f16vec2 tn, tf;
+    slab16x2_span(en.o, false, f16vec2(H0), lo, hi, tn, tf);
     key = vec2(tn);
     h0 = ChildHit(tn.x, f16vec3(lo[0].x, lo[1].x, lo[2].x), f16vec3(hi[0].x, hi[1].x, hi[2].x));
     h1 = ChildHit(tn.y, f16vec3(lo[0].y, lo[1].y, lo[2].y), f16vec3(hi[0].y, hi[1].y, hi[2].y));
@@ -103,16 +85,11 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     derive_child(en.wk.xyz, en.wk.w, h.lo, h.hi, cc, cr, cw, ck);
     float16_t se = max(h.tn, H0);
     float16_t r16 = float16_t(cr);
-    // x and y on f16vec2 lanes (packed), z alone; per axis the same operations.
-    precise f16vec2 eaxy = en.o.xy + f16vec2(se) * lr_d16.xy;
-    precise float16_t eaz = en.o.z + se * lr_d16.z;
-    precise f16vec2 ecxy = eaxy - cc.xy;
-    precise float16_t ecz = eaz - cc.z;
-    precise f16vec2 oaxy = ecxy * f16vec2(r16);
-    precise float16_t oaz = ecz * r16;
+    f16vec3 ea, ec;
+    f16vec3 oa = move16(en.o, se, cc, r16, ea, ec);
     // finite16 of x and y on lanes: the clamp packed, NaN (compared a lane) to 0.
-    f16vec2 cxy = clamp(oaxy, f16vec2(-F16_MAX), f16vec2(F16_MAX));
-    f16vec3 o2 = f16vec3(mix(cxy, f16vec2(H0), isnan(oaxy)), finite16(oaz));
+    f16vec2 cxy = clamp(oa.xy, f16vec2(-F16_MAX), f16vec2(F16_MAX));
+    f16vec3 o2 = f16vec3(mix(cxy, f16vec2(H0), isnan(oa.xy)), finite16(oa.z));
     precise float step_t = float(se) / v.mk;
     precise float tp = en.tp + step_t;
     return Entry(vec4(cw, ck), o2, tp);

@@ -88,18 +88,9 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
         float emag = 0.0, ecmag = 0.0, omag = 0.0;
         bool finite = true;
 #if !defined(MATH_F32) && !defined(FC_OFF)
-        // The move of x and y on f16vec2 lanes (packed), z alone: per axis the operations of
-        // the loop below, rounded the same.
-        float16_t s_e = TO_HALF(se);
-        float16_t r16c = float16_t(cr);
-        precise f16vec2 eaxy = en.o.xy + f16vec2(s_e) * lr_d16.xy;
-        precise float16_t eaz = en.o.z + s_e * lr_d16.z;
-        precise f16vec2 ecxy = eaxy - cc.xy;
-        precise float16_t ecz = eaz - cc.z;
-        precise f16vec2 oaxy = ecxy * f16vec2(r16c);
-        precise float16_t oaz = ecz * r16c;
-        o2 = f16vec3(oaxy, oaz);
-        f16vec3 ea3 = f16vec3(eaxy, eaz), ec3 = f16vec3(ecxy, ecz);
+        // The move (half.glsl, move16): per axis the operations of the loop below.
+        f16vec3 ea3, ec3;
+        o2 = move16(en.o, TO_HALF(se), cc, float16_t(cr), ea3, ec3);
         for (int a = 0; a < 3; a++) {
             emag = max(emag, abs(float(ea3[a])));
             ecmag = max(ecmag, abs(float(ec3[a])));
