@@ -171,8 +171,9 @@ pub struct TraceArgs {
     /// storageBuffer16BitAccess, floatControls, subgroupSizeControl, rayQuery.
     #[arg(long, hide = true)]
     pub mask_feature: Vec<String>,
-    /// Seconds a dispatch may run before its kernel is declared hung (default 600).
-    #[arg(long)]
+    /// How long a dispatch may run before its kernel is declared hung: seconds or e.g. 90s,
+    /// 10m (default 600 s; at most a week).
+    #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--kernel-timeout", s))]
     pub kernel_timeout: Option<f64>,
 }
 
@@ -259,6 +260,11 @@ pub struct SweepArgs {
     /// job array it defaults to the array task (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT).
     #[arg(long)]
     pub shard: Option<String>,
+    /// Wall-time budget (seconds, or e.g. 90s, 8m, 1h30m): no job starts once the time so far
+    /// plus the longest job so far would pass it (the first job always runs); --resume runs
+    /// the rest.
+    #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--budget", s))]
+    pub budget: Option<f64>,
     /// Continue the sweep in --out: keep its rows, run only the jobs they do not record.
     #[arg(long)]
     pub resume: bool,
@@ -274,8 +280,9 @@ pub struct SweepArgs {
     /// Treat a device feature as missing (testing), e.g. rayQuery.
     #[arg(long, hide = true)]
     pub mask_feature: Vec<String>,
-    /// Seconds a dispatch may run before its kernel is declared hung (default 600).
-    #[arg(long)]
+    /// How long a dispatch may run before its kernel is declared hung: seconds or e.g. 90s,
+    /// 10m (default 600 s; at most a week).
+    #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--kernel-timeout", s))]
     pub kernel_timeout: Option<f64>,
 }
 

@@ -36,4 +36,5 @@ pub mod report;
 pub mod runner;
 pub mod scene;
 pub mod sweep;
+pub mod units;
 pub mod variant;

@@ -114,6 +114,26 @@ fn bad_parameters() {
     assert!(e.contains("--camera"), "{e}");
 }
 
+/// Durations are range-checked where they are parsed (flags and the sweep's TOML): a huge or
+/// infinite timeout was a panic converting it to a Duration.
+#[test]
+fn durations_are_range_checked() {
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    for v in ["1e300", "inf", "nan", "0", "-1", "169h", "5 minutes"] {
+        let e = fails(&["trace", "--scene", t, &format!("--kernel-timeout={v}")]);
+        assert!(e.contains("--kernel-timeout") && e.contains(v), "{v}: {e}");
+        let e = fails(&["sweep", "--scene", t, &format!("--budget={v}"), "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("--budget") && e.contains(v), "{v}: {e}");
+    }
+    assert!(!tmp("never").exists());
+    for v in ["1e300", "inf", "-3.0", "0.0"] {
+        let toml = obj(&format!("timeout-{v}.toml"), &format!("kernel_timeout = {v}\n"));
+        let e = fails(&["sweep", "--config", toml.to_str().unwrap(), "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("kernel_timeout") && e.contains("timeout-"), "{v}: {e}");
+    }
+}
+
 fn write_raw_npy(name: &str, header: &str, data: &[u8]) -> PathBuf {
     let mut h = header.to_string();
     let pad = (64 - (10 + h.len() + 1) % 64) % 64;

@@ -36,6 +36,7 @@ fn config(a: &SweepArgs) -> anyhow::Result<Config> {
     c.kernel_timeout = a.kernel_timeout.unwrap_or(c.kernel_timeout);
     c.device = a.device.clone().unwrap_or(c.device);
     c.float_controls = a.float_controls.unwrap_or(c.float_controls);
+    c.budget = a.budget;
     c.check()?;
     c.shard = match &a.shard {
         Some(s) => Some(s.parse().map_err(anyhow::Error::msg)?),
@@ -61,6 +62,13 @@ pub fn sweep(a: &SweepArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let s = sweep::run(&c, &out, a.quiet, &a.mask_feature, kept)?;
     outln!("{} variants in {:.0} s; report: {}", s.rows, t0.elapsed().as_secs_f64(), s.out.join("report.md").display());
+    if s.unrun > 0 {
+        outln!(
+            "budget of {:.0} s reached: {} job(s) not run; rerun with --resume to run them",
+            c.budget.unwrap_or(0.0),
+            s.unrun
+        );
+    }
     anyhow::ensure!(s.failed.is_empty(), "{} variant(s) failed validation: {}", s.failed.len(), s.failed.join(", "));
     Ok(())
 }

@@ -18,7 +18,6 @@ use std::time::Instant;
 
 pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(a.repeat >= 1, "--repeat {}: at least one timed dispatch is needed", a.repeat);
-    anyhow::ensure!(a.kernel_timeout.is_none_or(|t| t > 0.0), "--kernel-timeout must be a positive number of seconds");
     check_outputs(a)?;
     let layout = match a.layout {
         LayoutArg::Baseline(b) => return trace_baseline(a, b),

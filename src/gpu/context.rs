@@ -138,7 +138,9 @@ impl Gpu {
             .expect("a device with compute timestamps has such a queue family") as u32;
         let logical = Self::create_device(&inst, physical, &info, qfi, opts.statistics)?;
         let queue = unsafe { logical.device.get_device_queue(qfi, 0) };
-        let timeout = opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).max(0.001);
+        // Parsed values are checked (crate::units); the clamp keeps any other caller's value
+        // convertible.
+        let timeout = opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).clamp(0.001, crate::units::MAX_SECONDS);
         Ok(Gpu {
             instance,
             physical,
@@ -148,7 +150,8 @@ impl Gpu {
             info,
             validation_enabled: inst.validation(),
             capture: opts.statistics,
-            kernel_timeout: std::time::Duration::from_secs_f64(timeout),
+            kernel_timeout: std::time::Duration::try_from_secs_f64(timeout)
+                .unwrap_or(std::time::Duration::from_secs(600)),
             hung: AtomicBool::new(false),
             logical: ManuallyDrop::new(logical),
             inst: ManuallyDrop::new(inst),

@@ -54,6 +54,11 @@ pub struct Config {
     /// key: the same config serves every shard).
     #[serde(skip)]
     pub shard: Option<Shard>,
+    /// Wall-time budget in seconds (`--budget`; not a file key): no job starts once the time
+    /// run so far plus the longest job so far would exceed it (the first job always runs);
+    /// `--resume` runs the rest.
+    #[serde(skip)]
+    pub budget: Option<f64>,
 }
 
 /// A user kernel in a sweep: a GLSL compute file or SPIR-V module standing in for the built-in
@@ -129,6 +134,7 @@ impl Default for Config {
             float_controls: FcChoice::Auto,
             kernel: Vec::new(),
             shard: None,
+            budget: None,
         }
     }
 }
@@ -166,7 +172,7 @@ impl Config {
             m.parse::<Math>().map_err(anyhow::Error::msg).context("maths")?;
         }
         anyhow::ensure!(self.repeat >= 1, "repeat must be at least 1");
-        anyhow::ensure!(self.kernel_timeout > 0.0, "kernel_timeout must be positive (seconds)");
+        crate::units::check_seconds("kernel_timeout", self.kernel_timeout).map_err(anyhow::Error::msg)?;
         anyhow::ensure!(self.width > 0 && self.height > 0, "width and height must be positive");
         crate::rays::check_image_size(self.width, self.height).map_err(anyhow::Error::msg)?;
         for (i, k) in self.kernel.iter().enumerate() {

@@ -20,6 +20,8 @@ pub struct Summary {
     pub rows: usize,
     pub failed: Vec<String>,
     pub out: PathBuf,
+    /// Jobs left unrun when the budget ran out (`Config::budget`).
+    pub unrun: usize,
 }
 
 /// What to do with an output folder that already holds files.
@@ -74,6 +76,7 @@ pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
 /// their jobs are not run again.
 pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row>) -> anyhow::Result<Summary> {
     cfg.check()?;
+    let start = std::time::Instant::now();
     let opts = gpu::ContextOptions {
         device: (!cfg.device.is_empty()).then(|| cfg.device.clone()),
         mask_features: mask.to_vec(),
@@ -111,7 +114,15 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     );
     let last = jobs::last_uses(&jobs);
     let mut failed = Vec::new();
+    let (mut longest, mut unrun) = (0.0f64, 0);
     for (i, job) in jobs.iter().enumerate() {
+        if let Some(budget) = cfg.budget {
+            if i > 0 && start.elapsed().as_secs_f64() + longest > budget {
+                unrun = jobs.len() - i;
+                break;
+            }
+        }
+        let job_start = std::time::Instant::now();
         bar.set_message(ex.describe(job));
         let mut row = match ex.run_job(job, &bar) {
             Ok(row) => row,
@@ -162,12 +173,17 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
         if jobs.get(i + 1).is_none_or(|n| n.scene != job.scene) {
             ex.finish_scene(out)?;
         }
+        longest = longest.max(job_start.elapsed().as_secs_f64());
         bar.inc(1);
+    }
+    if unrun > 0 {
+        // Stopped by the budget inside a scene: its images from the jobs that ran.
+        ex.finish_scene(out)?;
     }
     bar.finish_and_clear();
     drop(ex);
     report::render(writer.rows(), out, &[out.to_path_buf()])?;
-    Ok(Summary { rows: writer.rows().len(), failed, out: out.into() })
+    Ok(Summary { rows: writer.rows().len(), failed, out: out.into(), unrun })
 }
 
 /// The first scene's primary hits and nodes per pixel of each layout (B = 4, P = 1, default
