@@ -51,6 +51,10 @@ pub enum Cmd {
     /// Check every variant on a device against the CPU references (what to run first on a new
     /// GPU): writes conformance.md and conformance.csv, exits non-zero on any failure.
     Conformance(ConformanceArgs),
+    /// A device's whole report in one command sized to a wall-time budget: devices,
+    /// conformance --quick, a short bench, a sweep in the time that remains, isa where the
+    /// driver reports pipeline statistics; one folder named after the device, resumable.
+    DeviceReport(DeviceReportArgs),
     /// The compiler's view: build each kernel on RADV null devices (AMD's shader compiler for a
     /// GPU family, no GPU needed) or on a device whose driver reports pipeline statistics, and
     /// write registers, scratch, occupancy and the fp16 instruction mix per kernel (isa.md,
@@ -385,4 +389,45 @@ pub struct BenchArgs {
     /// Also write the report (Markdown) to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+pub struct DeviceReportArgs {
+    /// Vulkan device: index or name substring (default: the device every command picks).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Wall time for the whole report (seconds, or e.g. 90s, 8m, 1h): the fixed steps run whole,
+    /// the sweep gets what remains (at least one job).
+    #[arg(long, default_value = "8m", value_parser = |s: &str| crate::units::parse_duration("--budget", s))]
+    pub budget: f64,
+    /// Output folder (default REPORTS/<device name>). One that holds files is refused unless
+    /// --resume or --force.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The folder the default --out is made in.
+    #[arg(long, default_value = "reports", conflicts_with = "out")]
+    pub reports: PathBuf,
+    /// Scenes: the first (default: the bundled scene) gets conformance, the bench and the
+    /// default matrix; the others are swept after it while the budget lasts.
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Also sweep every .obj / .obj.gz scene in this folder, after --scene (default:
+    /// ../shared/scenes when it exists; "none" for none).
+    #[arg(long)]
+    pub scenes_dir: Option<PathBuf>,
+    /// Image size of the bench's and the sweep's rays.
+    #[arg(long, default_value_t = 256)]
+    pub width: u32,
+    #[arg(long, default_value_t = 256)]
+    pub height: u32,
+    /// Finish the report in --out: run only the steps that did not finish (the sweep resumes);
+    /// a folder with no report yet gets a new one.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace the report's own files in --out (other files there are left alone).
+    #[arg(long)]
+    pub force: bool,
+    /// Treat a device feature as missing in every step (testing).
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
 }

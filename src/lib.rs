@@ -20,6 +20,7 @@ pub mod bvh;
 pub mod cli;
 pub mod commands;
 pub mod conformance;
+pub mod devreport;
 pub mod digest;
 pub mod fp16;
 pub mod fsx;

@@ -20,6 +20,7 @@ fn main() {
         Cmd::Devices(a) => commands::devices(a),
         Cmd::Conformance(a) => commands::conformance(a),
         Cmd::Isa(a) => commands::isa(a),
+        Cmd::DeviceReport(a) => commands::device_report(a),
         Cmd::ProbeFamily => commands::probe_family(),
         Cmd::Shaders { emit } => commands::shaders(emit),
         Cmd::Sweep(a) => commands::sweep(a),

@@ -125,6 +125,8 @@ fn durations_are_range_checked() {
         assert!(e.contains("--kernel-timeout") && e.contains(v), "{v}: {e}");
         let e = fails(&["sweep", "--scene", t, &format!("--budget={v}"), "--out", tmp("never").to_str().unwrap()]);
         assert!(e.contains("--budget") && e.contains(v), "{v}: {e}");
+        let e = fails(&["device-report", &format!("--budget={v}"), "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("--budget"), "{v}: {e}");
     }
     assert!(!tmp("never").exists());
     for v in ["1e300", "inf", "-3.0", "0.0"] {

@@ -4,6 +4,7 @@
 mod bench;
 mod bvh_stats;
 mod conformance;
+mod device_report;
 mod devices;
 mod instance;
 mod isa;
@@ -15,6 +16,7 @@ mod trace;
 pub use bench::bench;
 pub use bvh_stats::bvh_stats;
 pub use conformance::conformance;
+pub use device_report::device_report;
 pub use devices::devices;
 pub use instance::instance;
 pub use isa::{isa, probe_family};

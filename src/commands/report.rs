@@ -4,7 +4,19 @@ use super::outln;
 use std::path::{Path, PathBuf};
 
 pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
-    let m = crate::report::merge::merge(dirs, out)?;
+    // A device report's folder (`device-report`) stands for its sweep.
+    let dirs: Vec<PathBuf> = dirs
+        .iter()
+        .map(|d| {
+            let sweep = d.join("sweep");
+            if d.join("device-report.json").is_file() && !d.join("results.csv").exists() && sweep.is_dir() {
+                sweep
+            } else {
+                d.clone()
+            }
+        })
+        .collect();
+    let m = crate::report::merge::merge(&dirs, out)?;
     let merged = m.results.map(|r| format!(", merged rows: {}", r.display())).unwrap_or_default();
     outln!("{} rows from {} folder(s); report: {}{merged}", m.rows, dirs.len(), m.report.display());
     Ok(())

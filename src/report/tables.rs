@@ -412,3 +412,87 @@ pub fn every_row(rows: &[Row]) -> String {
     }
     md
 }
+
+/// The headline ratios of one device's sweep (the device report's summary): every layout and
+/// math mode ÷ f32 at B = 4 and 8 (P = 1), f32's packet series ÷ P = 1 at B = 4, and f32 ÷
+/// each baseline; Mrays/s, means over the scenes and ray kinds measured on both sides.
+pub fn device_headline(rows: &[Row]) -> String {
+    let mut md = String::new();
+    let devices: Vec<&str> = {
+        let mut d: Vec<&str> = rows.iter().map(|r| r.device.as_str()).collect();
+        d.sort();
+        d.dedup();
+        d
+    };
+    let points = layout_points(rows);
+    let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
+    let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok() && r.mrays_median > 0.0).collect();
+    for dev in devices {
+        let mut labels: Vec<(usize, String)> =
+            points.keys().filter(|(d, _, l, _)| d == dev && l != "f32").map(|(_, o, l, _)| (*o, l.clone())).collect();
+        labels.dedup();
+        if !labels.is_empty() {
+            md += &format!("Mrays/s ÷ f32 on {dev} (above 1: faster than f32; means over scenes and ray kinds):\n\n");
+            md += &header(&[("layout", false), ("B = 4", true), ("B = 8", true)]);
+        }
+        for (o, l) in &labels {
+            let at = |b: usize| {
+                points.get(&(dev.to_string(), *o, l.clone(), b)).map_or(f64::NAN, |p| p.ratio[0] / p.n as f64)
+            };
+            md += &format!("| {l} | {} | {} |\n", fmt(at(4)), fmt(at(8)));
+        }
+        // f32's packets at B = 4: each P ÷ P = 1 for the same scene and rays.
+        let f32_at = |p: usize, s: &str, r: &str| {
+            ok.iter().find(|x| {
+                x.device == dev
+                    && x.layout == "f32"
+                    && x.branching == 4
+                    && x.packet == p
+                    && x.scene == s
+                    && x.rays == r
+                    && x.kernel.starts_with("trav_")
+            })
+        };
+        let singles: Vec<&&Row> =
+            ok.iter().filter(|x| x.device == dev && x.layout == "f32" && x.branching == 4 && x.packet == 1).collect();
+        let mut packets: Vec<usize> =
+            ok.iter().filter(|x| x.device == dev && x.layout == "f32" && x.packet > 1).map(|x| x.packet).collect();
+        packets.sort();
+        packets.dedup();
+        if !packets.is_empty() {
+            md += "\nf32 at B = 4, packets of P rays ÷ single rays (P = 1):\n\n";
+            let titles: Vec<String> = packets.iter().map(|p| format!("P = {p}")).collect();
+            md += &header(&titles.iter().map(|t| (t.as_str(), true)).collect::<Vec<_>>());
+            let cells: Vec<String> = packets
+                .iter()
+                .map(|&p| {
+                    let v: Vec<f64> = singles
+                        .iter()
+                        .filter_map(|s| f32_at(p, &s.scene, &s.rays).map(|x| x.mrays_median / s.mrays_median))
+                        .collect();
+                    fmt(mean(&v))
+                })
+                .collect();
+            md += &format!("| {} |\n", cells.join(" | "));
+        }
+        let mut base = Vec::new();
+        for b in BaselineId::all() {
+            let v: Vec<f64> = singles
+                .iter()
+                .filter_map(|s| {
+                    ok.iter()
+                        .find(|q| q.device == dev && q.layout == b.name() && q.scene == s.scene && q.rays == s.rays)
+                        .map(|q| s.mrays_median / q.mrays_median)
+                })
+                .collect();
+            if !v.is_empty() {
+                base.push(format!("f32 (B = 4) ÷ `{b}` {}", fmt(mean(&v))));
+            }
+        }
+        if !base.is_empty() {
+            md += &format!("\n{} (above 1: our f32 kernel is faster).\n", base.join("; "));
+        }
+        md += "\n";
+    }
+    md
+}

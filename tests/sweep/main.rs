@@ -3,6 +3,7 @@
 //! folder with results is refused, resumed or replaced; `report` merges folders and shards.
 //! One test binary, a module per concern.
 
+mod device_report;
 mod folders;
 mod outputs;
 mod report;

@@ -1,0 +1,584 @@
+//! `halftrace device-report`: a device's whole report in one command sized to a wall-time
+//! budget — `devices` (and `vulkaninfo --summary`, `nvidia-smi` where present), `conformance
+//! --quick`, a short `bench`, a sweep that gets the time that remains (the default matrix on the
+//! first scene, then the other scenes while time lasts), and `isa` where the driver reports
+//! pipeline statistics — into one folder named after the device, with a `report.md` that
+//! names the device and driver and gives the headline ratios.
+//!
+//! Each step runs as a child process of this binary (a crash in a driver ends one step, not
+//! the report), its output streamed to `logs/<step>.log`; `device-report.json` records each
+//! finished step, so an interrupted report rerun with `--resume` runs only what did not finish
+//! (the sweep continues with its own `--resume`). A child that runs far past the budget is
+//! stopped and recorded as such.
+
+use crate::gpu::{self, DeviceInfo};
+use crate::report::{self, Row};
+use crate::sweep;
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// What the report runs.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Vulkan device (index or name substring; default: the device every command picks).
+    pub device: Option<String>,
+    /// Wall-time budget of the whole report, seconds.
+    pub budget_s: f64,
+    /// Output folder (default `<reports>/<device>`).
+    pub out: Option<PathBuf>,
+    pub reports: PathBuf,
+    /// The scenes: the first gets conformance, the bench and the sweep's default matrix; the
+    /// others are swept after it while the budget lasts.
+    pub scenes: Vec<PathBuf>,
+    /// Image size of the bench's and the sweep's ray sets.
+    pub width: u32,
+    pub height: u32,
+    pub resume: bool,
+    pub force: bool,
+    /// Treat device features as missing in every step (testing).
+    pub mask_features: Vec<String>,
+}
+
+/// The record of a report folder (`device-report.json`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct State {
+    pub device: String,
+    pub driver: String,
+    pub kind: String,
+    pub api_version: String,
+    pub version: String,
+    pub commit: String,
+    pub scenes: Vec<String>,
+    pub width: u32,
+    pub height: u32,
+    /// One entry per run of the command (a resumed report has several).
+    pub runs: Vec<RunRecord>,
+    /// Finished steps by name.
+    pub steps: BTreeMap<String, StepRecord>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct RunRecord {
+    pub started_unix: u64,
+    pub budget_s: f64,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StepRecord {
+    /// `ok`, `failed (exit N)`, `skipped: why`, `partial: …`, `stopped: …`.
+    pub status: String,
+    pub seconds: f64,
+    /// Finished: a resumed report does not run it again.
+    pub done: bool,
+    pub output: String,
+}
+
+const STATE: &str = "device-report.json";
+/// The steps, in the order they run.
+pub const STEPS: &[&str] = &["devices", "conformance", "bench", "sweep", "isa"];
+/// The names this command writes in its folder (what `--force` replaces; nothing else there is
+/// touched).
+const OWN: &[&str] = &[
+    STATE,
+    "report.md",
+    "devices.txt",
+    "vulkaninfo.txt",
+    "nvidia-smi.txt",
+    "bench.md",
+    "logs",
+    "conformance",
+    "sweep",
+];
+
+/// A folder name from a device name: lower case letters, digits and single dashes.
+pub fn slug(name: &str) -> String {
+    let mut s = String::new();
+    for c in name.chars().flat_map(char::to_lowercase) {
+        if c.is_ascii_alphanumeric() {
+            s.push(c);
+        } else if !s.ends_with('-') && !s.is_empty() {
+            s.push('-');
+        }
+    }
+    let s = s.trim_end_matches('-').to_string();
+    if s.is_empty() {
+        "device".into()
+    } else {
+        s
+    }
+}
+
+/// The device the report is for: the one `--device` names, or the one every command picks.
+pub fn choose_device(want: Option<&str>) -> anyhow::Result<DeviceInfo> {
+    let mut list = gpu::list_devices().context("listing Vulkan devices")?;
+    let i = gpu::pick(&list, want).map_err(|e| {
+        let all: Vec<String> = list.iter().map(|d| format!("{}: {}", d.index, d.name)).collect();
+        anyhow::anyhow!("{e} (found: {})", if all.is_empty() { "none".into() } else { all.join("; ") })
+    })?;
+    let d = list.swap_remove(i);
+    anyhow::ensure!(
+        !d.compile_only,
+        "{} is compile-only (RADV's null device): it runs nothing; `halftrace isa --device {}` reads its compiler's \
+         statistics",
+        d.name,
+        d.index
+    );
+    Ok(d)
+}
+
+/// The summary of a finished (or resumed) report.
+pub struct Summary {
+    pub out: PathBuf,
+    pub state: State,
+    pub seconds: f64,
+    pub sweep_rows: usize,
+    pub sweep_jobs: usize,
+}
+
+/// Runs the report (or what an interrupted one left) into its folder.
+pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Result<Summary> {
+    anyhow::ensure!(!(opts.resume && opts.force), "--resume and --force exclude each other");
+    anyhow::ensure!(!opts.scenes.is_empty(), "at least one scene is needed");
+    for s in &opts.scenes {
+        anyhow::ensure!(s.is_file(), "--scene {}: not a readable file", s.display());
+    }
+    crate::units::check_seconds("--budget", opts.budget_s).map_err(anyhow::Error::msg)?;
+    crate::rays::check_image_size(opts.width, opts.height).map_err(anyhow::Error::msg)?;
+    let start = Instant::now();
+    let dev = choose_device(opts.device.as_deref())?;
+    let out = opts.out.clone().unwrap_or_else(|| opts.reports.join(slug(&dev.name)));
+    let scenes: Vec<String> = opts.scenes.iter().map(|p| p.display().to_string()).collect();
+    let mut state = prepare(&out, opts, &dev, &scenes)?;
+    std::fs::create_dir_all(out.join("logs")).with_context(|| format!("creating {}", out.join("logs").display()))?;
+    let started_unix =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    state.runs.push(RunRecord { started_unix, budget_s: opts.budget_s, seconds: 0.0 });
+    save(&out, &state)?;
+    let device_arg = dev.index.to_string();
+    let deadline = start + Duration::from_secs_f64(opts.budget_s);
+    let mut common: Vec<String> = vec!["--device".into(), device_arg.clone()];
+    for m in &opts.mask_features {
+        common.extend(["--mask-feature".into(), m.clone()]);
+    }
+    let first = scenes[0].clone();
+    let size = |v: &mut Vec<String>| {
+        v.extend(["--width".into(), opts.width.to_string(), "--height".into(), opts.height.to_string()]);
+    };
+    let runner = Steps { exe, out: &out };
+
+    // devices, and what the machine's own tools say.
+    if !state.steps.get("devices").is_some_and(|s| s.done) {
+        say("devices");
+        let mut args: Vec<String> = vec!["devices".into()];
+        for m in &opts.mask_features {
+            args.extend(["--mask-feature".into(), m.clone()]);
+        }
+        let r = runner.run("devices", &args, Some("devices.txt"), HANG)?;
+        for (tool, args, file) in [
+            ("vulkaninfo", &["--summary"][..], "vulkaninfo.txt"),
+            (
+                "nvidia-smi",
+                &["--query-gpu=name,driver_version,memory.total,clocks.max.sm", "--format=csv"][..],
+                "nvidia-smi.txt",
+            ),
+        ] {
+            if let Some(t) = find_tool(exe, tool) {
+                let _ = runner.tool(&t, args, file);
+            }
+        }
+        record(&mut state, "devices", r, "devices.txt");
+        save(&out, &state)?;
+    }
+
+    if !state.steps.get("conformance").is_some_and(|s| s.done) {
+        say("conformance --quick");
+        let mut args: Vec<String> = vec!["conformance".into(), "--quick".into(), "--scene".into(), first.clone()];
+        args.extend(common.iter().cloned());
+        args.extend(["--out".into(), out.join("conformance").display().to_string()]);
+        let mut r = runner.run("conformance", &args, None, HANG)?;
+        if let Some(c) = conformance_counts(&out.join("conformance/conformance.csv")) {
+            r.status = format!("{} ({c})", r.status);
+        }
+        record(&mut state, "conformance", r, "conformance/conformance.md");
+        save(&out, &state)?;
+    }
+
+    if !state.steps.get("bench").is_some_and(|s| s.done) {
+        say("bench (short)");
+        let mut args: Vec<String> = vec![
+            "bench".into(),
+            "--scene".into(),
+            first.clone(),
+            "--rays".into(),
+            "primary,ao".into(),
+            "--rounds".into(),
+            "3".into(),
+            "--repeat".into(),
+            "3".into(),
+            "--device".into(),
+            device_arg.clone(),
+            "--out".into(),
+            out.join("bench.md").display().to_string(),
+        ];
+        size(&mut args);
+        let r = runner.run("bench", &args, None, HANG)?;
+        record(&mut state, "bench", r, "bench.md");
+        save(&out, &state)?;
+    }
+
+    // The sweep gets what the budget has left, less a share for isa and the report; at least
+    // one job runs (every report has a row).
+    let isa_runs = dev.pipeline_statistics;
+    let mut cfg =
+        sweep::Config { scenes: opts.scenes.clone(), width: opts.width, height: opts.height, ..Default::default() };
+    cfg.device = device_arg.clone();
+    let jobs = sweep::jobs::list(&cfg).len();
+    if !state.steps.get("sweep").is_some_and(|s| s.done) {
+        let reserve = if isa_runs { (opts.budget_s * 0.1).max(20.0) } else { 2.0 };
+        let left = deadline.saturating_duration_since(Instant::now()).as_secs_f64() - reserve;
+        let budget = left.max(1.0);
+        say(&format!("sweep ({jobs} jobs, budget {budget:.0} s)"));
+        let dir = out.join("sweep");
+        let mut args: Vec<String> = vec!["sweep".into(), "--quiet".into()];
+        for s in &scenes {
+            args.extend(["--scene".into(), s.clone()]);
+        }
+        size(&mut args);
+        args.extend(common.iter().cloned());
+        args.extend([
+            "--kernel-timeout".into(),
+            "120".into(),
+            "--budget".into(),
+            format!("{budget:.1}"),
+            "--out".into(),
+            dir.display().to_string(),
+        ]);
+        if dir.join("results.csv").is_file() {
+            args.push("--resume".into());
+        }
+        // The sweep stops itself between jobs; a job far longer than the budget is stopped.
+        let limit = Duration::from_secs_f64(budget + (budget / 2.0).max(120.0));
+        let mut r = runner.run("sweep", &args, None, limit)?;
+        let rows = report::read_rows(&dir).map(|r| r.len()).unwrap_or(0);
+        if r.done && rows < jobs {
+            r.done = false;
+            r.status = format!("partial: {rows} of {jobs} jobs (budget reached; --resume runs the rest)");
+        } else if r.done {
+            r.status = format!("ok: {rows} jobs");
+        } else {
+            r.status = format!("{}; {rows} of {jobs} jobs", r.status);
+        }
+        record(&mut state, "sweep", r, "sweep/report.md");
+        save(&out, &state)?;
+    }
+
+    if !state.steps.get("isa").is_some_and(|s| s.done) {
+        let r = if isa_runs {
+            say("isa");
+            let mut args: Vec<String> = vec!["isa".into(), "--quiet".into(), "--device".into(), device_arg.clone()];
+            args.extend(["--out".into(), out.join("sweep").display().to_string(), "--force".into()]);
+            runner.run("isa", &args, None, HANG)?
+        } else {
+            StepRecord {
+                status: "skipped: the driver does not report pipeline statistics \
+                         (VK_KHR_pipeline_executable_properties)"
+                    .into(),
+                done: true,
+                ..Default::default()
+            }
+        };
+        record(&mut state, "isa", r, "sweep/isa.md");
+        save(&out, &state)?;
+    }
+
+    // The sweep's report again, with the compiler's view beside it when isa ran.
+    if out.join("sweep/results.csv").is_file() {
+        report::merge::merge(&[out.join("sweep")], None).context("rendering sweep/report.md")?;
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    if let Some(r) = state.runs.last_mut() {
+        r.seconds = seconds;
+    }
+    save(&out, &state)?;
+    let rows = report::read_rows(&out.join("sweep")).unwrap_or_default();
+    let md = markdown(&state, &dev, &rows, &out, jobs);
+    crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
+    Ok(Summary { out, state, seconds, sweep_rows: rows.len(), sweep_jobs: jobs })
+}
+
+/// Checks the folder: new (absent or empty), a report of the same device and settings to
+/// resume, or one to replace; returns the state to continue from.
+fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> anyhow::Result<State> {
+    let fresh = State {
+        device: dev.name.clone(),
+        driver: dev.driver.clone(),
+        kind: dev.kind.clone(),
+        api_version: dev.api_version.clone(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        commit: env!("HALFTRACE_COMMIT").into(),
+        scenes: scenes.to_vec(),
+        width: opts.width,
+        height: opts.height,
+        ..Default::default()
+    };
+    let meta = std::fs::symlink_metadata(out);
+    if let Ok(m) = &meta {
+        anyhow::ensure!(m.is_dir(), "--out {}: exists and is not a folder", out.display());
+    }
+    let entries: Vec<String> = match std::fs::read_dir(out) {
+        Ok(d) => d.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().to_string()).collect(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
+    };
+    if entries.is_empty() {
+        return Ok(fresh);
+    }
+    if opts.force {
+        for e in entries.iter().filter(|e| OWN.contains(&e.as_str())) {
+            let p = out.join(e);
+            let r = if p.is_dir() && !p.is_symlink() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
+            r.with_context(|| format!("--force: removing {}", p.display()))?;
+        }
+        return Ok(fresh);
+    }
+    anyhow::ensure!(
+        opts.resume,
+        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
+         replace it, or choose another folder",
+        out.display(),
+        entries.len()
+    );
+    let path = out.join(STATE);
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("--resume: {} is not a device report (no readable {STATE})", out.display()))?;
+    let old: State = serde_json::from_str(&text).with_context(|| format!("--resume: {}", path.display()))?;
+    for (what, was, now) in [
+        ("device", old.device.clone(), fresh.device.clone()),
+        ("driver", old.driver.clone(), fresh.driver.clone()),
+        ("scenes", old.scenes.join(", "), fresh.scenes.join(", ")),
+        ("image size", format!("{}x{}", old.width, old.height), format!("{}x{}", fresh.width, fresh.height)),
+    ] {
+        anyhow::ensure!(
+            was == now,
+            "--resume: {} is a report with {what} {was}, not {now}; resume with the same settings, or choose another \
+             folder",
+            out.display()
+        );
+    }
+    Ok(old)
+}
+
+fn save(out: &Path, state: &State) -> anyhow::Result<()> {
+    crate::fsx::write_atomic(&out.join(STATE), serde_json::to_string_pretty(state)?.as_bytes())
+}
+
+fn record(state: &mut State, name: &str, mut r: StepRecord, output: &str) {
+    r.output = output.into();
+    state.steps.insert(name.into(), r);
+}
+
+/// How long a step of fixed size (devices, conformance, bench, isa) may run before it is
+/// taken for hung and stopped: they run whole, whatever the budget.
+const HANG: Duration = Duration::from_secs(30 * 60);
+
+/// Runs the steps' child processes.
+struct Steps<'a> {
+    exe: &'a Path,
+    out: &'a Path,
+}
+
+impl Steps<'_> {
+    /// Runs `exe args`, stopped after `limit`; stderr (and stdout, unless `stdout_file` takes
+    /// it) go to `logs/<name>.log`.
+    fn run(
+        &self,
+        name: &str,
+        args: &[String],
+        stdout_file: Option<&str>,
+        limit: Duration,
+    ) -> anyhow::Result<StepRecord> {
+        let log = self.out.join("logs").join(format!("{name}.log"));
+        let err = std::fs::File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+        let stdout = match stdout_file {
+            Some(_) => Stdio::piped(),
+            None => Stdio::from(err.try_clone()?),
+        };
+        let mut cmd = Command::new(self.exe);
+        cmd.args(args).stdin(Stdio::null()).stdout(stdout).stderr(Stdio::from(err));
+        let t0 = Instant::now();
+        let mut child = cmd.spawn().with_context(|| format!("starting {} {name}", self.exe.display()))?;
+        // Read a captured stdout on a thread (it may exceed a pipe's buffer).
+        let reader = child.stdout.take().map(|mut s| {
+            std::thread::spawn(move || {
+                let mut v = Vec::new();
+                let _ = std::io::Read::read_to_end(&mut s, &mut v);
+                v
+            })
+        });
+        let status = loop {
+            if let Some(s) = child.try_wait()? {
+                break Some(s);
+            }
+            if t0.elapsed() > limit {
+                let _ = child.kill();
+                let _ = child.wait();
+                break None;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        };
+        let captured = reader.and_then(|h| h.join().ok());
+        if let (Some(file), Some(bytes)) = (stdout_file, &captured) {
+            crate::fsx::write_atomic(&self.out.join(file), bytes)?;
+        }
+        let seconds = t0.elapsed().as_secs_f64();
+        Ok(match status {
+            Some(s) if s.success() => StepRecord { status: "ok".into(), seconds, done: true, output: String::new() },
+            Some(s) => StepRecord {
+                status: format!("failed ({}; see logs/{name}.log)", exit_text(s)),
+                seconds,
+                done: true,
+                output: String::new(),
+            },
+            None => StepRecord {
+                status: format!("stopped: still running after {:.0} s (logs/{name}.log)", limit.as_secs_f64()),
+                seconds,
+                done: false,
+                output: String::new(),
+            },
+        })
+    }
+
+    /// A machine tool's output into `file` (at most 60 s; best effort).
+    fn tool(&self, tool: &Path, args: &[&str], file: &str) -> anyhow::Result<()> {
+        let mut child =
+            Command::new(tool).args(args).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn()?;
+        let t0 = Instant::now();
+        while child.try_wait()?.is_none() {
+            if t0.elapsed() > Duration::from_secs(60) {
+                let _ = child.kill();
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let o = child.wait_with_output()?;
+        let mut text = o.stdout;
+        text.extend_from_slice(&o.stderr);
+        crate::fsx::write_atomic(&self.out.join(file), &text)
+    }
+}
+
+fn exit_text(s: std::process::ExitStatus) -> String {
+    match s.code() {
+        Some(c) => format!("exit {c}"),
+        None => {
+            use std::os::unix::process::ExitStatusExt;
+            format!("signal {}", s.signal().unwrap_or(0))
+        }
+    }
+}
+
+/// A tool beside the binary (a bundle has `vulkaninfo` there) or on the PATH.
+fn find_tool(exe: &Path, name: &str) -> Option<PathBuf> {
+    let beside = exe.parent().map(|d| d.join(name));
+    if let Some(b) = beside.filter(|b| b.is_file()) {
+        return Some(b);
+    }
+    std::env::var_os("PATH")?.to_str()?.split(':').map(|d| Path::new(d).join(name)).find(|p| p.is_file())
+}
+
+/// "N ok, N failed, N skipped" from a conformance.csv.
+fn conformance_counts(csv: &Path) -> Option<String> {
+    let mut r = csv::Reader::from_path(csv).ok()?;
+    let col = r.headers().ok()?.iter().position(|h| h == "status")?;
+    let (mut ok, mut failed, mut skipped) = (0, 0, 0);
+    for rec in r.records().flatten() {
+        let s = rec.get(col).unwrap_or("");
+        if s == "ok" {
+            ok += 1;
+        } else if s.starts_with("skipped") {
+            skipped += 1;
+        } else {
+            failed += 1;
+        }
+    }
+    Some(format!("{ok} ok, {failed} failed, {skipped} skipped"))
+}
+
+/// The folder's `report.md`.
+fn markdown(state: &State, dev: &DeviceInfo, rows: &[Row], out: &Path, jobs: usize) -> String {
+    let total: f64 = state.runs.iter().map(|r| r.seconds).sum();
+    let runs: Vec<String> =
+        state.runs.iter().map(|r| format!("{:.0} s of a {:.0} s budget", r.seconds, r.budget_s)).collect();
+    let mut md = format!(
+        "# halftrace device report: {}\n\n\
+         - device: {} ({}), Vulkan {}\n- driver: {}\n- halftrace {} ({})\n- scenes: {}; rays at {}×{}\n\
+         - made by `halftrace device-report` in {} run(s): {} ({total:.0} s in all)\n\n",
+        state.device,
+        state.device,
+        state.kind,
+        state.api_version,
+        state.driver,
+        state.version,
+        state.commit,
+        state.scenes.join(", "),
+        state.width,
+        state.height,
+        state.runs.len(),
+        runs.join("; "),
+    );
+    md += &format!(
+        "fp16 {}, 16-bit storage {}, subgroup size {}, ray queries {}, pipeline statistics {}.\n\n",
+        dev.shader_float16, dev.storage_16bit, dev.subgroup_size, dev.ray_query, dev.pipeline_statistics
+    );
+    md += "## Steps\n\n| step | status | seconds | output |\n|---|---|---:|---|\n";
+    for name in STEPS {
+        match state.steps.get(*name) {
+            Some(s) => {
+                let link = if out.join(&s.output).is_file() { format!("[{0}]({0})", s.output) } else { "–".into() };
+                md += &format!("| {name} | {} | {:.0} | {link} |\n", s.status, s.seconds);
+            }
+            None => md += &format!("| {name} | not run | – | – |\n"),
+        }
+    }
+    md += "\n";
+    if !rows.is_empty() {
+        md += &format!(
+            "## Headline ({} of {jobs} sweep jobs; every variant validated against its CPU reference before it was \
+             timed)\n\n",
+            rows.len()
+        );
+        md += &report::tables::device_headline(rows);
+        md += "Every table and plot: [sweep/report.md](sweep/report.md).\n\n";
+    }
+    if let Ok(b) = std::fs::read_to_string(out.join("bench.md")) {
+        md += "## Bench (short: 3 rounds of 3 timed dispatches)\n\n";
+        md += &demote(&b);
+        md += "\n";
+    }
+    md += "## Merging\n\n`halftrace report reports/<device> [reports/<other device>…] --out reports/merged` puts \
+           several devices' sweeps in one report.\n";
+    md
+}
+
+/// A Markdown document's headings one level lower (it becomes a section of another).
+fn demote(md: &str) -> String {
+    md.lines().map(|l| if l.starts_with('#') { format!("##{l}\n") } else { format!("{l}\n") }).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_names_become_folder_names() {
+        assert_eq!(slug("NVIDIA H200"), "nvidia-h200");
+        assert_eq!(slug("llvmpipe (LLVM 15.0.6, 256 bits)"), "llvmpipe-llvm-15-0-6-256-bits");
+        assert_eq!(slug("../../etc"), "etc");
+        assert_eq!(slug("  "), "device");
+    }
+}

@@ -1,0 +1,95 @@
+use super::*;
+use std::os::unix::process::CommandExt;
+use std::time::{Duration, Instant};
+
+fn report_cmd(out: &Path, extra: &[&str]) -> Command {
+    let scene = teapot();
+    let mut c = Command::new(env!("CARGO_BIN_EXE_halftrace"));
+    c.args(["device-report", "--scene", &scene, "--scenes-dir", "none", "--width", "16", "--height", "16", "--out"])
+        .arg(out)
+        .args(extra);
+    c
+}
+
+fn state(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("device-report.json")).unwrap()).unwrap()
+}
+
+/// The report command on the default device: killed (with every step it started) once its
+/// sweep has written a row, a new run into the folder refused, then resumed within a 1 s
+/// budget: the finished steps are not run again, the sweep keeps its rows and adds some, and
+/// the folder holds the device's report, which `report` reads as a sweep folder.
+#[test]
+fn device_report_is_interrupted_refused_and_resumed() {
+    let out = tmp("device-report");
+    let mut child = report_cmd(&out, &["--budget", "20m"]).process_group(0).spawn().unwrap();
+    let pid = child.id();
+    let t0 = Instant::now();
+    loop {
+        let rows = std::fs::read_to_string(out.join("sweep/results.csv")).map(|t| t.lines().count()).unwrap_or(0);
+        if rows >= 2 {
+            break;
+        }
+        assert!(child.try_wait().unwrap().is_none(), "the report ended before its sweep wrote a row");
+        assert!(t0.elapsed() < Duration::from_secs(1200), "no sweep row within 20 minutes");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let killed = Command::new("kill").args(["-KILL", "--", &format!("-{pid}")]).status().unwrap();
+    assert!(killed.success());
+    let _ = child.wait();
+    let s = state(&out);
+    for step in ["devices", "conformance", "bench"] {
+        assert_eq!(s["steps"][step]["done"], true, "{step} finished before the sweep: {s}");
+    }
+    assert!(s["steps"].get("sweep").is_none(), "the killed sweep is not recorded as finished: {s}");
+    let before = read_rows(&out.join("sweep")).unwrap();
+    assert!(!before.is_empty());
+    let conf = out.join("conformance/conformance.csv");
+    let conf_time = std::fs::metadata(&conf).unwrap().modified().unwrap();
+
+    // A new report into the folder is refused, and changes nothing.
+    let o = report_cmd(&out, &["--budget", "1s"]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("already holds files") && err.contains("--resume"), "{err}");
+    assert_eq!(state(&out), s);
+
+    // Resumed with a 1 s budget: only the sweep runs (at least one more job).
+    let o = report_cmd(&out, &["--budget", "1s", "--resume"]).output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(!stderr.contains("conformance --quick") && !stderr.contains("bench (short)"), "{stderr}");
+    assert_eq!(std::fs::metadata(&conf).unwrap().modified().unwrap(), conf_time, "conformance ran again");
+    let after = read_rows(&out.join("sweep")).unwrap();
+    assert!(after.len() > before.len(), "{} rows before, {} after", before.len(), after.len());
+    for r in &before {
+        let kept = after.iter().find(|a| a.id() == r.id()).unwrap_or_else(|| panic!("{} lost", r.kernel));
+        assert_eq!(kept.mrays_median, r.mrays_median, "{} was measured again", r.kernel);
+    }
+    let s = state(&out);
+    assert_eq!(s["runs"].as_array().unwrap().len(), 2);
+    let sweep = s["steps"]["sweep"]["status"].as_str().unwrap();
+    assert!(sweep.starts_with("partial: ") && sweep.contains(&format!("{} of ", after.len())), "{sweep}");
+    assert!(s["steps"]["conformance"]["status"].as_str().unwrap().contains(" 0 failed"), "{s}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let (device, driver) = (s["device"].as_str().unwrap(), s["driver"].as_str().unwrap());
+    assert!(md.starts_with(&format!("# halftrace device report: {device}")), "{md}");
+    assert!(md.contains(driver) && md.contains("| conformance | ok (") && md.contains("## Bench"), "{md}");
+    for f in ["devices.txt", "bench.md", "conformance/conformance.md", "sweep/report.md", "logs/sweep.log"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    assert!(std::fs::read_to_string(out.join("devices.txt")).unwrap().contains(device));
+
+    // `report` reads the device's folder as its sweep.
+    let merged = tmp("device-report-merged");
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .arg("report")
+        .arg(&out)
+        .arg("--out")
+        .arg(&merged)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(read_rows(&merged).unwrap().len(), after.len());
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&merged);
+}
