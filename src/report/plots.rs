@@ -32,19 +32,30 @@ fn font() -> anyhow::Result<()> {
     use std::sync::OnceLock;
     static DONE: OnceLock<Result<(), String>> = OnceLock::new();
     DONE.get_or_init(|| {
-        let candidates = [
+        // HALFTRACE_FONT, then fonts/ beside the binary (a bundle, scripts/bundle.sh), then
+        // the distributions' places.
+        let mut candidates: Vec<std::path::PathBuf> = Vec::new();
+        candidates.extend(std::env::var_os("HALFTRACE_FONT").map(Into::into));
+        if let Some(dir) = std::env::current_exe().ok().and_then(|e| e.parent().map(|d| d.to_path_buf())) {
+            candidates.push(dir.join("fonts/DejaVuSans.ttf"));
+        }
+        for c in [
             "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
             "/usr/share/fonts/TTF/DejaVuSans.ttf",
             "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-        ];
-        for c in candidates {
+        ] {
+            candidates.push(c.into());
+        }
+        for c in &candidates {
             if let Ok(b) = std::fs::read(c) {
                 let leaked: &'static [u8] = Box::leak(b.into_boxed_slice());
                 return plotters::style::register_font("sans-serif", FontStyle::Normal, leaked)
-                    .map_err(|_| format!("{c}: not a usable font"));
+                    .map_err(|_| format!("{}: not a usable font", c.display()));
             }
         }
-        Err("no DejaVuSans.ttf found for plot labels (install fonts-dejavu-core: scripts/install-deps.sh)".into())
+        Err("no DejaVuSans.ttf found for plot labels (install fonts-dejavu-core: scripts/install-deps.sh, or name \
+             one with HALFTRACE_FONT)"
+            .into())
     })
     .clone()
     .map_err(anyhow::Error::msg)
