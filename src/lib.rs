@@ -7,7 +7,7 @@
 //! [`rays`], [`npy`]; [`bvh`]; [`layout`] (one folder per precision layout, the CPU
 //! traversal); [`variant`]; [`gpu`] (the Vulkan backend, the only `unsafe`); [`baseline`]
 //! (`rq`, `embree`); [`report`]; [`runner`] (validate, then time — the one way to a result);
-//! [`sweep`], [`bench`], [`conformance`], [`isa`]; [`cli`] and [`commands`].
+//! [`sweep`], [`bench`], [`conformance`], [`isa`]; [`devreport`]; [`cli`] and [`commands`].
 
 // The exact arithmetic loops over the three axes index several arrays in step, as the GLSL
 // they mirror does; iterators would hide that correspondence.
