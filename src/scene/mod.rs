@@ -165,12 +165,38 @@ fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
             source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"),
         });
     }
+    // A scene is held in memory several times over while it loads (text, parsed vertices,
+    // triangles, then the BVH): its text may take at most an eighth of the memory this process
+    // can have, checked before reading and while decompressing (a gzip bomb is refused, not
+    // an abort on allocation).
+    let limit = scene_byte_limit();
+    let too_big = |what: &str| SceneError::Invalid {
+        path: path.into(),
+        msg: format!(
+            "{what} more than {} MB, the most a scene may take here (an eighth of the {} MB this process may use)",
+            limit >> 20,
+            (limit * 8) >> 20
+        ),
+    };
+    if meta.len() > limit {
+        return Err(too_big("the file holds"));
+    }
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
-    let bytes = if path.extension().is_some_and(|e| e == "gz") {
+    // gzip by its magic, whatever the name; every member of a multi-member file.
+    let gz = bytes.starts_with(&[0x1f, 0x8b]);
+    if path.extension().is_some_and(|e| e == "gz") && !gz {
+        let source = std::io::Error::new(std::io::ErrorKind::InvalidData, "no gzip header (magic 1f 8b)");
+        return Err(SceneError::Gzip { path: path.into(), source });
+    }
+    let bytes = if gz {
         let mut out = Vec::new();
-        flate2::read::GzDecoder::new(&bytes[..])
+        flate2::read::MultiGzDecoder::new(&bytes[..])
+            .take(limit + 1)
             .read_to_end(&mut out)
             .map_err(|source| SceneError::Gzip { path: path.into(), source })?;
+        if out.len() as u64 > limit {
+            return Err(too_big("it decompresses to"));
+        }
         out
     } else {
         bytes
@@ -190,6 +216,27 @@ fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
     };
     drop(bytes);
     finish(path, tris, warnings)
+}
+
+/// The most bytes of scene text (decompressed) a load accepts: an eighth of the memory this
+/// process may use — the smaller of the machine's available memory and the address-space
+/// limit (`ulimit -v`) — and at least 64 MiB.
+pub fn scene_byte_limit() -> u64 {
+    let kib = |text: &str, key: &str| {
+        text.lines().find(|l| l.starts_with(key)).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+    };
+    let mut mem = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| kib(&m, "MemAvailable:"))
+        .map(|k| k * 1024)
+        .unwrap_or(16 << 30);
+    if let Some(limit) = std::fs::read_to_string("/proc/self/limits").ok().and_then(|t| {
+        let l = t.lines().find(|l| l.starts_with("Max address space"))?;
+        l.split_whitespace().nth(3)?.parse::<u64>().ok()
+    }) {
+        mem = mem.min(limit);
+    }
+    (mem / 8).max(64 << 20)
 }
 
 /// The scene of a loaded triangle list, with the file's name on every error and warning.

@@ -10,8 +10,34 @@ use std::path::Path;
 pub fn load(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError> {
     use ply_rs::ply::Property;
     let parser = ply_rs::parser::Parser::<ply_rs::ply::DefaultElement>::new();
-    let ply = parser.read_ply(&mut &bytes[..]).map_err(|e| bad(path, format!("not a valid PLY file: {e}")))?;
-    let verts = ply.payload.get("vertex").ok_or_else(|| bad(path, "no 'vertex' element".into()))?;
+    // Element by element, so that an error names the element, and the data checked to end
+    // where the header's counts say it does.
+    let mut r = bytes;
+    let header = parser.read_header(&mut r).map_err(|e| bad(path, format!("not a valid PLY header: {e}")))?;
+    let mut payload = std::collections::HashMap::new();
+    for (name, def) in &header.elements {
+        let els = parser
+            .read_payload_for_element(&mut r, def, &header)
+            .map_err(|e| bad(path, format!("element '{name}' ({} declared): {e}", def.count)))?;
+        payload.insert(name.clone(), els);
+    }
+    let rest = match header.encoding {
+        ply_rs::ply::Encoding::Ascii => r.iter().filter(|b| !b.is_ascii_whitespace()).count(),
+        _ => r.len(),
+    };
+    if rest > 0 {
+        let counts: Vec<String> = header.elements.iter().map(|(n, d)| format!("{} {n}", d.count)).collect();
+        return Err(bad(
+            path,
+            format!(
+                "{} bytes of data follow the last element the header declares ({}): the header's counts do not \
+                 match the data",
+                r.len(),
+                counts.join(", ")
+            ),
+        ));
+    }
+    let verts = payload.get("vertex").ok_or_else(|| bad(path, "no 'vertex' element".into()))?;
     let num = |p: Option<&Property>| -> Option<f64> {
         Some(match p? {
             Property::Float(x) => *x as f64,
@@ -56,7 +82,7 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError> {
             .ok_or_else(|| bad(path, format!("{what}: vertex index {i} is out of range ({} vertices)", pos.len())))
     };
     let mut tris = Vec::new();
-    if let Some(faces) = ply.payload.get("face") {
+    if let Some(faces) = payload.get("face") {
         for (f, e) in faces.iter().enumerate() {
             let what = format!("face {f}");
             let ix = list(e, &what)?;
@@ -68,7 +94,7 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError> {
                 tris.push([get(&what, ix[a])?, get(&what, ix[b])?, get(&what, ix[c])?]);
             }
         }
-    } else if let Some(strips) = ply.payload.get("tristrips") {
+    } else if let Some(strips) = payload.get("tristrips") {
         for (s, e) in strips.iter().enumerate() {
             let what = format!("tristrips {s}");
             for strip in list(e, &what)?.split(|&i| i < 0) {
