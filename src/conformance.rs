@@ -321,10 +321,7 @@ pub fn write(o: &Outcome, quick: bool, dir: &Path) -> anyhow::Result<()> {
     }
     let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
     for (name, data) in [("conformance.csv", bytes), ("conformance.md", markdown(o, quick).into_bytes())] {
-        let path = dir.join(name);
-        let tmp = dir.join(format!(".{name}.tmp"));
-        std::fs::write(&tmp, data).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
+        crate::fsx::write_atomic(&dir.join(name), &data)?;
     }
     Ok(())
 }

@@ -98,7 +98,7 @@ fn write_npy(path: &Path, descr: &str, shape: &str, data: &[u8]) -> Result<(), N
 /// Reads rays from a float32 array of shape (N, 8): `ox oy oz tmin dx dy dz tmax`.
 /// The rays are not validated here; see [`crate::base::validate`].
 pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
-    let b = std::fs::read(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
+    let b = crate::fsx::read_regular(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
     let h = parse_header(path, &b)?;
     if h.descr != "<f4" && h.descr != "=f4" {
         return Err(NpyError::Shape {
@@ -122,6 +122,14 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
         });
     }
     let n = h.shape[0];
+    if n == 0 {
+        // Nothing to trace: a speed or a SIMD utilisation of no rays means nothing.
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: "at least one ray".into(),
+            found: "shape (0, 8)".into(),
+        });
+    }
     let data = &b[h.data_offset..];
     let Some(need) = n.checked_mul(32) else {
         return Err(NpyError::Shape {

@@ -24,7 +24,12 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
     }
     crate::rays::check_image_size(a.width, a.height).map_err(anyhow::Error::msg)?;
     if let Some(o) = &a.out {
-        anyhow::ensure!(!o.is_dir(), "--out {} is a folder; name a file", o.display());
+        crate::fsx::check_output("--out", o)?;
+        anyhow::ensure!(
+            !o.exists(),
+            "--out {} exists; a report is never overwritten (remove it or name another file)",
+            o.display()
+        );
     }
     let mut layouts = Vec::new();
     for l in &a.layouts {

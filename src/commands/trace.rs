@@ -38,8 +38,19 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
     let backend = match a.backend {
         Some(b) => b,
         None if a.kernel.is_some() => Backend::Gpu,
-        None if gpu::list_devices().is_ok_and(|d| !d.is_empty()) => Backend::Gpu,
-        None => Backend::Cpu,
+        // Without a device, the CPU reference — said on stderr, with the loader's reason; an
+        // explicit --backend gpu fails instead.
+        None => match gpu::list_devices() {
+            Ok(d) if !d.is_empty() => Backend::Gpu,
+            Ok(_) => {
+                eprintln!("warning: no Vulkan device found; tracing with the CPU reference (--backend cpu)");
+                Backend::Cpu
+            }
+            Err(e) => {
+                eprintln!("warning: no Vulkan device ({e}); tracing with the CPU reference (--backend cpu)");
+                Backend::Cpu
+            }
+        },
     };
     let g = match backend {
         Backend::Gpu => Some(open(a)?),
@@ -278,7 +289,7 @@ fn check_outputs(a: &TraceArgs) -> anyhow::Result<()> {
         for (m, q) in &outputs[..i] {
             anyhow::ensure!(!same(p, q), "{n} and {m} are the same file ({})", p.display());
         }
-        anyhow::ensure!(!p.is_dir(), "{n} {} is a folder; name a file", p.display());
+        crate::fsx::check_output(n, p)?;
     }
     if let Some(p) = &a.image {
         let png = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
