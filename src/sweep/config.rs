@@ -141,7 +141,8 @@ impl Default for Config {
 
 impl Config {
     pub fn load(path: &Path) -> anyhow::Result<Config> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let bytes = crate::fsx::read_regular(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = String::from_utf8(bytes).with_context(|| format!("reading {}: not UTF-8 text", path.display()))?;
         let c: Config = toml::from_str(&text).with_context(|| format!("{}: invalid sweep config", path.display()))?;
         c.check().with_context(|| path.display().to_string())?;
         Ok(c)
@@ -151,6 +152,23 @@ impl Config {
     pub fn check(&self) -> anyhow::Result<()> {
         anyhow::ensure!(!self.scenes.is_empty(), "scenes: at least one scene is needed");
         anyhow::ensure!(!self.rays.is_empty(), "rays: at least one ray kind is needed");
+        anyhow::ensure!(!self.layouts.is_empty(), "layouts: at least one layout or baseline is needed");
+        // Rows name their scene by its short name: two files of one name (or one file named
+        // twice) would write rows `--resume` and `report` cannot tell apart.
+        for (i, a) in self.scenes.iter().enumerate() {
+            for b in &self.scenes[..i] {
+                let same_file =
+                    a == b || (a.canonicalize().ok().is_some() && a.canonicalize().ok() == b.canonicalize().ok());
+                anyhow::ensure!(!same_file, "scenes: {} and {} are the same file", b.display(), a.display());
+                let (na, nb) = (crate::scene::scene_name(a), crate::scene::scene_name(b));
+                anyhow::ensure!(
+                    na != nb,
+                    "scenes: {} and {} would both be '{na}' in the results; rename one",
+                    b.display(),
+                    a.display()
+                );
+            }
+        }
         for r in &self.rays {
             r.parse::<RayKind>()?;
         }
@@ -176,6 +194,17 @@ impl Config {
         anyhow::ensure!(self.width > 0 && self.height > 0, "width and height must be positive");
         crate::rays::check_image_size(self.width, self.height).map_err(anyhow::Error::msg)?;
         for (i, k) in self.kernel.iter().enumerate() {
+            anyhow::ensure!(
+                !k.name.trim().is_empty() && !k.name.chars().any(char::is_control) && !k.name.contains('|'),
+                "[[kernel]] name {:?}: name it with printable characters (no control characters or '|'; it is a \
+                 report column)",
+                k.name
+            );
+            anyhow::ensure!(
+                !k.name.starts_with("trav_") && BaselineId::all().all(|b| b.imp().kernel() != k.name),
+                "[[kernel]] '{}': trav_… and the baselines' kernel names are the built-in kernels'; name it otherwise",
+                k.name
+            );
             k.variant()?;
             for r in k.rays.iter().flatten() {
                 r.parse::<RayKind>().with_context(|| format!("[[kernel]] '{}'", k.name))?;
