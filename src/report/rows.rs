@@ -80,13 +80,14 @@ pub struct RowId {
     pub branching: usize,
     pub packet: usize,
     pub float_controls: String,
+    pub setup: String,
 }
 
 impl std::fmt::Display for RowId {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} | {} | {} | {} | {} | {}/{}/B{}/P{} fc {}",
+            "{} | {} | {} | {} | {} | {}/{}/B{}/P{} fc {} | setup {}",
             self.device,
             self.driver,
             self.scene,
@@ -96,7 +97,8 @@ impl std::fmt::Display for RowId {
             self.math,
             self.branching,
             self.packet,
-            self.float_controls
+            self.float_controls,
+            if self.setup.is_empty() { "–" } else { &self.setup }
         )
     }
 }
@@ -132,6 +134,11 @@ pub struct Row {
     pub driver: String,
     pub version: String,
     pub commit: String,
+    /// A hash of what else decides the row's result: the scene file (its path, size and
+    /// modification time), the image size, seed and rays file, a user kernel's source — so
+    /// `--resume` runs a job again when any of them changed. Empty in rows of older versions.
+    #[serde(default)]
+    pub setup: String,
     /// `ok`, `FAILED: …` when the variant disagreed with its CPU reference, or `skipped: …`.
     pub status: Status,
     pub mrays_median: f64,
@@ -298,6 +305,15 @@ fn current_names(mut r: Row) -> Row {
     r
 }
 
+/// The columns of `results.csv` this version writes.
+pub fn columns() -> Vec<String> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let _ = w.serialize(Row::default());
+    let bytes = w.into_inner().unwrap_or_default();
+    let text = String::from_utf8_lossy(&bytes);
+    text.lines().next().unwrap_or("").split(',').map(String::from).collect()
+}
+
 impl Row {
     /// The row's identity.
     pub fn id(&self) -> RowId {
@@ -312,6 +328,7 @@ impl Row {
             branching: self.branching,
             packet: self.packet,
             float_controls: self.float_controls.clone(),
+            setup: self.setup.clone(),
         }
     }
 }

@@ -56,9 +56,27 @@ pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
             entries.len()
         ),
         OutMode::Resume => {
-            if !out.join("results.csv").is_file() {
+            let csv = out.join("results.csv");
+            if !csv.is_file() {
                 anyhow::bail!("--resume: {} has no results.csv to resume", out.display());
             }
+            // Columns this version does not write (a newer version's) would be lost when the
+            // kept rows are written again: refuse.
+            let known = report::rows::columns();
+            let header = std::fs::read_to_string(&csv)
+                .with_context(|| format!("--resume: reading {}", csv.display()))?
+                .lines()
+                .next()
+                .unwrap_or("")
+                .to_string();
+            let unknown: Vec<&str> = header.split(',').filter(|c| !known.iter().any(|k| k == c)).collect();
+            anyhow::ensure!(
+                unknown.is_empty(),
+                "--resume: {} has column(s) this version does not write ({}); they would be lost — resume with the \
+                 version that wrote it, or --force",
+                csv.display(),
+                unknown.join(", ")
+            );
             report::read_rows(out)
         }
         OutMode::Force => {
@@ -235,6 +253,7 @@ impl Executor<'_, '_> {
             commit: env!("HALFTRACE_COMMIT").into(),
             math: "n/a".into(),
             float_controls: "n/a".into(),
+            setup: self.setup(job),
             ..Row::default()
         };
         match &job.target {
@@ -251,6 +270,33 @@ impl Executor<'_, '_> {
             Target::Baseline(b) => (row.layout, row.kernel) = (b.name().into(), b.imp().kernel().into()),
         }
         row
+    }
+
+    /// What else decides a job's result (the row's `setup`): the scene file, the image size,
+    /// seed and rays file, a user kernel's source; files by canonical path, size and
+    /// modification time (a kernel by its bytes).
+    fn setup(&self, job: &Job) -> String {
+        let file = |p: &Path| {
+            let m = std::fs::metadata(p).ok();
+            let mtime =
+                m.as_ref().and_then(|m| m.modified().ok()).and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
+            format!(
+                "{}:{}:{}",
+                p.canonicalize().unwrap_or_else(|_| p.to_path_buf()).display(),
+                m.map_or(0, |m| m.len()),
+                mtime.map_or(0, |d| d.as_nanos())
+            )
+        };
+        let c = self.cfg;
+        let mut text = format!("scene {}; {}x{} seed {}", file(&c.scenes[job.scene]), c.width, c.height, c.seed);
+        if let RayKind::File(p) = self.kind(job) {
+            text += &format!("; rays {}", file(&p));
+        }
+        if let Some(i) = job.user {
+            let src = std::fs::read(&c.kernel[i].file).unwrap_or_default();
+            text += &format!("; kernel {:016x}", crate::digest::fnv1a(&src));
+        }
+        format!("{:016x}", crate::digest::fnv1a(text.as_bytes()))
     }
 
     fn run_job(&mut self, job: &Job, bar: &indicatif::ProgressBar) -> anyhow::Result<Row> {

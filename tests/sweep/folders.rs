@@ -101,6 +101,46 @@ fn existing_out_folder_is_refused_resumed_or_replaced() {
     assert!(!sweep(&out, &both).status.success());
 }
 
+/// A resume knows what it ran: a row measured with another seed (image size, scene file or
+/// rays file) is not taken for the job with this one, and a results.csv with columns this version
+/// does not write (a newer version's) is refused rather than rewritten without them.
+#[test]
+fn resume_runs_what_no_longer_matches_and_keeps_unknown_columns() {
+    let out = tmp("resume-identity");
+    let args =
+        ["--rays", "primary", "--layouts", "f32", "--branchings", "4", "--packets", "1", "--layout-branchings", "4"];
+    let o = sweep(&out, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let first = read_rows(&out).unwrap();
+    assert_eq!(first.len(), 1);
+    // Another seed: the old row is kept, the job runs.
+    let mut other: Vec<&str> = args.to_vec();
+    other.extend(["--seed", "7", "--resume"]);
+    let o = sweep(&out, &other);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = read_rows(&out).unwrap();
+    assert_eq!(rows.len(), 2, "the seed-7 job ran beside the seed-1 row");
+    assert_ne!(rows[0].setup, rows[1].setup);
+    // The same settings again: nothing to run.
+    let o = sweep(&out, &other);
+    assert!(o.status.success());
+    assert_eq!(read_rows(&out).unwrap().len(), 2);
+    // A column from a newer version: refused, the file untouched.
+    let csv = out.join("results.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let newer: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| format!("{l},{}\n", if i == 0 { "energy_joules" } else { "1.5" }))
+        .collect();
+    std::fs::write(&csv, &newer).unwrap();
+    let o = sweep(&out, &other);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("energy_joules"), "{err}");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), newer);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 /// Without a terminal (CI logs, nohup, Slurm) the sweep prints one line per finished job with
 /// elapsed time and ETA instead of a progress bar.
 #[test]
