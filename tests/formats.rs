@@ -185,9 +185,9 @@ fn bad_files_name_the_file_and_element() {
     let d = dir();
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n3 0 1 7\n".to_vec(), "face 0: vertex index 1 is out of range"),
-        ("trunc.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n\x00\x00".to_vec(), "not a valid PLY file"),
+        ("trunc.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n\x00\x00".to_vec(), "element 'vertex' (3 declared): "),
         ("nan.ply", [&b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"[..], &f32::NAN.to_le_bytes(), &[0u8; 8]].concat(), "vertex 0 is not finite"),
-        ("word.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 zero\n".to_vec(), "Line 8"),
+        ("word.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 zero\n".to_vec(), "element 'vertex' (1 declared, from line 8): "),
         ("noface.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n".to_vec(), "no 'face' or 'tristrips' element"),
         ("notjson.gltf", b"{ this is not json".to_vec(), "not a valid glTF 2.0 file"),
         ("missing.gltf", br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],"bufferViews":[{"buffer":0,"byteLength":36}],"buffers":[{"byteLength":36,"uri":"nowhere.bin"}]}"#.to_vec(), "buffer 0: "),

@@ -125,7 +125,7 @@ fn ply_counts_must_match_the_data() {
     let p = tmp("truncated.ply");
     std::fs::write(&p, head(3) + "3 0 1 2\n").unwrap();
     let e = halftrace::scene::load(&p).unwrap_err().to_string();
-    assert!(e.contains("truncated.ply") && e.contains("element 'face' (3 declared)"), "{e}");
+    assert!(e.contains("truncated.ply") && e.contains("element 'face' (3 declared, from line 14)"), "{e}");
     let p = tmp("exact.ply");
     std::fs::write(&p, head(2) + "3 0 1 2\n3 1 3 2\n").unwrap();
     assert_eq!(halftrace::scene::load(&p).unwrap().len(), 2);

@@ -15,10 +15,15 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError> {
     let mut r = bytes;
     let header = parser.read_header(&mut r).map_err(|e| bad(path, format!("not a valid PLY header: {e}")))?;
     let mut payload = std::collections::HashMap::new();
+    let ascii = matches!(header.encoding, ply_rs::ply::Encoding::Ascii);
+    // An ascii element's first line in the file (the parser counts lines per element).
+    let mut line = bytes[..bytes.len() - r.len()].iter().filter(|&&b| b == b'\n').count() + 1;
     for (name, def) in &header.elements {
+        let at = if ascii { format!(", from line {line}") } else { String::new() };
         let els = parser
             .read_payload_for_element(&mut r, def, &header)
-            .map_err(|e| bad(path, format!("element '{name}' ({} declared): {e}", def.count)))?;
+            .map_err(|e| bad(path, format!("element '{name}' ({} declared{at}): {e}", def.count)))?;
+        line += def.count;
         payload.insert(name.clone(), els);
     }
     let rest = match header.encoding {
