@@ -17,6 +17,9 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
         })
         .collect();
     let m = crate::report::merge::merge(&dirs, out)?;
+    for s in &m.missing_shards {
+        eprintln!("warning: {s} is not among the folders: the report covers only part of that sweep");
+    }
     let merged = m.results.map(|r| format!(", merged rows: {}", r.display())).unwrap_or_default();
     outln!("{} rows from {} folder(s); report: {}{merged}", m.rows, dirs.len(), m.report.display());
     Ok(())

@@ -12,12 +12,63 @@ pub struct Merged {
     pub report: PathBuf,
     /// The merged `results.csv`, when `out` is a folder of its own.
     pub results: Option<PathBuf>,
+    /// Shards of a sweep that are not among the folders ("shard 2 of 4 of sweep …").
+    pub missing_shards: Vec<String>,
+}
+
+/// `shard.json` in a shard's folder: which share of which sweep (a hash of its whole
+/// configuration) it holds.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ShardManifest {
+    pub k: usize,
+    pub n: usize,
+    pub config: String,
+}
+
+/// The shards among `dirs`: all of one sweep (else refused, naming both), each once; returns
+/// the shards of that sweep that are missing.
+fn check_shards(dirs: &[PathBuf]) -> anyhow::Result<Vec<String>> {
+    let mut seen: Vec<(&PathBuf, ShardManifest)> = Vec::new();
+    for d in dirs {
+        let p = d.join("shard.json");
+        if !p.exists() {
+            continue;
+        }
+        let text = String::from_utf8(crate::fsx::read_regular(&p).with_context(|| format!("reading {}", p.display()))?)
+            .with_context(|| p.display().to_string())?;
+        let m: ShardManifest =
+            serde_json::from_str(&text).with_context(|| format!("{}: not a shard manifest", p.display()))?;
+        if let Some((other, o)) = seen.iter().find(|(_, o)| o.config != m.config || o.n != m.n) {
+            anyhow::bail!(
+                "{} is shard {}/{} of sweep {} but {} is shard {}/{} of sweep {}: shards of different sweeps do not \
+                 merge into one sweep's report; report them separately",
+                other.display(),
+                o.k,
+                o.n,
+                o.config,
+                d.display(),
+                m.k,
+                m.n,
+                m.config
+            );
+        }
+        if let Some((other, _)) = seen.iter().find(|(_, o)| o.k == m.k) {
+            anyhow::bail!("{} and {} are both shard {}/{}", other.display(), d.display(), m.k, m.n);
+        }
+        seen.push((d, m));
+    }
+    let Some((_, first)) = seen.first() else { return Ok(Vec::new()) };
+    Ok((1..=first.n)
+        .filter(|k| !seen.iter().any(|(_, m)| m.k == *k))
+        .map(|k| format!("shard {k} of {} of sweep {}", first.n, first.config))
+        .collect())
 }
 
 /// Reads the rows of every folder in `dirs` and renders their report into `out` (default: the
 /// first folder); a folder that is not one of the inputs also gets the merged rows and the
 /// sweep's images.
 pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
+    let missing_shards = check_shards(dirs)?;
     let mut rows: Vec<Row> = Vec::new();
     // Identity of a row → (folder, CSV line) of its first occurrence.
     let mut seen: HashMap<RowId, (usize, usize)> = HashMap::new();
@@ -97,9 +148,21 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
         }
     }
     super::markdown::render_with(&rows, &isa_rows, &out, dirs)?;
+    if !missing_shards.is_empty() {
+        // Said at the top of the report, too: its tables cover only part of that sweep.
+        let p = out.join("report.md");
+        let md = std::fs::read_to_string(&p).with_context(|| p.display().to_string())?;
+        let (title, rest) = md.split_once("\n\n").unwrap_or((&md, ""));
+        let note = format!(
+            "**Incomplete sweep:** not among the folders: {}. Every table covers only the shards given.",
+            missing_shards.join("; ")
+        );
+        crate::fsx::write_atomic(&p, format!("{title}\n\n{note}\n\n{rest}").as_bytes())?;
+    }
     Ok(Merged {
         rows: rows.len() + isa_rows.len(),
         report: out.join("report.md"),
         results: own.then(|| out.join(if rows.is_empty() { "isa.json" } else { "results.csv" })),
+        missing_shards,
     })
 }

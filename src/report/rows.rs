@@ -210,7 +210,7 @@ pub fn layouts_in(rows: &[&Row]) -> Vec<&'static str> {
 
 /// The files a sweep writes into its folder (besides per-layout images, [`is_output`]).
 pub const OUTPUTS: &[&str] =
-    &["results.csv", "results.json", "report.md", "device_arith.json", "device_bench.json", "render.png"];
+    &["results.csv", "results.json", "report.md", "device_arith.json", "device_bench.json", "render.png", "shard.json"];
 /// The plots (each as `.png` and `.svg`); `schemes` is the old name of `layouts`.
 pub const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "layouts", "schemes"];
 
@@ -280,15 +280,67 @@ pub fn write_rows(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
 
 /// Reads the rows of `DIR/results.csv`. Rows of a renamed layout read under its current name
 /// (its kernel names too), so a resume or a merge over older results matches them.
+/// Every row is checked: a file of halftrace's columns (a folder, an empty file or another
+/// CSV is refused), each value in its domain ([`check_row`]).
 pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
     let p = dir.join("results.csv");
-    let mut r = csv::Reader::from_path(&p).with_context(|| format!("reading {}", p.display()))?;
+    let bytes = crate::fsx::read_regular(&p).with_context(|| format!("reading {}", p.display()))?;
+    let mut r = csv::Reader::from_reader(&bytes[..]);
+    let header: Vec<String> = r.headers().map(|h| h.iter().map(String::from).collect()).unwrap_or_default();
+    for need in ["scene", "rays", "layout", "branching", "packet", "kernel", "device", "status", "mrays_median"] {
+        anyhow::ensure!(
+            header.iter().any(|h| h == need),
+            "{}: not a halftrace results.csv (no '{need}' column{})",
+            p.display(),
+            if bytes.is_empty() { "; the file is empty" } else { "" }
+        );
+    }
     let rows: Vec<Row> = r
         .deserialize()
         .enumerate()
-        .map(|(i, x)| x.with_context(|| format!("{}: row {}", p.display(), i + 2)))
+        .map(|(i, x)| {
+            let row: Row = x.with_context(|| format!("{}: row {}", p.display(), i + 2))?;
+            check_row(&row).map_err(|e| anyhow::anyhow!("{}: row {} ({}): {e}", p.display(), i + 2, row.kernel))?;
+            Ok(row)
+        })
         .collect::<anyhow::Result<_>>()?;
     Ok(rows.into_iter().map(current_names).collect())
+}
+
+/// A row's values in their domains: a known layout or baseline, B and P that exist for it,
+/// times and speeds finite and non-negative (NaN only where nothing was measured), counts
+/// non-negative.
+pub fn check_row(r: &Row) -> Result<(), String> {
+    let layout = LayoutId::parse(&r.layout).is_ok() || LayoutId::parse(&r.layout.replace("-seed", "-poster")).is_ok();
+    if layout {
+        if !crate::bvh::BRANCHINGS.contains(&r.branching) {
+            return Err(format!("branching {} is not one of {:?}", r.branching, crate::bvh::BRANCHINGS));
+        }
+        if !crate::variant::PACKETS.contains(&r.packet) {
+            return Err(format!("packet {} is not one of {:?}", r.packet, crate::variant::PACKETS));
+        }
+    } else if BaselineId::parse(&r.layout).is_none() {
+        return Err(format!("layout '{}' is neither a layout nor a baseline of this version", r.layout));
+    }
+    let timed = [
+        ("mrays_median", r.mrays_median),
+        ("mrays_min", r.mrays_min),
+        ("mrays_max", r.mrays_max),
+        ("ms_median", r.ms_median),
+        ("ms_min", r.ms_min),
+        ("ms_max", r.ms_max),
+        ("build_ms", r.build_ms),
+        ("nodes_per_ray", r.nodes_per_ray),
+        ("box_tests_per_ray", r.box_tests_per_ray),
+        ("tri_tests_per_ray", r.tri_tests_per_ray),
+        ("node_bytes_per_ray", r.node_bytes_per_ray),
+    ];
+    for (name, v) in timed {
+        if v.is_infinite() || v < 0.0 || (v.is_nan() && r.status.is_ok() && name.starts_with("m")) {
+            return Err(format!("{name} {v} is not a finite, non-negative number"));
+        }
+    }
+    Ok(())
 }
 
 /// A row with its layout's current name (and its built-in kernel's name with it).

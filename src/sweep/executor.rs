@@ -117,6 +117,13 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     let jobs: Vec<Job> = jobs.into_iter().filter(|j| !done.contains(&ex.identity(j).id())).collect();
     let resumed = kept.len();
     let mut writer = report::Writer::create(out, kept)?;
+    if let Some(s) = cfg.shard {
+        // Which sweep this share is of, so that `report` merges only shards of one sweep.
+        let whole = Config { shard: None, budget: None, ..cfg.clone() };
+        let config = format!("{:016x}", crate::digest::fnv1a(format!("{whole:?}").as_bytes()));
+        let manifest = report::merge::ShardManifest { k: s.k, n: s.n, config };
+        crate::fsx::write_atomic(&out.join("shard.json"), serde_json::to_string_pretty(&manifest)?.as_bytes())?;
+    }
     let arith = gpu::arith::run(&g, 16384, 256, 3)?;
     crate::fsx::write_atomic(&out.join("device_arith.json"), serde_json::to_string_pretty(&arith)?.as_bytes())?;
     if resumed > 0 && !quiet {

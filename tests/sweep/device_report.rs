@@ -22,7 +22,12 @@ fn state(out: &Path) -> serde_json::Value {
 #[test]
 fn device_report_is_interrupted_refused_and_resumed() {
     let out = tmp("device-report");
-    let mut child = report_cmd(&out, &["--budget", "20m"]).process_group(0).spawn().unwrap();
+    let mut child = report_cmd(&out, &["--budget", "20m"])
+        .process_group(0)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
     let pid = child.id();
     let t0 = Instant::now();
     loop {

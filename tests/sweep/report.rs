@@ -52,6 +52,43 @@ fn report_refuses_duplicate_rows() {
     let o = run(&[&a, &b]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("same variant") && e.contains("line 2"), "{e}");
+    // What report reads is checked: halftrace's columns, each value in its domain.
+    let row = read_rows(&a).unwrap().remove(0);
+    let bad = |name: &str, write: &dyn Fn(&Path)| {
+        let d = tmp(&format!("bad-{name}"));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        write(&d);
+        let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).arg("report").arg(&d).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr).to_string();
+        assert_eq!(o.status.code(), Some(1), "{name}: {e}");
+        assert!(!d.join("report.md").exists(), "{name}: a report was written");
+        e
+    };
+    let e = bad("dir", &|d| std::fs::create_dir_all(d.join("results.csv")).unwrap());
+    assert!(e.contains("results.csv") && e.contains("folder"), "{e}");
+    let e = bad("empty", &|d| std::fs::write(d.join("results.csv"), b"").unwrap());
+    assert!(e.contains("not a halftrace results.csv") && e.contains("empty"), "{e}");
+    let e = bad("junk", &|d| std::fs::write(d.join("results.csv"), [0x89u8, 0x50, 0x4e, 0x47, 0, 1, 2, 255]).unwrap());
+    assert!(e.contains("not a halftrace results.csv"), "{e}");
+    let text = std::fs::read_to_string(a.join("results.csv")).unwrap();
+    let e = bad("status", &|d| std::fs::write(d.join("results.csv"), text.replace(",ok,", ",weird,")).unwrap());
+    assert!(e.contains("row 2") && e.contains("weird"), "{e}");
+    type Edit = fn(&mut Row);
+    let edits: [(&str, Edit, &str); 6] = [
+        ("nan", |r| r.mrays_median = f64::NAN, "mrays_median NaN"),
+        ("inf", |r| r.ms_median = f64::INFINITY, "ms_median inf"),
+        ("negative", |r| r.ms_min = -1.0, "ms_min -1"),
+        ("b3", |r| r.branching = 3, "branching 3"),
+        ("p5", |r| r.packet = 5, "packet 5"),
+        ("layout", |r| r.layout = "f8".into(), "layout 'f8'"),
+    ];
+    for (name, edit, want) in edits {
+        let mut r = row.clone();
+        edit(&mut r);
+        let e = bad(name, &|d| halftrace::report::write_rows(d, std::slice::from_ref(&r)).unwrap());
+        assert!(e.contains("row 2") && e.contains(want), "{name}: {e}");
+    }
 }
 
 /// `--shard 1/2` and `--shard 2/2` (the second through Slurm's array variables) each run
@@ -122,6 +159,31 @@ fn shards_merge_into_the_unsplit_sweep() {
     };
     assert_eq!(mask(&whole), mask(&merged), "the merged report differs from the unsplit one beyond its numbers");
     assert!(merged.join("render.png").is_file() && merged.join("heat_q8.png").is_file(), "the images came along");
+    // A lone shard merges with a warning and a note naming the missing one; a shard of another
+    // sweep (another configuration hash in its shard.json) is refused.
+    let report = |dirs: &[&Path], out: &Path| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_halftrace"));
+        c.arg("report").args(dirs).arg("--out").arg(out);
+        c.output().unwrap()
+    };
+    let lone = tmp("shard-lone");
+    let o = report(&[&s1], &lone);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("shard 2 of 2"), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(lone.join("report.md")).unwrap();
+    assert!(md.contains("**Incomplete sweep:**") && md.contains("shard 2 of 2"), "{md}");
+    let other = tmp("shard-other");
+    std::fs::create_dir_all(&other).unwrap();
+    for f in ["results.csv", "results.json"] {
+        std::fs::copy(s2.join(f), other.join(f)).unwrap();
+    }
+    let manifest = std::fs::read_to_string(s2.join("shard.json")).unwrap();
+    let config = manifest.split("\"config\": \"").nth(1).unwrap().split('"').next().unwrap().to_string();
+    std::fs::write(other.join("shard.json"), manifest.replace(&config, "0123456789abcdef")).unwrap();
+    let o = report(&[&s1, &other], &tmp("shard-mixed"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("different sweeps"), "{err}");
+    assert!(!tmp("shard-mixed").join("report.md").exists());
     // A bad shard is refused before anything runs.
     let bad = sweep(&tmp("shard-bad"), &[&only[..], &["--shard", "3/2"]].concat());
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("K/N"));
