@@ -267,3 +267,92 @@ fn no_silent_cpu_fallback() {
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.starts_with("error: "), "{err}");
 }
+
+/// A one-triangle glTF with `node` as its only node and its positions in `uri`.
+fn gltf(name: &str, version: &str, node: &str, byte_length: usize, uri: &str) -> PathBuf {
+    let json = format!(
+        r#"{{"asset":{{"version":"{version}"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{node}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "buffers":[{{"byteLength":{byte_length},"uri":"{uri}"}}]}}"#
+    );
+    let p = tmp(name);
+    std::fs::write(&p, json).unwrap();
+    p
+}
+
+/// glTF that was accepted and read wrongly: transforms validated, the version, byteLength,
+/// and buffer URIs confined to the file's folder; a bad GLB magic and a JSON root that is not
+/// an object are named as such.
+#[test]
+fn gltf_transforms_versions_lengths_and_uris_are_checked() {
+    let tri: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.].iter().flat_map(|x| x.to_le_bytes()).collect();
+    std::fs::write(tmp("tri.bin"), &tri).unwrap();
+    let mut long = tri.clone();
+    long.extend([0u8; 12]);
+    std::fs::write(tmp("long.bin"), &long).unwrap();
+    let outside = std::env::temp_dir().join(format!("halftrace-outside-{}.bin", std::process::id()));
+    std::fs::write(&outside, &tri).unwrap();
+    let load = |p: &Path| halftrace::scene::load(p).map(|s| s.len()).map_err(|e| e.to_string());
+    let ok = gltf("ok.gltf", "2.0", r#"{"mesh":0,"rotation":[0,0,0,1]}"#, 36, "tri.bin");
+    assert_eq!(load(&ok), Ok(1));
+    let cases = [
+        (
+            "zero_q.gltf",
+            "2.0",
+            r#"{"mesh":0,"rotation":[0,0,0,0]}"#,
+            36,
+            "tri.bin".to_string(),
+            "not a unit quaternion",
+        ),
+        (
+            "both.gltf",
+            "2.0",
+            r#"{"mesh":0,"matrix":[1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1],"translation":[5,0,0]}"#,
+            36,
+            "tri.bin".to_string(),
+            "both a matrix and",
+        ),
+        (
+            "projective.gltf",
+            "2.0",
+            r#"{"mesh":0,"matrix":[1,0,0,0.5,0,1,0,0,0,0,1,0,0,0,0,1]}"#,
+            36,
+            "tri.bin".to_string(),
+            "not affine",
+        ),
+        ("v3.gltf", "3.0", r#"{"mesh":0}"#, 36, "tri.bin".to_string(), "asset.version is 3.0"),
+        (
+            "short.gltf",
+            "2.0",
+            r#"{"mesh":0}"#,
+            36,
+            "long.bin".to_string(),
+            "byteLength 36 is smaller than its 48 bytes",
+        ),
+        ("abs.gltf", "2.0", r#"{"mesh":0}"#, 36, outside.display().to_string(), "outside the glTF's folder"),
+        (
+            "up.gltf",
+            "2.0",
+            r#"{"mesh":0}"#,
+            36,
+            format!("../{}", outside.file_name().unwrap().to_str().unwrap()),
+            "outside",
+        ),
+    ];
+    for (name, version, node, len, uri, want) in cases {
+        let p = gltf(name, version, node, len, &uri);
+        let e = load(&p).expect_err(name);
+        assert!(e.contains(name) && e.contains(want), "{name}: {e}");
+    }
+    let p = tmp("notglb.glb");
+    std::fs::write(&p, b"{\"asset\":{\"version\":\"2.0\"}}").unwrap();
+    let e = load(&p).unwrap_err();
+    assert!(e.contains("notglb.glb") && e.contains("magic 'glTF'"), "{e}");
+    let p = tmp("array.gltf");
+    std::fs::write(&p, b"[1, 2, 3]").unwrap();
+    let e = load(&p).unwrap_err();
+    assert!(e.contains("array.gltf") && e.contains("root is not a JSON object"), "{e}");
+    std::fs::remove_file(&outside).unwrap();
+}

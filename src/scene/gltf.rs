@@ -13,7 +13,20 @@ use std::path::{Path, PathBuf};
 
 /// Triangles of a glTF (`.gltf` JSON or `.glb` binary) file; `warnings` gets what was skipped.
 pub fn load(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Vec<[Vec3; 3]>, SceneError> {
+    let glb = bytes.starts_with(b"glTF");
+    if path.to_string_lossy().to_ascii_lowercase().trim_end_matches(".gz").ends_with(".glb") && !glb {
+        return Err(bad(path, "not a GLB file: it does not start with the magic 'glTF'".into()));
+    }
+    if !glb && bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
+        return Err(bad(path, "not a glTF JSON file: its root is not a JSON object ('{' expected first)".into()));
+    }
     let g = gltf::Gltf::from_slice(bytes).map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
+    let json = g.document.as_json();
+    let version = &json.asset.version;
+    if version.split('.').next() != Some("2") {
+        return Err(bad(path, format!("asset.version is {version}; this reads glTF 2.x")));
+    }
+    check_transforms(path, json)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     // The GLB binary chunk is borrowed, not copied (often the biggest array of a big scene).
     let mut buffers: Vec<Cow<[u8]>> = Vec::new();
@@ -29,6 +42,22 @@ pub fn load(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Vec
         if data.len() < b.length() {
             return Err(bad(path, format!("{what}: {} bytes, the file declares {}", data.len(), b.length())));
         }
+        // Its declared byteLength is the buffer (a GLB chunk is padded to 4 bytes; a file or
+        // data URI holds exactly it): nothing past it is read.
+        let pad = if matches!(b.source(), gltf::buffer::Source::Bin) { 3 } else { 0 };
+        if data.len() > b.length() + pad {
+            return Err(bad(
+                path,
+                format!("{what}: byteLength {} is smaller than its {} bytes of data", b.length(), data.len()),
+            ));
+        }
+        let data = match data {
+            Cow::Borrowed(d) => Cow::Borrowed(&d[..b.length()]),
+            Cow::Owned(mut d) => {
+                d.truncate(b.length());
+                Cow::Owned(d)
+            }
+        };
         buffers.push(data);
     }
     let doc = &g.document;
@@ -71,6 +100,38 @@ pub fn load(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Vec
     Ok(tris)
 }
 
+/// Node transforms as glTF 2.0 allows them: a matrix or TRS, not both; a matrix affine
+/// (last row 0 0 0 1); a rotation a unit quaternion (within 10⁻³).
+fn check_transforms(path: &Path, json: &gltf::json::Root) -> Result<(), SceneError> {
+    for (i, n) in json.nodes.iter().enumerate() {
+        let trs = n.translation.is_some() || n.rotation.is_some() || n.scale.is_some();
+        if let Some(m) = n.matrix {
+            if trs {
+                return Err(bad(
+                    path,
+                    format!("node {i}: both a matrix and translation/rotation/scale (one or the other)"),
+                ));
+            }
+            if m[3] != 0.0 || m[7] != 0.0 || m[11] != 0.0 || m[15] != 1.0 {
+                return Err(bad(
+                    path,
+                    format!(
+                        "node {i}: the matrix is not affine (last row {} {} {} {}, expected 0 0 0 1)",
+                        m[3], m[7], m[11], m[15]
+                    ),
+                ));
+            }
+        }
+        if let Some(q) = &n.rotation {
+            let len = q.0.iter().map(|x| x * x).sum::<f32>().sqrt();
+            if !len.is_finite() || (len - 1.0).abs() > 1e-3 {
+                return Err(bad(path, format!("node {i}: rotation {:?} is not a unit quaternion (length {len})", q.0)));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The bytes of a buffer URI: a `data:` URI (base64) or a file beside the glTF.
 fn read_uri(path: &Path, dir: &Path, uri: &str, what: &str) -> Result<Vec<u8>, SceneError> {
     if let Some(rest) = uri.strip_prefix("data:") {
@@ -91,6 +152,25 @@ fn read_uri(path: &Path, dir: &Path, uri: &str, what: &str) -> Result<Vec<u8>, S
     let meta = std::fs::metadata(&f).map_err(|e| bad(path, format!("{what}: {}: {e}", f.display())))?;
     if !meta.is_file() {
         return Err(bad(path, format!("{what}: {} is not a regular file", f.display())));
+    }
+    // Files beside the glTF (its folder and below) only, unless HALFTRACE_GLTF_ANY_URI=1: an
+    // absolute URI or one that climbs with `..` (or a link out) would read anything.
+    if std::env::var_os("HALFTRACE_GLTF_ANY_URI").is_none_or(|v| v != "1") {
+        let base = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+        let inside = match (f.canonicalize(), base.canonicalize()) {
+            (Ok(f), Ok(d)) => f.starts_with(&d),
+            _ => false,
+        };
+        if !inside {
+            return Err(bad(
+                path,
+                format!(
+                    "{what}: URI '{uri}' is outside the glTF's folder ({}); buffers are read from files beside it \
+                     (HALFTRACE_GLTF_ANY_URI=1 allows others)",
+                    base.display()
+                ),
+            ));
+        }
     }
     std::fs::read(&f).map_err(|e| bad(path, format!("{what}: {}: {e}", f.display())))
 }
