@@ -394,7 +394,13 @@ mod tests {
     fn rows_of_a_renamed_layout_read_under_its_current_name() {
         let dir = std::env::temp_dir().join(format!("halftrace-rows-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let row = |layout: &str, kernel: &str| Row { layout: layout.into(), kernel: kernel.into(), ..Row::default() };
+        let row = |layout: &str, kernel: &str| Row {
+            layout: layout.into(),
+            kernel: kernel.into(),
+            branching: 4,
+            packet: 1,
+            ..Row::default()
+        };
         let old = [row("f16h-seed", "trav_f16h-seed_b4_p1"), row("rq", "trav_rq"), row("f16h", "mine")];
         write_rows(&dir, &old).unwrap();
         let got: Vec<(String, String)> = read_rows(&dir).unwrap().into_iter().map(|r| (r.layout, r.kernel)).collect();
