@@ -28,6 +28,13 @@ fn main() {
         Cmd::Report { dirs, out } => commands::report(dirs, out.as_deref()),
     };
     if let Err(e) = r {
+        // stdout closed by its reader (`halftrace devices | head`): the reader has what it
+        // wanted; end quietly, as other tools do.
+        if e.chain()
+            .any(|c| c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe))
+        {
+            std::process::exit(0);
+        }
         // The context chain, each cause once: an error whose message already quotes its
         // source (an OS or gzip error) does not print it again.
         let mut msg = e.to_string();

@@ -384,3 +384,13 @@ fn small_input_mistakes_get_clear_answers() {
     let e = fails(&["devices", "--device", "no-such-gpu"]);
     assert!(e.contains("no-such-gpu") && e.contains("no such device"), "{e}");
 }
+
+/// A reader that stops early (`halftrace devices | head -1`) ends the command quietly: no
+/// "error: Broken pipe" on stderr.
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    let script = format!("{} devices | head -c 1 >/dev/null", env!("CARGO_BIN_EXE_halftrace"));
+    let o = Command::new("bash").args(["-o", "pipefail", "-c", &script]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("Broken pipe") && !err.contains("panicked"), "{err}");
+}
