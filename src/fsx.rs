@@ -33,6 +33,12 @@ pub fn read_regular(path: &Path) -> std::io::Result<Vec<u8>> {
     std::fs::read(path)
 }
 
+/// Whether two paths name one file: the same spelling, or the same file once links and `.`
+/// or `..` are resolved (both must exist for the second).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    a == b || matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
+}
+
 /// What a path that exists is, when it is not a regular file (`None`: absent or regular).
 fn special(path: &Path) -> Option<&'static str> {
     use std::os::unix::fs::FileTypeExt;

@@ -9,13 +9,8 @@ use std::path::PathBuf;
 pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
     let mut scenes = a.scene.clone();
     if let Some(d) = &a.scenes_dir {
-        let mut found: Vec<PathBuf> = std::fs::read_dir(d)
-            .with_context(|| format!("--scenes-dir {}", d.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.to_string_lossy().ends_with(".obj") || p.to_string_lossy().ends_with(".obj.gz"))
-            .collect();
+        let found = crate::scene::obj_files_in(d).with_context(|| format!("--scenes-dir {}", d.display()))?;
         anyhow::ensure!(!found.is_empty(), "--scenes-dir {}: no .obj or .obj.gz scenes in it", d.display());
-        found.sort();
         scenes.extend(found);
     }
     if scenes.is_empty() {

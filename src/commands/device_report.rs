@@ -17,17 +17,11 @@ pub fn device_report(a: &DeviceReportArgs) -> anyhow::Result<()> {
         None => Some(PathBuf::from("../shared/scenes")).filter(|d| d.is_dir()),
     };
     if let Some(d) = dir {
-        let mut found: Vec<PathBuf> = std::fs::read_dir(&d)
-            .with_context(|| format!("--scenes-dir {}", d.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.to_string_lossy().ends_with(".obj") || p.to_string_lossy().ends_with(".obj.gz"))
-            .collect();
-        found.sort();
+        let found = crate::scene::obj_files_in(&d).with_context(|| format!("--scenes-dir {}", d.display()))?;
         // A scene named twice (the bundled teapot is also a shared scene) is swept once.
         for f in found {
             let same = |s: &PathBuf| {
-                s.canonicalize().ok() == f.canonicalize().ok()
-                    || crate::scene::scene_name(s) == crate::scene::scene_name(&f)
+                crate::fsx::same_file(s, &f) || crate::scene::scene_name(s) == crate::scene::scene_name(&f)
             };
             if !scenes.iter().any(same) {
                 scenes.push(f);

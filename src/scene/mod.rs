@@ -110,6 +110,16 @@ impl Scene {
     }
 }
 
+/// The `.obj` and `.obj.gz` scenes in a folder, sorted by path (`--scenes-dir`).
+pub fn obj_files_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.to_string_lossy().ends_with(".obj") || p.to_string_lossy().ends_with(".obj.gz"))
+        .collect();
+    found.sort();
+    Ok(found)
+}
+
 /// The short name a scene file gets (file name without `.gz` and its format's extension).
 pub fn scene_name(path: &Path) -> String {
     name_and_format(path).0

@@ -157,9 +157,12 @@ impl Config {
         // twice) would write rows `--resume` and `report` cannot tell apart.
         for (i, a) in self.scenes.iter().enumerate() {
             for b in &self.scenes[..i] {
-                let same_file =
-                    a == b || (a.canonicalize().ok().is_some() && a.canonicalize().ok() == b.canonicalize().ok());
-                anyhow::ensure!(!same_file, "scenes: {} and {} are the same file", b.display(), a.display());
+                anyhow::ensure!(
+                    !crate::fsx::same_file(a, b),
+                    "scenes: {} and {} are the same file",
+                    b.display(),
+                    a.display()
+                );
                 let (na, nb) = (crate::scene::scene_name(a), crate::scene::scene_name(b));
                 anyhow::ensure!(
                     na != nb,
