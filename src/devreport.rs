@@ -172,7 +172,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     let runner = Steps { exe, out: &out };
 
     // devices, and what the machine's own tools say.
-    if !state.steps.get("devices").is_some_and(|s| s.done) {
+    if !finished(&state, "devices") {
         say("devices");
         let mut args: Vec<String> = vec!["devices".into()];
         for m in &opts.mask_features {
@@ -195,7 +195,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         save(&out, &state)?;
     }
 
-    if !state.steps.get("conformance").is_some_and(|s| s.done) {
+    if !finished(&state, "conformance") {
         say("conformance --quick");
         let mut args: Vec<String> = vec!["conformance".into(), "--quick".into(), "--scene".into(), first.clone()];
         args.extend(common.iter().cloned());
@@ -208,7 +208,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         save(&out, &state)?;
     }
 
-    if !state.steps.get("bench").is_some_and(|s| s.done) {
+    if !finished(&state, "bench") {
         say("bench (short)");
         let mut args: Vec<String> = vec![
             "bench".into(),
@@ -234,11 +234,10 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     // The sweep gets what the budget has left, less a share for isa and the report; at least
     // one job runs (every report has a row).
     let isa_runs = dev.pipeline_statistics;
-    let mut cfg =
+    let cfg =
         sweep::Config { scenes: opts.scenes.clone(), width: opts.width, height: opts.height, ..Default::default() };
-    cfg.device = device_arg.clone();
     let jobs = sweep::jobs::list(&cfg).len();
-    if !state.steps.get("sweep").is_some_and(|s| s.done) {
+    if !finished(&state, "sweep") {
         let reserve = if isa_runs { (opts.budget_s * 0.1).max(20.0) } else { 2.0 };
         let left = deadline.saturating_duration_since(Instant::now()).as_secs_f64() - reserve;
         let budget = left.max(1.0);
@@ -277,7 +276,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         save(&out, &state)?;
     }
 
-    if !state.steps.get("isa").is_some_and(|s| s.done) {
+    if !finished(&state, "isa") {
         let r = if isa_runs {
             say("isa");
             let mut args: Vec<String> = vec!["isa".into(), "--quiet".into(), "--device".into(), device_arg.clone()];
@@ -371,6 +370,11 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
         );
     }
     Ok(old)
+}
+
+/// Whether a step is recorded as finished (a resumed report does not run it again).
+fn finished(state: &State, step: &str) -> bool {
+    state.steps.get(step).is_some_and(|s| s.done)
 }
 
 fn save(out: &Path, state: &State) -> anyhow::Result<()> {

@@ -58,9 +58,8 @@ pub fn device_report(a: &DeviceReportArgs) -> anyhow::Result<()> {
         s.seconds,
         s.out.join("report.md").display()
     );
-    let failed: Vec<&String> =
-        s.state.steps.iter().filter(|(_, st)| st.status.starts_with("failed")).map(|(n, _)| n).collect();
-    let failed: Vec<&str> = failed.iter().map(|s| s.as_str()).collect();
+    let failed: Vec<&str> =
+        s.state.steps.iter().filter(|(_, st)| st.status.starts_with("failed")).map(|(n, _)| n.as_str()).collect();
     anyhow::ensure!(
         failed.is_empty(),
         "step(s) failed: {} (their logs are in {})",

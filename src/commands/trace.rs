@@ -42,12 +42,9 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
         // explicit --backend gpu fails instead.
         None => match gpu::list_devices() {
             Ok(d) if !d.is_empty() => Backend::Gpu,
-            Ok(_) => {
-                eprintln!("warning: no Vulkan device found; tracing with the CPU reference (--backend cpu)");
-                Backend::Cpu
-            }
-            Err(e) => {
-                eprintln!("warning: no Vulkan device ({e}); tracing with the CPU reference (--backend cpu)");
+            r => {
+                let why = r.err().map(|e| format!(" ({e})")).unwrap_or_else(|| " found".into());
+                eprintln!("warning: no Vulkan device{why}; tracing with the CPU reference (--backend cpu)");
                 Backend::Cpu
             }
         },

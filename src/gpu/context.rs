@@ -151,7 +151,7 @@ impl Gpu {
             validation_enabled: inst.validation(),
             capture: opts.statistics,
             kernel_timeout: std::time::Duration::try_from_secs_f64(timeout)
-                .unwrap_or(std::time::Duration::from_secs(600)),
+                .unwrap_or(std::time::Duration::from_secs_f64(DEFAULT_KERNEL_TIMEOUT_S)),
             hung: AtomicBool::new(false),
             logical: ManuallyDrop::new(logical),
             inst: ManuallyDrop::new(inst),

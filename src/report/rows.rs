@@ -311,8 +311,8 @@ pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
 /// times and speeds finite and non-negative (NaN only where nothing was measured), counts
 /// non-negative.
 pub fn check_row(r: &Row) -> Result<(), String> {
-    let layout = LayoutId::parse(&r.layout).is_ok() || LayoutId::parse(&r.layout.replace("-seed", "-poster")).is_ok();
-    if layout {
+    // (LayoutId::parse reads former names too, as current_names relies on.)
+    if LayoutId::parse(&r.layout).is_ok() {
         if !crate::bvh::BRANCHINGS.contains(&r.branching) {
             return Err(format!("branching {} is not one of {:?}", r.branching, crate::bvh::BRANCHINGS));
         }

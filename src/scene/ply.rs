@@ -26,10 +26,7 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError> {
         line += def.count;
         payload.insert(name.clone(), els);
     }
-    let rest = match header.encoding {
-        ply_rs::ply::Encoding::Ascii => r.iter().filter(|b| !b.is_ascii_whitespace()).count(),
-        _ => r.len(),
-    };
+    let rest = if ascii { r.iter().filter(|b| !b.is_ascii_whitespace()).count() } else { r.len() };
     if rest > 0 {
         let counts: Vec<String> = header.elements.iter().map(|(n, d)| format!("{} {n}", d.count)).collect();
         return Err(bad(
