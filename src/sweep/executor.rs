@@ -112,7 +112,8 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
         }
     }
     let runner = Runner::new(Some(&g), &cfg.baselines(), Default::default())?;
-    let mut ex = Executor { runner, cfg, gpu: &g, images: None, scene: None, measured: HashSet::new() };
+    let files = SetupFiles::of(cfg);
+    let mut ex = Executor { runner, cfg, gpu: &g, images: None, scene: None, measured: HashSet::new(), files };
     let done: HashSet<RowId> = kept.iter().map(Row::id).collect();
     let jobs: Vec<Job> = jobs.into_iter().filter(|j| !done.contains(&ex.identity(j).id())).collect();
     let resumed = kept.len();
@@ -227,6 +228,49 @@ struct Executor<'a, 'g> {
     scene: Option<usize>,
     /// The ray kinds measured on it: once all are, the f32 reference encoding is freed.
     measured: HashSet<usize>,
+    /// The files behind each row's `setup`, read once per sweep.
+    files: SetupFiles,
+}
+
+/// What the files a sweep reads contribute to its rows' `setup`: each scene and rays file by
+/// canonical path, size and modification time, each user kernel by its bytes' hash; taken
+/// once, not for every job identity.
+struct SetupFiles {
+    scenes: Vec<String>,
+    /// Per ray kind (`jobs::kinds`): a rays file's stamp, none for generated rays.
+    rays: Vec<Option<String>>,
+    kernels: Vec<u64>,
+}
+
+impl SetupFiles {
+    fn of(cfg: &Config) -> SetupFiles {
+        let stamp = |p: &Path| {
+            let m = std::fs::metadata(p).ok();
+            let mtime =
+                m.as_ref().and_then(|m| m.modified().ok()).and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
+            format!(
+                "{}:{}:{}",
+                p.canonicalize().unwrap_or_else(|_| p.to_path_buf()).display(),
+                m.map_or(0, |m| m.len()),
+                mtime.map_or(0, |d| d.as_nanos())
+            )
+        };
+        SetupFiles {
+            scenes: cfg.scenes.iter().map(|p| stamp(p)).collect(),
+            rays: jobs::kinds(cfg)
+                .iter()
+                .map(|k| match k {
+                    RayKind::File(p) => Some(stamp(p)),
+                    _ => None,
+                })
+                .collect(),
+            kernels: cfg
+                .kernel
+                .iter()
+                .map(|k| crate::digest::fnv1a(&std::fs::read(&k.file).unwrap_or_default()))
+                .collect(),
+        }
+    }
 }
 
 impl Executor<'_, '_> {
@@ -283,25 +327,13 @@ impl Executor<'_, '_> {
     /// seed and rays file, a user kernel's source; files by canonical path, size and
     /// modification time (a kernel by its bytes).
     fn setup(&self, job: &Job) -> String {
-        let file = |p: &Path| {
-            let m = std::fs::metadata(p).ok();
-            let mtime =
-                m.as_ref().and_then(|m| m.modified().ok()).and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
-            format!(
-                "{}:{}:{}",
-                p.canonicalize().unwrap_or_else(|_| p.to_path_buf()).display(),
-                m.map_or(0, |m| m.len()),
-                mtime.map_or(0, |d| d.as_nanos())
-            )
-        };
-        let c = self.cfg;
-        let mut text = format!("scene {}; {}x{} seed {}", file(&c.scenes[job.scene]), c.width, c.height, c.seed);
-        if let RayKind::File(p) = self.kind(job) {
-            text += &format!("; rays {}", file(&p));
+        let (c, f) = (self.cfg, &self.files);
+        let mut text = format!("scene {}; {}x{} seed {}", f.scenes[job.scene], c.width, c.height, c.seed);
+        if let Some(r) = &f.rays[job.rays] {
+            text += &format!("; rays {r}");
         }
         if let Some(i) = job.user {
-            let src = std::fs::read(&c.kernel[i].file).unwrap_or_default();
-            text += &format!("; kernel {:016x}", crate::digest::fnv1a(&src));
+            text += &format!("; kernel {:016x}", f.kernels[i]);
         }
         format!("{:016x}", crate::digest::fnv1a(text.as_bytes()))
     }
