@@ -20,12 +20,62 @@
 //   (optional, with TEST_PAIRS defined) bvec2 test_pair(uint ni, uint s, Entry e, Visit v,
 //         RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1): slots s and s + 1 at once
 //   Entry child_entry(uint ni, uint s, Entry e, Visit v, ChildHit h, RayPre r, inout uint reanchors)
+//
+// DEFER_ENTRIES (with GROUPS; Variant::defines sets them for layouts whose entries are large,
+// at B > 2): a child's entry is derived when the child is entered, not when the visit that hit
+// it pushes it. The stack then holds one group per visit that left inner children for later:
+// the node, its entry, this ray's hit mask and the children's order — not one entry per child.
+// Entering child s of node n under n's entry e calls visit_node(n, e, r, best_t), test_child
+// and child_entry with the same node, entry and box as the push would have, so the layout's
+// hooks must not let ChildHit or child_entry depend on `best` (only the hit result may, and
+// the hit is the one stored at the push): the entry is then the same, bit for bit. Groups
+// only ever belong to nodes on the path from the root, and a node with an inner child is at
+// most at depth (STACK_SIZE - 1) / (B - 1) - 2: at most GROUPS of them.
 #include "interface.glsl"
 #include "ray.glsl"
 #include "tri.glsl"
 #include "box.glsl"
 #include "layout.glsl"
 #include "packet.glsl"
+
+#ifdef DEFER_ENTRIES
+// A group's Meta: this ray's hit mask over the node's children, how many inner children are
+// left, and their slots nearest first (SB bits each). One word up to B = 8.
+#if B == 4
+#define SB 2u
+#else
+#define SB 3u
+#endif
+#if B <= 8
+#define Meta uint
+#define OFS (uint(B) + SB)
+Meta meta_new(uint hit, int left) { return hit | (uint(left) << uint(B)); }
+Meta meta_put(Meta m, int k, uint s) { return m | (s << (OFS + SB * uint(k))); }
+uint meta_slot(Meta m) { return (m >> OFS) & (uint(B) - 1u); }
+uint meta_left(Meta m) { return (m >> uint(B)) & ((1u << SB) - 1u); }
+Meta meta_next(Meta m) {
+    uint ord = (m >> OFS) >> SB;
+    return (m & ((1u << uint(B)) - 1u)) | ((meta_left(m) - 1u) << uint(B)) | (ord << OFS);
+}
+bool meta_hit(Meta m, uint s) { return (m & (1u << s)) != 0u; }
+#else
+// B = 16: x = hit mask | left << 16, y and z the slots (4 bits each, y first).
+#define Meta uvec3
+Meta meta_new(uint hit, int left) { return uvec3(hit | (uint(left) << 16), 0u, 0u); }
+Meta meta_put(Meta m, int k, uint s) {
+    if (k < 8) m.y |= s << (4 * k);
+    else m.z |= s << (4 * (k - 8));
+    return m;
+}
+uint meta_slot(Meta m) { return m.y & 15u; }
+uint meta_left(Meta m) { return m.x >> 16; }
+Meta meta_next(Meta m) { return uvec3(m.x - 0x10000u, (m.y >> 4) | (m.z << 28), m.z >> 4); }
+bool meta_hit(Meta m, uint s) { return (m.x & (1u << s)) != 0u; }
+#endif
+// One array of groups: compilers keep small private arrays in registers (RADV: up to 256
+// bytes), so the node and Meta go beside the entry, in memory, not in 2·GROUPS registers.
+struct Group { Entry en; uint node; Meta meta; };
+#endif
 
 void main() {
     uint i = packet_ray_index();
@@ -43,8 +93,18 @@ void main() {
     // The stack holds the nodes still to visit; the node being visited (ni, en) is kept out of
     // it: a visit goes on with its nearest inner child directly and pushes only the others, so
     // the nodes are visited in exactly the order of pushing all and popping the top.
+#ifdef DEFER_ENTRIES
+    Group gs[GROUPS];
+    int gp = 0;
+    // The child to enter: slot ps of node pn, under pn's entry pe; phit: this ray hit it.
+    uint pn = 0u, ps = 0u;
+    Entry pe = no_entry();
+    bool phit = false;
+#else
     uint st_node[STACK_SIZE];
     Entry st[STACK_SIZE];
+#endif
+    // Entries on the stack (with DEFER_ENTRIES: children left in its groups).
     int sp = 0;
     bool overflow = false;
     bool more = packet_any(root_hit);
@@ -131,6 +191,37 @@ void main() {
                 else if ((mask & (1u << s)) != 0u) test_leaf(r, c, cnt.z);
             }
             int n = bitCount(inner);
+#ifdef DEFER_ENTRIES
+            uint s0 = 0u;
+            Meta gm = meta_new(mask, n - 1);
+            [[unroll]] for (uint s = 0u; s < uint(B); s++) {
+                if ((inner & (1u << s)) == 0u) continue;
+                int rank = 0;
+                [[unroll]] for (uint t = 0u; t < uint(B); t++) {
+                    // (key, slot) order with one comparison: t < s is known when unrolled.
+                    bool before = t < s ? key[t] <= key[s] : key[t] < key[s];
+                    if ((inner & (1u << t)) != 0u && before) rank++;
+                }
+                if (rank == 0) s0 = s;
+                else gm = meta_put(gm, rank - 1, s);
+            }
+            if (sp + n > STACK_SIZE || (n > 1 && gp >= GROUPS)) {
+                overflow = true;
+                break;
+            }
+            if (n > 0) {
+                if (n > 1) {
+                    gs[gp] = Group(en, ni, gm);
+                    gp++;
+                }
+                sp += n - 1;
+                pn = ni;
+                pe = en;
+                ps = s0;
+                phit = (mask & (1u << s0)) != 0u;
+                descend = true;
+            }
+#else
             uint next_node = 0u;
             Entry next_entry = no_entry();
             [[unroll]] for (uint s = 0u; s < uint(B); s++) {
@@ -164,6 +255,7 @@ void main() {
                 en = next_entry;
                 descend = true;
             }
+#endif
         }
 #if P == 1
         }
@@ -173,10 +265,37 @@ void main() {
                 more = false;
             } else {
                 sp--;
+#ifdef DEFER_ENTRIES
+                // The nearest child left in the top group; the group goes when it is empty.
+                int g = gp - 1;
+                Meta m = gs[g].meta;
+                pn = gs[g].node;
+                pe = gs[g].en;
+                ps = meta_slot(m);
+                phit = meta_hit(m, ps);
+                m = meta_next(m);
+                if (meta_left(m) == 0u) gp = g;
+                else gs[g].meta = m;
+#else
                 ni = st_node[sp];
                 en = st[sp];
+#endif
             }
         }
+#ifdef DEFER_ENTRIES
+        // Enter the child: its entry from its parent's, as the push would have derived it.
+        if (more) {
+            ni = child_word(pn, ps);
+            en = no_entry();
+            if (phit) {
+                Visit pv = visit_node(pn, pe, r, best_t);
+                float k;
+                ChildHit h;
+                test_child(pn, ps, pe, pv, r, k, h);
+                en = child_entry(pn, ps, pe, pv, h, r, cnt.w);
+            }
+        }
+#endif
     }
     if (!valid) return;
     if (overflow) hits[i] = Hit(0.0, PRIM_OVERFLOW, 0.0, 0.0);

@@ -68,6 +68,13 @@ pub fn stack_entries(b: usize) -> usize {
     }
 }
 
+/// Stack groups per ray of a kernel that defers entries (trav.comp, `DEFER_ENTRIES`): one per
+/// node on the path from the root that has an inner child, so depth − 1 with the depth that
+/// [`stack_entries`] allows.
+pub fn stack_groups(b: usize) -> usize {
+    (stack_entries(b) - 1) / (b - 1) - 1
+}
+
 impl Variant {
     /// A variant in its layout's default math.
     pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
@@ -179,6 +186,10 @@ impl Variant {
             ("STACK_SIZE".to_string(), stack_entries(self.branching).to_string()),
             (self.math.define().to_string(), "1".to_string()),
         ];
+        if self.defers_entries() {
+            d.push(("DEFER_ENTRIES".into(), "1".into()));
+            d.push(("GROUPS".into(), stack_groups(self.branching).to_string()));
+        }
         match imp {
             PacketImpl::Subgroup => d.push(("PACKET_SUBGROUP".into(), "1".into())),
             PacketImpl::Hybrid => d.push(("PACKET_HYBRID".into(), "1".into())),
@@ -204,10 +215,25 @@ impl Variant {
         (self.layout.info().stack_entry)(self.math)
     }
 
+    /// Whether this variant's kernels derive entries when entering children (the layout's
+    /// [`LayoutInfo::defer_entries`](crate::layout::LayoutInfo), at B > 2: at B = 2 a group
+    /// would hold one child and cost more than its entry).
+    pub fn defers_entries(&self) -> bool {
+        self.layout.info().defer_entries && self.branching > 2
+    }
+
     /// Stack bytes per ray: entries × entry bytes (node index and the layout's fields, from
-    /// the same definition the kernel's `struct Entry` is generated from).
+    /// the same definition the kernel's `struct Entry` is generated from); for a kernel that
+    /// defers entries, groups × (node index, the layout's fields and the group's order word:
+    /// 4 bytes, 12 at B = 16).
     pub fn stack_bytes(&self) -> u64 {
-        (stack_entries(self.branching) * interface::stack_entry_bytes(self.stack_entry())) as u64
+        let entry = interface::stack_entry_bytes(self.stack_entry());
+        if self.defers_entries() {
+            let meta = if self.branching > 8 { 12 } else { 4 };
+            (stack_groups(self.branching) * (entry + meta)) as u64
+        } else {
+            (stack_entries(self.branching) * entry) as u64
+        }
     }
 
     /// The generated `interface.glsl` of this variant's kernels.

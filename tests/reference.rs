@@ -222,3 +222,115 @@ fn huge_coordinates_keep_every_hit() {
 fn embree_baseline_agrees_with_f32_on_every_scene() {
     baseline_agrees_with_f32("embree", &halftrace::baseline::embree::host(), 1);
 }
+
+/// Kernels that defer entries (trav.comp, `DEFER_ENTRIES`: f16h and f16h-poster above B = 2)
+/// derive a child's entry when they enter the child, with the node's visit recomputed under the
+/// closest hit found by then, and keep only the hit result of the push. That gives the same
+/// entries only if a layout's box-test data and child entries ignore the closest hit: checked
+/// here along each ray's whole walk (every hit child, whatever the closest hit would cull) on
+/// the adversarial teapot_in_stadium and the teapot, every math mode, with float controls on
+/// and off — each child tested and entered under best = tmax and under best = the node's own
+/// entry bound (the nearest best that still visits it), the test data, entries and counters
+/// compared.
+#[test]
+fn deferred_entries_ignore_the_closest_hit() {
+    use halftrace::base::{Counters, RayPre};
+    use halftrace::layout::f16h::F16h;
+    use halftrace::layout::f16h_poster::F16hPoster;
+    use halftrace::layout::{decode_child, Layout, Node};
+    use halftrace::precision::FloatControls;
+
+    fn walk<L: Layout, const B: usize>(
+        enc: &halftrace::layout::encoded::Encoded,
+        rays: &[halftrace::base::Ray],
+    ) -> usize
+    where
+        L::Entry: std::fmt::Debug,
+        L::ChildHit: std::fmt::Debug,
+    {
+        let (nodes, root) = enc.typed::<L, B>().unwrap();
+        let mut checked = 0;
+        for &(math, fc) in L::INFO
+            .maths
+            .iter()
+            .flat_map(|m| {
+                let offs: &[FloatControls] = if L::INFO.float_controls_off {
+                    &[FloatControls::On, FloatControls::Off]
+                } else {
+                    &[FloatControls::On]
+                };
+                offs.iter().map(move |&f| (*m, f))
+            })
+            .collect::<Vec<_>>()
+            .iter()
+        {
+            for ray in rays {
+                let r = RayPre::new(ray);
+                let lr = L::ray(&r, math, fc);
+                let (lo, hi): ([f32; 3], [f32; 3]) = (enc.root_box.min.into(), enc.root_box.max.into());
+                let (near, far) = halftrace::base::slab32(&r, lo, hi, r.tmin, r.tmax);
+                if near > far {
+                    continue;
+                }
+                let mut stack = vec![(0u32, L::root_entry(root, &r, &lr, near))];
+                while let Some((ni, e)) = stack.pop() {
+                    let n = &nodes[ni as usize];
+                    let far_v = L::visit::<B>(n, root, &e, &r, &lr, r.tmax);
+                    let near_v = L::visit::<B>(n, root, &e, &r, &lr, L::entry_t(&e));
+                    for s in 0..B {
+                        let w = n.child(s);
+                        if w == halftrace::interface::CHILD_EMPTY {
+                            break;
+                        }
+                        let (Some(a), b) = (
+                            L::test_child::<B>(n, s, &e, &far_v, &r, &lr),
+                            L::test_child::<B>(n, s, &e, &near_v, &r, &lr),
+                        ) else {
+                            continue;
+                        };
+                        if let Some(b) = b {
+                            assert_eq!(
+                                format!("{a:?}"),
+                                format!("{b:?}"),
+                                "{} ray {ray:?} node {ni} slot {s}: box test",
+                                L::INFO.name
+                            );
+                        }
+                        if let halftrace::bvh::ChildRef::Inner(j) = decode_child(w) {
+                            let (mut ca, mut cb) = (Counters::default(), Counters::default());
+                            let ea = L::child_entry::<B>(n, s, &e, &far_v, &a.1, &r, &lr, &mut ca);
+                            let eb = L::child_entry::<B>(n, s, &e, &near_v, &a.1, &r, &lr, &mut cb);
+                            assert_eq!(
+                                format!("{ea:?}"),
+                                format!("{eb:?}"),
+                                "{} ray {ray:?} node {ni} slot {s}: entry",
+                                L::INFO.name
+                            );
+                            assert_eq!(ca, cb);
+                            checked += 1;
+                            if stack.len() < 4096 {
+                                stack.push((j, ea));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        checked
+    }
+
+    for name in ["teapot_in_stadium.obj", "teapot.obj"] {
+        let p = prepare(&scenes_dir().join(name));
+        let rays: Vec<_> = ray_sets(&p, 24, 300).into_iter().flat_map(|(_, r)| r).collect();
+        for b in [4usize, 8, 16] {
+            let f16h = encode(&p, LayoutId::parse("f16h").unwrap(), b);
+            let poster = encode(&p, LayoutId::parse("f16h-poster").unwrap(), b);
+            let n = match b {
+                4 => walk::<F16h, 4>(&f16h, &rays) + walk::<F16hPoster, 4>(&poster, &rays),
+                8 => walk::<F16h, 8>(&f16h, &rays) + walk::<F16hPoster, 8>(&poster, &rays),
+                _ => walk::<F16h, 16>(&f16h, &rays) + walk::<F16hPoster, 16>(&poster, &rays),
+            };
+            assert!(n > 1000, "{name} B={b}: only {n} child entries checked");
+        }
+    }
+}

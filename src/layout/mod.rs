@@ -73,6 +73,13 @@ pub struct LayoutInfo {
     /// The stack entry's fields besides the node index, as (name, GLSL type), per math mode:
     /// generated into the kernels' `struct Entry` and counted in the report's stack bytes.
     pub stack_entry: fn(Math) -> &'static [(&'static str, &'static str)],
+    /// Whether the kernels at B > 2 derive a child's entry when they enter the child rather
+    /// than when they push it (trav.comp, `DEFER_ENTRIES`): the stack then holds one group
+    /// per visit (node, entry, hit mask and order of the children left), not an entry per
+    /// child — for layouts whose entries are large. The hooks' `ChildHit` and `child_entry`
+    /// must then not depend on the closest hit so far; the entries, hits and counters are the
+    /// same either way.
+    pub defer_entries: bool,
     /// Constants the hooks share with the GLSL side, generated into `interface.glsl` (see
     /// [`crate::interface::glsl_float`]).
     pub glsl_constants: fn() -> String,
@@ -91,6 +98,7 @@ impl LayoutInfo {
         conservative: true,
         needs: |_| Needs::NONE,
         stack_entry: |_| &[],
+        defer_entries: false,
         glsl_constants: String::new,
     };
 }

@@ -40,6 +40,7 @@ impl Layout for F16h {
                 &[("wk", "vec4"), ("o", "f16vec3"), ("e", "float"), ("tp", "float"), ("tlo", "float")]
             }
         },
+        defer_entries: true,
         glsl_constants: || super::half::glsl_constants() + &hooks::glsl_constants(),
         ..LayoutInfo::DEFAULT
     };

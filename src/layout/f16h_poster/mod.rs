@@ -54,6 +54,7 @@ impl Layout for F16hPoster {
         conservative: false,
         needs: |_| Needs { storage16: true, float16: true },
         stack_entry: |_| &[("wk", "vec4"), ("o", "f16vec3"), ("tp", "float")],
+        defer_entries: true,
         glsl_constants: super::half::glsl_constants,
         ..LayoutInfo::DEFAULT
     };
