@@ -188,7 +188,9 @@ void main() {
                 if ((any_mask & (1u << s)) == 0u) continue;
                 uint c = cw[s];
                 if (!is_leaf(c)) inner |= 1u << s;
+#ifndef DEFER_ENTRIES
                 else if ((mask & (1u << s)) != 0u) test_leaf(r, c, cnt.z);
+#endif
             }
             int n = bitCount(inner);
 #ifdef DEFER_ENTRIES
@@ -220,6 +222,11 @@ void main() {
                 ps = s0;
                 phit = (mask & (1u << s0)) != 0u;
                 descend = true;
+            }
+            // The leaves after the push, so that the visit's keys and entry are not held
+            // across the triangle tests (the same tests: nothing above depends on best_t).
+            [[unroll]] for (uint s = 0u; s < uint(B); s++) {
+                if ((mask & ~inner & (1u << s)) != 0u) test_leaf(r, cw[s], cnt.z);
             }
 #else
             uint next_node = 0u;
@@ -289,9 +296,17 @@ void main() {
             en = no_entry();
             if (phit) {
                 Visit pv = visit_node(pn, pe, r, best_t);
-                float k;
                 ChildHit h;
+#ifdef TEST_PAIRS
+                // The pair the child was tested in (the same results: packed, as the visit).
+                vec2 k;
+                ChildHit h0, h1;
+                test_pair(pn, ps & ~1u, pe, pv, r, k, h0, h1);
+                h = (ps & 1u) != 0u ? h1 : h0;
+#else
+                float k;
                 test_child(pn, ps, pe, pv, r, k, h);
+#endif
                 en = child_entry(pn, ps, pe, pv, h, r, cnt.w);
             }
         }
