@@ -302,10 +302,19 @@ mod tests {
         let f32 = LayoutId::f32();
         let f16h = LayoutId::parse("f16h").unwrap();
         assert_eq!(Variant::new(f32, 4, 1).stack_bytes(), 97 * 8);
-        // node 4 + frame 16 + origin (fp16 6 or fp32 12) + e, tp, tlo 12
-        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F16).stack_bytes(), 97 * 38);
-        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::Mixed).stack_bytes(), 97 * 38);
-        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F32).stack_bytes(), 97 * 44);
+        // At B = 2, an entry per child: node 4 + frame 16 + origin (fp16 6 or fp32 12) + e, tp,
+        // tlo 12.
+        assert_eq!(Variant::new(f16h, 2, 1).with_math(Math::F16).stack_bytes(), 65 * 38);
+        assert_eq!(Variant::new(f16h, 2, 1).with_math(Math::F32).stack_bytes(), 65 * 44);
+        // Above, groups: depth - 1 of them (31 at B = 4, 23 at B = 8, 15 at B = 16), each an
+        // entry and its order word (4 bytes, 12 at B = 16).
+        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F16).stack_bytes(), 31 * 42);
+        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::Mixed).stack_bytes(), 31 * 42);
+        assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F32).stack_bytes(), 31 * 48);
+        assert_eq!(Variant::new(f16h, 8, 1).with_math(Math::F16).stack_bytes(), 23 * 42);
+        assert_eq!(Variant::new(f16h, 16, 1).with_math(Math::F32).stack_bytes(), 15 * 56);
+        assert!(!Variant::new(f16h, 2, 1).defers_entries() && Variant::new(f16h, 4, 1).defers_entries());
+        assert!(!Variant::new(f32, 8, 1).defers_entries());
     }
 
     #[test]
