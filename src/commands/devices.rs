@@ -114,6 +114,10 @@ fn plan(d: &DeviceInfo) -> Vec<String> {
         .map(|&p| match gpu::support::packet_plan(d, p) {
             (PacketImpl::Subgroup, Some(n)) => format!("P={p} subgroup (pinned to {n})"),
             (PacketImpl::Subgroup, None) => format!("P={p} subgroup ({})", d.subgroup_size),
+            (PacketImpl::Hybrid, _) if p <= d.max_subgroup_size.max(d.subgroup_size) as usize => format!(
+                "P={p} hybrid (subgroups of {}, then shared memory; no clustered subgroup operations)",
+                d.subgroup_size
+            ),
             (PacketImpl::Hybrid, _) => format!("P={p} hybrid (subgroups of {}, then shared memory)", d.subgroup_size),
             (imp, _) => format!("P={p} {}", if imp == PacketImpl::Shared { "shared memory" } else { "single" }),
         })

@@ -7,7 +7,7 @@ use ash::vk;
 use std::ffi::CStr;
 
 /// What the harness needs to know about a device.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct DeviceInfo {
     pub index: usize,
     pub name: String,
@@ -62,6 +62,8 @@ impl DeviceInfo {
                 self.buffer_device_address = false;
                 self.ray_query = false;
             }
+            "subgroupClustered" => self.subgroup_ops &= !(1 << 6),
+            "subgroupArithmetic" => self.subgroup_ops &= !((1 << 2) | (1 << 6)),
             "subgroupSizeControl" => {
                 self.subgroup_size_control = false;
                 (self.min_subgroup_size, self.max_subgroup_size) = (self.subgroup_size, self.subgroup_size);
@@ -87,6 +89,8 @@ pub const MASKABLE: &[&str] = &[
     "rayQuery",
     "bufferDeviceAddress",
     "subgroupSizeControl",
+    "subgroupClustered",
+    "subgroupArithmetic",
     "shaderRoundingModeRTEFloat16",
     "shaderRoundingModeRTEFloat32",
     "shaderSignedZeroInfNanPreserveFloat16",

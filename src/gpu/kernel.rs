@@ -205,6 +205,14 @@ fn subgroup_pin(gpu: &Gpu, k: &KernelId) -> Result<Option<u32>, GpuError> {
     if imp != PacketImpl::Subgroup {
         return Ok(None);
     }
+    if !super::support::has_subgroup_clustered(&gpu.info) {
+        return Err(GpuError::Unsupported(format!(
+            "{}: subgroup packets need clustered subgroup operations in compute shaders, which {} lacks \
+             (the hybrid packets run there)",
+            k.name(),
+            gpu.info.name
+        )));
+    }
     let pin = super::support::packet_plan(&gpu.info, v.packet).1;
     if pin.is_none() && v.packet > gpu.info.subgroup_size as usize {
         return Err(GpuError::Unsupported(format!(

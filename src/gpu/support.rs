@@ -105,16 +105,17 @@ pub fn packet_subgroup(p: usize, subgroup: u32, control: Option<(u32, u32)>) -> 
 }
 
 /// The packet implementation for `p` rays and the subgroup size to pin (`None`: leave the
-/// driver's choice, which is the reported size): a subgroup when one holds the packet, else
-/// the hybrid (subgroup arithmetic, then shared memory) where the device has subgroup
-/// arithmetic in compute, else shared memory.
+/// driver's choice, which is the reported size): a subgroup when one holds the packet and the
+/// device has clustered subgroup operations, else the hybrid (subgroup arithmetic, then shared
+/// memory; a workgroup of P invocations, so it also serves packets a subgroup holds) where the
+/// device has subgroup arithmetic in compute, else shared memory.
 pub fn packet_plan(info: &DeviceInfo, p: usize) -> (PacketImpl, Option<u32>) {
     let control = info.subgroup_size_control.then_some((info.min_subgroup_size, info.max_subgroup_size));
     match packet_subgroup(p, info.subgroup_size, control) {
         _ if p == 1 => (PacketImpl::Single, None),
-        Some(size) => (PacketImpl::Subgroup, control.map(|_| size)),
-        None if has_subgroup_arithmetic(info) => (PacketImpl::Hybrid, None),
-        None => (PacketImpl::Shared, None),
+        Some(size) if has_subgroup_clustered(info) => (PacketImpl::Subgroup, control.map(|_| size)),
+        _ if has_subgroup_arithmetic(info) => (PacketImpl::Hybrid, None),
+        _ => (PacketImpl::Shared, None),
     }
 }
 
@@ -124,9 +125,30 @@ pub fn has_subgroup_arithmetic(info: &DeviceInfo) -> bool {
     info.subgroup_ops & basic != 0 && info.subgroup_ops & arithmetic != 0
 }
 
+/// Clustered subgroup operations besides the arithmetic (the subgroup packets reduce each
+/// cluster of P invocations with them). SwiftShader has arithmetic but not these: its
+/// compiler warns "UNSUPPORTED: Group operation: 3" (ClusteredReduce) and returns wrong values.
+pub fn has_subgroup_clustered(info: &DeviceInfo) -> bool {
+    let clustered = 1u32 << 6;
+    has_subgroup_arithmetic(info) && info.subgroup_ops & clustered != 0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn packets_without_clustered_operations_go_hybrid_or_shared() {
+        let mut info = DeviceInfo { subgroup_size: 4, subgroup_ops: 0xff, ..Default::default() };
+        assert_eq!(packet_plan(&info, 4).0, PacketImpl::Subgroup);
+        info.subgroup_ops &= !(1 << 6);
+        for p in [4, 8, 64] {
+            assert_eq!(packet_plan(&info, p), (PacketImpl::Hybrid, None), "P {p}");
+        }
+        info.subgroup_ops &= !(1 << 2);
+        assert_eq!(packet_plan(&info, 4), (PacketImpl::Shared, None));
+        assert_eq!(packet_plan(&info, 1).0, PacketImpl::Single);
+    }
 
     #[test]
     fn packet_choice_for_every_subgroup_size() {

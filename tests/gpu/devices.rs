@@ -4,7 +4,9 @@ use super::*;
 
 /// A device without a feature runs what does not need it, with the same hits, and skips the
 /// rest with a line naming the feature: shaderFloat16 → f32, rq and f16h with fp32 math;
-/// 16-bit storage → f32; float controls → every layout through its build without them.
+/// 16-bit storage → f32; float controls → every layout through its build without them;
+/// clustered subgroup operations (SwiftShader has none) → hybrid packets, and without subgroup
+/// arithmetic → shared-memory packets, the subgroup kernels refused by name.
 #[test]
 fn missing_features_fall_back_to_what_stays_exact() {
     use halftrace::gpu::support;
@@ -12,7 +14,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
     let p = prepare(&scenes_dir().join("teapot.obj"));
     let rays = &ray_sets(&p, 24, 200)[3].1;
     let f16h = layout("f16h");
-    let cases: [(&str, Vec<Variant>, Vec<Variant>); 4] = [
+    let cases: [(&str, Vec<Variant>, Vec<Variant>); 6] = [
         (
             "shaderFloat16",
             vec![
@@ -42,6 +44,12 @@ fn missing_features_fall_back_to_what_stays_exact() {
             vec![Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 8).with_math(Math::F16)],
             vec![],
         ),
+        (
+            "subgroupClustered",
+            vec![Variant::new(LayoutId::f32(), 4, 4), Variant::new(f16h, 4, 8).with_math(Math::F16)],
+            vec![],
+        ),
+        ("subgroupArithmetic", vec![Variant::new(LayoutId::f32(), 4, 4)], vec![]),
     ];
     for (feature, runs, skips) in cases {
         let g =
@@ -59,6 +67,18 @@ fn missing_features_fall_back_to_what_stays_exact() {
             let enc = encode(&p, v.layout, v.branching);
             let gb = GpuBvh::upload(&g, &enc).unwrap();
             let imp = halftrace::gpu::kernel::choose_impl(&g, &v, None);
+            let want = match feature {
+                "subgroupClustered" => PacketImpl::Hybrid,
+                "subgroupArithmetic" => PacketImpl::Shared,
+                _ => imp,
+            };
+            assert_eq!(imp, want, "{feature} masked: {v}");
+            if imp != PacketImpl::Subgroup && v.packet > 1 {
+                let e = Kernel::build(&g, &KernelId::new(v, PacketImpl::Subgroup, false), &Source::Builtin)
+                    .err()
+                    .expect("a subgroup kernel without clustered operations is refused");
+                assert!(e.to_string().contains("clustered subgroup operations"), "{e}");
+            }
             let k = builtin(&g, &v, imp, true);
             assert_eq!(
                 k.subgroup.is_some(),
