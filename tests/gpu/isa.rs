@@ -51,16 +51,22 @@ fn isa_builds_every_kernel_on_a_null_device() {
             assert_eq!((q.vgprs, q.scratch), (Some(1.0), Some(1.0)));
         }
     }
-    // f16h's stack entry is larger than f32's: more scratch at every B (P = 1), every math.
+    // f16h's stack (P = 1, every math): at B = 2 an entry per child, larger than f32's, so
+    // more scratch; above, one group per visit (trav.comp, DEFER_ENTRIES): at B = 4 and 8 at
+    // most 2× f32's scratch and 1.5× its VGPRs (it was 5× and 2.4× with an entry per child).
     for r in rows.iter().filter(|r| r.layout == "f16h" && r.packet == 1) {
         let f = rows.iter().find(|f| f.layout == "f32" && f.packet == 1 && f.branching == r.branching).unwrap();
-        assert!(
-            r.scratch_bytes > f.scratch_bytes,
-            "{}: scratch {:?} not above f32's {:?}",
-            r.kernel,
-            r.scratch_bytes,
-            f.scratch_bytes
-        );
+        let (s, fs) = (r.scratch_bytes.unwrap(), f.scratch_bytes.unwrap());
+        let (v, fv) = (r.vgprs.unwrap(), f.vgprs.unwrap());
+        match r.branching {
+            2 => assert!(s > fs, "{}: scratch {s} not above f32's {fs}", r.kernel),
+            4 | 8 => assert!(
+                s <= 2.0 * fs && v <= 1.5 * fv,
+                "{}: scratch {s} and VGPRs {v} against f32's {fs} and {fv}",
+                r.kernel
+            ),
+            _ => assert!(s < fs, "{}: scratch {s} not below f32's {fs}", r.kernel),
+        }
     }
     // The fp16-math kernels compute in fp16, their box tests packed two children to a
     // register (v_pk_*_f16: glsl/half.glsl, slab16x2).
