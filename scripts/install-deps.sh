@@ -2,8 +2,9 @@
 # Installs the system packages halftrace needs on Debian bookworm (or Ubuntu),
 # idempotently: Mesa's lavapipe from bookworm-backports (shaderFloat16, 16-bit
 # storage, VK_KHR_ray_query), the Vulkan loader, shaderc/glslang/SPIRV-Tools for
-# static linking, Embree 3 (the host-CPU baseline) and the Khronos validation layer for
-# the test suite.
+# static linking, Embree 3 (the host-CPU baseline), the Khronos validation layer for
+# the test suite, and SwiftShader (a second CPU Vulkan, from Debian's chromium-common: its
+# ICD is /usr/lib/chromium/vk_swiftshader_icd.json; no browser) for the conformance legs.
 # Backports reuse the mirror already configured for the system (no host names here).
 set -euo pipefail
 SUDO=""
@@ -12,7 +13,11 @@ if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 pkgs=(libvulkan-dev vulkan-tools libshaderc-dev glslang-dev spirv-tools vulkan-validationlayers libembree-dev pkg-config fonts-dejavu-core git)
 
 missing=()
-for p in "${pkgs[@]}" mesa-vulkan-drivers; do
+# SwiftShader: Debian ships it in chromium-common; where no such package exists (Ubuntu's
+# chromium is a snap) everything else still installs, and `halftrace` never needs it.
+swiftshader=chromium-common
+
+for p in "${pkgs[@]}" mesa-vulkan-drivers "$swiftshader"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 
@@ -43,10 +48,12 @@ if [ "${VERSION_CODENAME:-}" = bookworm ]; then
     printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' "$uri" | $SUDO tee "$src" >/dev/null
   fi
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}" "$swiftshader"
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers
 else
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}" mesa-vulkan-drivers
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "$swiftshader" ||
+    echo "install-deps: no $swiftshader here: SwiftShader (a second CPU Vulkan) is not installed" >&2
 fi
 echo "install-deps: done"

@@ -68,7 +68,9 @@ impl Outcome {
 /// Quick: per layout, every B at P = 1 in the default math, every other math once, every P at
 /// B = 4 (the math modes in turn), both implementations at every P the subgroup holds, and the
 /// build without float controls in every math mode at P = 1 and in a packet where the layout
-/// has one.
+/// has one. On a device without the float controls a kernel declares, its build without them
+/// is checked in its place where the layout has one (so a device like SwiftShader checks f32 at
+/// every B and P, not only the two builds without float controls of the quick set).
 pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     let mut out: Vec<(Variant, PacketImpl)> = Vec::new();
     // Every implementation the device can run at P; in the quick set, packets a subgroup
@@ -130,7 +132,16 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
             }
         }
     }
-    out
+    let mut seen = std::collections::HashSet::new();
+    out.into_iter()
+        .map(|(v, imp)| match support::check(info, &v) {
+            Err(_) if v.fc == FloatControls::On => {
+                (support::resolve(info, v, FcChoice::Auto).unwrap_or(v), imp)
+            }
+            _ => (v, imp),
+        })
+        .filter(|k| seen.insert(*k))
+        .collect()
 }
 
 /// The ray sets of every scene: primary, ao and diffuse at `res`², and grazing rays.
