@@ -135,9 +135,7 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     let mut seen = std::collections::HashSet::new();
     out.into_iter()
         .map(|(v, imp)| match support::check(info, &v) {
-            Err(_) if v.fc == FloatControls::On => {
-                (support::resolve(info, v, FcChoice::Auto).unwrap_or(v), imp)
-            }
+            Err(_) if v.fc == FloatControls::On => (support::resolve(info, v, FcChoice::Auto).unwrap_or(v), imp),
             _ => (v, imp),
         })
         .filter(|k| seen.insert(*k))
