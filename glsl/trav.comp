@@ -28,7 +28,9 @@
 // Entering child s of node n under n's entry e calls visit_node(n, e, r, best_t), test_child
 // and child_entry with the same node, entry and box as the push would have, so the layout's
 // hooks must not let ChildHit or child_entry depend on `best` (only the hit result may, and
-// the hit is the one stored at the push): the entry is then the same, bit for bit. Groups
+// the hit is the one stored at the push): the entry is then the same, bit for bit, and so are
+// the hits and counters (but for a ray whose stack overflows: it reports PRIM_OVERFLOW, and
+// the encoder's depth check keeps that from happening). Groups
 // only ever belong to nodes on the path from the root, and a node with an inner child is at
 // most at depth (STACK_SIZE - 1) / (B - 1) - 2: at most GROUPS of them.
 #include "interface.glsl"
@@ -178,11 +180,12 @@ void main() {
             pnodes++;
             asum += nact;
             if (act) cnt.x++;
-            // Leaves first, in slot order, by the rays that hit them: any order gives the same
-            // closest hit (ties go to the lower prim) and the same counters. Inner children go
-            // nearest first: each one's place is its rank by (key, slot), so nothing is sorted
-            // or copied through arrays indexed at run time (traverse.rs, order_children); rank
-            // 0 is visited next, the others are pushed with the nearer ones on top.
+            // Leaves first (with DEFER_ENTRIES after the push), in slot order, by the rays that
+            // hit them: any order gives the same closest hit (ties go to the lower prim) and the
+            // same counters. Inner children go nearest first: each one's place is its rank by
+            // (key, slot), so nothing is sorted or copied through arrays indexed at run time
+            // (traverse.rs, order_children); rank 0 is visited next, the others are pushed with
+            // the nearer ones on top.
             uint inner = 0u;
             [[unroll]] for (uint s = 0u; s < uint(B); s++) {
                 if ((any_mask & (1u << s)) == 0u) continue;

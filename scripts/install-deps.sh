@@ -13,11 +13,17 @@ if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 pkgs=(libvulkan-dev vulkan-tools libshaderc-dev glslang-dev spirv-tools vulkan-validationlayers libembree-dev pkg-config fonts-dejavu-core git)
 
 missing=()
-# SwiftShader: Debian ships it in chromium-common; where no such package exists (Ubuntu's
-# chromium is a snap) everything else still installs, and `halftrace` never needs it.
+# SwiftShader: Debian ships it in chromium-common (installed without its desktop
+# recommends); where no such package exists (Ubuntu's chromium is a snap) it is not asked
+# for, everything else installs, and `halftrace` never needs it (CI's SwiftShader leg does).
 swiftshader=chromium-common
+. /etc/os-release
+want=("${pkgs[@]}" mesa-vulkan-drivers)
+if [ "${VERSION_CODENAME:-}" = bookworm ] || apt-cache show "$swiftshader" >/dev/null 2>&1; then
+  want+=("$swiftshader")
+fi
 
-for p in "${pkgs[@]}" mesa-vulkan-drivers "$swiftshader"; do
+for p in "${want[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 
@@ -33,7 +39,6 @@ if [ ${#missing[@]} -eq 0 ] && [ $mesa_ok -eq 1 ]; then
   exit 0
 fi
 
-. /etc/os-release
 if [ "${VERSION_CODENAME:-}" = bookworm ]; then
   src=/etc/apt/sources.list.d/halftrace-backports.sources
   if [ ! -f "$src" ]; then
@@ -48,12 +53,13 @@ if [ "${VERSION_CODENAME:-}" = bookworm ]; then
     printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' "$uri" | $SUDO tee "$src" >/dev/null
   fi
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}" "$swiftshader"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "$swiftshader"
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers
 else
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${pkgs[@]}" mesa-vulkan-drivers
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "$swiftshader" ||
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "$swiftshader" ||
     echo "install-deps: no $swiftshader here: SwiftShader (a second CPU Vulkan) is not installed" >&2
 fi
 echo "install-deps: done"

@@ -66,7 +66,8 @@ impl Outcome {
 /// The kernels to check on a device, in run order. Full: every layout × math × float-control
 /// build the layout has × B × P, each packet size in every implementation the device can run.
 /// Quick: per layout, every B at P = 1 in the default math, every other math once, every P at
-/// B = 4 (the math modes in turn), both implementations at every P the subgroup holds, and the
+/// B = 4 (the math modes in turn), shared memory and the device's own implementation at every
+/// P the subgroup holds (subgroup, or hybrid without clustered operations), and the
 /// build without float controls in every math mode at P = 1 and in a packet where the layout
 /// has one. On a device without the float controls a kernel declares, its build without them
 /// is checked in its place where the layout has one (so a device like SwiftShader checks f32 at
@@ -79,11 +80,14 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     let imps = |p: usize| -> Vec<PacketImpl> {
         let plan = support::packet_plan(info, p).0;
         let hybrid = support::has_subgroup_arithmetic(info);
+        // A subgroup holds the packet, but the device lacks clustered operations: hybrid.
+        let held = p <= info.subgroup_size.max(info.max_subgroup_size) as usize;
         match plan {
             PacketImpl::Single => vec![PacketImpl::Single],
             PacketImpl::Subgroup if quick => vec![PacketImpl::Shared, PacketImpl::Subgroup],
             PacketImpl::Subgroup if hybrid => vec![PacketImpl::Shared, PacketImpl::Subgroup, PacketImpl::Hybrid],
             PacketImpl::Subgroup => vec![PacketImpl::Shared, PacketImpl::Subgroup],
+            PacketImpl::Hybrid if quick && held => vec![PacketImpl::Shared, PacketImpl::Hybrid],
             PacketImpl::Hybrid if quick => vec![PacketImpl::Hybrid],
             PacketImpl::Hybrid => vec![PacketImpl::Shared, PacketImpl::Hybrid],
             PacketImpl::Shared => vec![PacketImpl::Shared],

@@ -229,9 +229,10 @@ fn embree_baseline_agrees_with_f32_on_every_scene() {
 /// entries only if a layout's box-test data and child entries ignore the closest hit: checked
 /// here along each ray's whole walk (every hit child, whatever the closest hit would cull) on
 /// the adversarial teapot_in_stadium and the teapot, every math mode, with float controls on
-/// and off — each child tested and entered under best = tmax and under best = the node's own
-/// entry bound (the nearest best that still visits it), the test data, entries and counters
-/// compared.
+/// and off — each child tested and entered under best = tmax, under best = the node's own
+/// entry bound (the nearest best that still visits it) and under best = tmin (a child is
+/// entered after its nearer siblings' subtrees, whose hits may lie before its parent's
+/// bound), the test data, entries and counters compared.
 #[test]
 fn deferred_entries_ignore_the_closest_hit() {
     use halftrace::base::{Counters, RayPre};
@@ -277,6 +278,7 @@ fn deferred_entries_ignore_the_closest_hit() {
                     let n = &nodes[ni as usize];
                     let far_v = L::visit::<B>(n, root, &e, &r, &lr, r.tmax);
                     let near_v = L::visit::<B>(n, root, &e, &r, &lr, L::entry_t(&e));
+                    let low_v = L::visit::<B>(n, root, &e, &r, &lr, r.tmin);
                     for s in 0..B {
                         let w = n.child(s);
                         if w == halftrace::interface::CHILD_EMPTY {
@@ -288,7 +290,7 @@ fn deferred_entries_ignore_the_closest_hit() {
                         ) else {
                             continue;
                         };
-                        if let Some(b) = b {
+                        for b in [b, L::test_child::<B>(n, s, &e, &low_v, &r, &lr)].into_iter().flatten() {
                             assert_eq!(
                                 format!("{a:?}"),
                                 format!("{b:?}"),
@@ -297,16 +299,19 @@ fn deferred_entries_ignore_the_closest_hit() {
                             );
                         }
                         if let halftrace::bvh::ChildRef::Inner(j) = decode_child(w) {
-                            let (mut ca, mut cb) = (Counters::default(), Counters::default());
+                            let mut ca = Counters::default();
                             let ea = L::child_entry::<B>(n, s, &e, &far_v, &a.1, &r, &lr, &mut ca);
-                            let eb = L::child_entry::<B>(n, s, &e, &near_v, &a.1, &r, &lr, &mut cb);
-                            assert_eq!(
-                                format!("{ea:?}"),
-                                format!("{eb:?}"),
-                                "{} ray {ray:?} node {ni} slot {s}: entry",
-                                L::INFO.name
-                            );
-                            assert_eq!(ca, cb);
+                            for v in [&near_v, &low_v] {
+                                let mut cb = Counters::default();
+                                let eb = L::child_entry::<B>(n, s, &e, v, &a.1, &r, &lr, &mut cb);
+                                assert_eq!(
+                                    format!("{ea:?}"),
+                                    format!("{eb:?}"),
+                                    "{} ray {ray:?} node {ni} slot {s}: entry",
+                                    L::INFO.name
+                                );
+                                assert_eq!(ca, cb);
+                            }
                             checked += 1;
                             if stack.len() < 4096 {
                                 stack.push((j, ea));
