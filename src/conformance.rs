@@ -81,7 +81,7 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
         let plan = support::packet_plan(info, p).0;
         let hybrid = support::has_subgroup_arithmetic(info);
         // A subgroup holds the packet, but the device lacks clustered operations: hybrid.
-        let held = p <= info.subgroup_size.max(info.max_subgroup_size) as usize;
+        let held = support::subgroup_holds(info, p);
         match plan {
             PacketImpl::Single => vec![PacketImpl::Single],
             PacketImpl::Subgroup if quick => vec![PacketImpl::Shared, PacketImpl::Subgroup],
@@ -138,9 +138,10 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
     }
     let mut seen = std::collections::HashSet::new();
     out.into_iter()
-        .map(|(v, imp)| match support::check(info, &v) {
-            Err(_) if v.fc == FloatControls::On => (support::resolve(info, v, FcChoice::Auto).unwrap_or(v), imp),
-            _ => (v, imp),
+        .map(|(v, imp)| match v.fc {
+            // Auto: the build with float controls where the device runs it, else the one without.
+            FloatControls::On => (support::resolve(info, v, FcChoice::Auto).unwrap_or(v), imp),
+            FloatControls::Off => (v, imp),
         })
         .filter(|k| seen.insert(*k))
         .collect()

@@ -114,7 +114,7 @@ fn plan(d: &DeviceInfo) -> Vec<String> {
         .map(|&p| match gpu::support::packet_plan(d, p) {
             (PacketImpl::Subgroup, Some(n)) => format!("P={p} subgroup (pinned to {n})"),
             (PacketImpl::Subgroup, None) => format!("P={p} subgroup ({})", d.subgroup_size),
-            (PacketImpl::Hybrid, _) if p <= d.max_subgroup_size.max(d.subgroup_size) as usize => format!(
+            (PacketImpl::Hybrid, _) if gpu::support::subgroup_holds(d, p) => format!(
                 "P={p} hybrid (subgroups of {}, then shared memory; no clustered subgroup operations)",
                 d.subgroup_size
             ),

@@ -104,6 +104,12 @@ pub fn packet_subgroup(p: usize, subgroup: u32, control: Option<(u32, u32)>) -> 
     }
 }
 
+/// Whether a subgroup of this device (pinned where it allows) holds a packet of `p` rays.
+pub fn subgroup_holds(info: &DeviceInfo, p: usize) -> bool {
+    let control = info.subgroup_size_control.then_some((info.min_subgroup_size, info.max_subgroup_size));
+    packet_subgroup(p, info.subgroup_size, control).is_some()
+}
+
 /// The packet implementation for `p` rays and the subgroup size to pin (`None`: leave the
 /// driver's choice, which is the reported size): a subgroup when one holds the packet and the
 /// device has clustered subgroup operations, else the hybrid (subgroup arithmetic, then shared
