@@ -48,6 +48,52 @@ layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer CounterBuf 
 #define FLT_MIN_NORMAL uintBitsToFloat(0x00800000u)
 const int NO_PRIM = 0x7fffffff;
 
+// a / b rounded to nearest even wherever a result must be the CPU's bit for bit (the
+// triangle test and its shear constants): Vulkan allows fp32 division an error of 2.5 ulp, float controls
+// or not (RADV multiplies by a reciprocal; SwiftShader's is not correctly rounded), so the
+// quotient's significand comes from integer operations, the native division giving only the
+// first estimate. fp16.rs, div_rte_emulated, takes the same steps and is tested against IEEE
+// division with the estimate off by up to 100 units either way. b = 0 divides natively.
+float div_rte(float a, float b) {
+    uint ua = floatBitsToUint(a);
+    uint ub = floatBitsToUint(b);
+    uint sgn = (ua ^ ub) & 0x80000000u;
+    uint xa = ua & 0x7fffffffu;
+    uint xb = ub & 0x7fffffffu;
+    if (xb == 0u) return a / b;
+    if (xa == 0u) return uintBitsToFloat(sgn);
+    // significands in [2^23, 2^24): a = ma * 2^(ea - 150), b = mb * 2^(eb - 150)
+    int ea = int(xa >> 23);
+    int eb = int(xb >> 23);
+    uint ma = xa & 0x7fffffu;
+    uint mb = xb & 0x7fffffu;
+    if (ea == 0) { int s = 23 - findMSB(ma); ma <<= uint(s); ea = 1 - s; } else ma |= 0x800000u;
+    if (eb == 0) { int s = 23 - findMSB(mb); mb <<= uint(s); eb = 1 - s; } else mb |= 0x800000u;
+    // g = floor(ma * 2^sh / mb) in [2^23, 2^24); the quotient is (g + rem / mb) * 2^(e - 150)
+    uint sh = ma >= mb ? 23u : 24u;
+    int e = ea - eb + 127 - int(sh - 23u);
+    uint estimate = uint(float(ma) / float(mb) * float(1u << sh));
+    uint g = clamp(estimate, 0x800000u, 0xffffffu);
+    int rem = int((ma << sh) - g * mb);   // low words only: exact while |estimate - g| < 128
+    while (rem < 0) { g--; rem += int(mb); }
+    while (rem >= int(mb)) { g++; rem -= int(mb); }
+    uint r2 = uint(rem) << 1;
+    if (e >= 1) {
+        if (r2 > mb || (r2 == mb && (g & 1u) == 1u)) g++;
+        if (g == 0x1000000u) { g = 0x800000u; e++; }
+        if (e >= 255) return uintBitsToFloat(sgn | 0x7f800000u);
+        return uintBitsToFloat(sgn | (uint(e) << 23) | (g & 0x7fffffu));
+    }
+    // subnormal: the significand keeps g >> s
+    uint s = uint(1 - e);
+    if (s > 24u) return uintBitsToFloat(sgn);
+    uint q = g >> s;
+    uint low = g & ((1u << s) - 1u);
+    uint halfway = 1u << (s - 1u);
+    if (low > halfway || (low == halfway && (rem != 0 || (q & 1u) == 1u))) q++;
+    return uintBitsToFloat(sgn | q);
+}
+
 uint ray_index() {
     return (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * uint(WG) + gl_LocalInvocationID.x;
 }
@@ -82,12 +128,13 @@ RayPre ray_pre(uint i) {
     int ky = (kx + 1) % 3;
     if (d[kz] < 0.0) { int t = kx; kx = ky; ky = t; }
     r.kx = kx; r.ky = ky; r.kz = kz;
+    // inv serves only box tests, whose widening allows 2.5 ulp: native division
     precise vec3 inv = vec3(1.0) / d;
     r.inv = inv;
-    precise float sx = d[kx] / d[kz];
-    precise float sy = d[ky] / d[kz];
-    precise float sz = 1.0 / d[kz];
-    r.sx = sx; r.sy = sy; r.sz = sz;
+    // the triangle test's shear must be the CPU's bit for bit
+    r.sx = div_rte(d[kx], d[kz]);
+    r.sy = div_rte(d[ky], d[kz]);
+    r.sz = div_rte(1.0, d[kz]);
     return r;
 }
 

@@ -1,7 +1,103 @@
 // Watertight ray-triangle test (Woop, Benthin, Wald 2013) and the closest-hit rule.
 // Mirrors src/base/tri.rs and base::Closest operation for operation (no contraction).
 
-bool tri_intersect(RayPre r, uint ti, out float t, out float u, out float v) {
+#ifndef HAS_F64
+// Without shaderFloat64 the recomputation of an edge function that is zero in fp32 is done
+// with integer operations: edge_f64(a, b, c, d) is a*b - c*d computed in f64 (both products
+// exact there) and rounded to f32, on 64-bit values held as uvec2(lo, hi). tri.rs,
+// edge_f64_emulated, takes the same steps on u64 and is tested against the f64 expression.
+uvec2 u64_shl(uvec2 v, uint n) {
+    if (n == 0u) return v;
+    if (n >= 32u) return uvec2(0u, v.x << (n - 32u));
+    return uvec2(v.x << n, (v.y << n) | (v.x >> (32u - n)));
+}
+uvec2 u64_shr(uvec2 v, uint n) {
+    if (n == 0u) return v;
+    if (n >= 32u) return uvec2(v.y >> (n - 32u), 0u);
+    return uvec2((v.x >> n) | (v.y << (32u - n)), v.y >> n);
+}
+uvec2 u64_add(uvec2 a, uvec2 b) { uint c; uint lo = uaddCarry(a.x, b.x, c); return uvec2(lo, a.y + b.y + c); }
+uvec2 u64_sub(uvec2 a, uvec2 b) { uint br; uint lo = usubBorrow(a.x, b.x, br); return uvec2(lo, a.y - b.y - br); }
+bool u64_lt(uvec2 a, uvec2 b) { return a.y < b.y || (a.y == b.y && a.x < b.x); }
+int u64_msb(uvec2 v) { return v.y != 0u ? 32 + findMSB(v.y) : findMSB(v.x); }
+uvec2 u64_mask(uint n) { return n >= 32u ? uvec2(0xffffffffu, (1u << (n - 32u)) - 1u) : uvec2((1u << n) - 1u, 0u); }
+
+// r rounded to nearest even at bit pos (1..63), shifted down by pos.
+uvec2 u64_round_at(uvec2 r, uint pos) {
+    uvec2 q = u64_shr(r, pos);
+    uvec2 low = r & u64_mask(pos);
+    uvec2 halfway = u64_shl(uvec2(1u, 0u), pos - 1u);
+    if (u64_lt(halfway, low) || (low == halfway && (q.x & 1u) == 1u)) q = u64_add(q, uvec2(1u, 0u));
+    return q;
+}
+
+// x*y as sign, m * 2^e with m in [2^62, 2^63) (or m = 0): 48 significant bits, 15 zero bits
+// below them and one above.
+struct Product { uint sign; int e; uvec2 m; };
+Product edge_product(float x, float y, bool negate) {
+    uint ux = floatBitsToUint(x);
+    uint uy = floatBitsToUint(y);
+    uint sign = (ux ^ uy ^ (negate ? 0x80000000u : 0u)) & 0x80000000u;
+    ux &= 0x7fffffffu;
+    uy &= 0x7fffffffu;
+    if (ux == 0u || uy == 0u) return Product(sign, 0, uvec2(0u));
+    int ex = int(ux >> 23);
+    int ey = int(uy >> 23);
+    uint mx = ux & 0x7fffffu;
+    uint my = uy & 0x7fffffu;
+    if (ex == 0) { int s = 23 - findMSB(mx); mx <<= uint(s); ex = 1 - s; } else mx |= 0x800000u;
+    if (ey == 0) { int s = 23 - findMSB(my); my <<= uint(s); ey = 1 - s; } else my |= 0x800000u;
+    uint hi, lo;
+    umulExtended(mx, my, hi, lo);
+    uvec2 m = uvec2(lo, hi);                            // in [2^46, 2^48)
+    uint s = m.y < 0x8000u ? 16u : 15u;
+    return Product(sign, ex + ey - 300 - int(s), u64_shl(m, s));
+}
+
+float edge_f64(float a, float b, float c, float d) {
+    Product p1 = edge_product(a, b, false);
+    Product p2 = edge_product(c, d, true);
+    bool z1 = p1.m == uvec2(0u);
+    bool z2 = p2.m == uvec2(0u);
+    if (z1 && z2) return uintBitsToFloat(p1.sign & p2.sign);
+    // the larger magnitude first; the smaller aligned to it with a sticky bit
+    bool first = z2 || (!z1 && (p1.e > p2.e || (p1.e == p2.e && !u64_lt(p1.m, p2.m))));
+    Product pb = first ? p1 : p2;
+    Product ps = first ? p2 : p1;
+    uint delta = ps.m == uvec2(0u) ? 64u : uint(pb.e - ps.e);
+    uvec2 small;
+    if (delta >= 64u) small = uvec2(ps.m != uvec2(0u) ? 1u : 0u, 0u);
+    else small = u64_shr(ps.m, delta) | uvec2((ps.m & u64_mask(delta)) != uvec2(0u) ? 1u : 0u, 0u);
+    uvec2 r = pb.sign == ps.sign ? u64_add(pb.m, small) : u64_sub(pb.m, small);
+    int e = pb.e;
+    if (r == uvec2(0u)) return 0.0;
+    if (r.y >= 0x80000000u) { r = u64_shr(r, 1u) | (r & uvec2(1u, 0u)); e += 1; }
+    // to f64's 53 bits (f32 products give no f64 subnormal or overflow)
+    int top = u64_msb(r);
+    if (top > 52) {
+        uint pos = uint(top - 52);
+        r = u64_shl(u64_round_at(r, pos), pos);
+    }
+    // then to f32: 24 bits, or fewer where the result is subnormal
+    top = u64_msb(r);
+    int pos = max(top - 23, -149 - e);
+    uvec2 q;
+    if (pos <= 0) q = u64_shl(r, uint(-pos));
+    else if (pos > top + 1) q = uvec2(0u);
+    else q = u64_round_at(r, uint(pos));
+    int ex = e + pos;                                   // the result is q * 2^ex
+    if (q.x >= 0x1000000u) { q.x >>= 1; ex += 1; }
+    if (q.x >= 0x800000u) {
+        int biased = ex + 150;
+        if (biased >= 255) return uintBitsToFloat(pb.sign | 0x7f800000u);
+        return uintBitsToFloat(pb.sign | (uint(biased) << 23) | (q.x & 0x7fffffu));
+    }
+    return uintBitsToFloat(pb.sign | q.x);
+}
+#endif
+
+// t is exact (div_rte); the barycentrics come as numerators over det (closest_test divides).
+bool tri_intersect(RayPre r, uint ti, out float t, out float nu, out float nv, out float det_out) {
     uint b = 9u * ti;
     precise float A[3];
     precise float Bv[3];
@@ -42,6 +138,12 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float u, out float v) {
         V = float(dV);
         W = float(dW);
     }
+#else
+    if (U == 0.0 || V == 0.0 || W == 0.0) {
+        U = edge_f64(cx, by, cy, bx);
+        V = edge_f64(ax, cy, ay, cx);
+        W = edge_f64(bx, ay, by, ax);
+    }
 #endif
     if ((U < 0.0 || V < 0.0 || W < 0.0) && (U > 0.0 || V > 0.0 || W > 0.0)) return false;
     precise float det = U + V + W;
@@ -50,26 +152,24 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float u, out float v) {
     precise float bz = r.sz * Bv[r.kz];
     precise float cz = r.sz * C[r.kz];
     precise float T = U * az + V * bz + W * cz;
-    precise float tq = T / det;
-    precise float tt = tq * back;
-    precise float uu = V / det;
-    precise float vv = W / det;
-    t = tt; u = uu; v = vv;
+    precise float tt = div_rte(T, det) * back;
+    t = tt; nu = V; nv = W; det_out = det;
     return true;
 }
 
-// Closest hit so far; ties (equal t) go to the lower prim.
+// Closest hit so far; ties (equal t) go to the lower prim. The barycentrics are divided only
+// for a hit that becomes the closest.
 float best_t;
 int best_prim;
 float best_u;
 float best_v;
 
 void closest_test(RayPre r, uint ti) {
-    float t, u, v;
-    if (tri_intersect(r, ti, t, u, v)) {
+    float t, nu, nv, det;
+    if (tri_intersect(r, ti, t, nu, nv, det)) {
         int prim = int(tri_id[ti]);
         if (t >= r.tmin && (t < best_t || (t == best_t && prim < best_prim))) {
-            best_t = t; best_prim = prim; best_u = u; best_v = v;
+            best_t = t; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
         }
     }
 }
