@@ -1,21 +1,43 @@
 // The node of the layouts that store every child box as fp16 in one frame per node or per BVH
 // (f16h, f16h-poster, f16w, and f16a after its frame; src/layout/node16.rs, Node16): lo and hi structure of arrays,
-// then the child words. Include after half.glsl (HVEC3, LOADH). A layout whose node carries
+// then the child words (HALF_WORDS: in 32-bit words, for devices without 16-bit storage).
+// Include after half.glsl (HVEC3, LOADH). A layout whose node carries
 // more (f16a: its frame) defines NODE16_HEAD as the fields that come first.
 struct Node {
 #ifdef NODE16_HEAD
     NODE16_HEAD
 #endif
+#ifdef HALF_WORDS
+    // Without 16-bit storage: fp16 pairs in 32-bit words, the same bytes; half i of lo is the
+    // low (i even) or the high half of lo[i / 2]
+    uint lo[3 * B / 2];
+    uint hi[3 * B / 2];
+#else
     float16_t lo[3 * B];   // lo[axis * B + slot], in the node's frame, rounded down
     float16_t hi[3 * B];
+#endif
     uint child[B];
 };
 NODE_BUFFER(Node)
 
 uint child_word(uint ni, uint s) { return nodes[ni].child[s]; }
 
-HVEC3 slot_lo(uint ni, uint s) { return HVEC3(LOADH(nodes[ni].lo[s]), LOADH(nodes[ni].lo[B + s]), LOADH(nodes[ni].lo[2 * B + s])); }
-HVEC3 slot_hi(uint ni, uint s) { return HVEC3(LOADH(nodes[ni].hi[s]), LOADH(nodes[ni].hi[B + s]), LOADH(nodes[ni].hi[2 * B + s])); }
+#ifdef HALF_WORDS
+// Half i of a word array, exactly: a bit cast with fp16 arithmetic, a conversion without.
+#ifdef MATH_F32
+float half_of(uint word, uint i) { return unpackHalf2x16(word >> ((i & 1u) << 4)).x; }
+#else
+float16_t half_of(uint word, uint i) { return unpackFloat2x16(word >> ((i & 1u) << 4)).x; }
+#endif
+#define NODE_LO(ni, i) half_of(nodes[ni].lo[(i) >> 1], (i))
+#define NODE_HI(ni, i) half_of(nodes[ni].hi[(i) >> 1], (i))
+#else
+#define NODE_LO(ni, i) LOADH(nodes[ni].lo[i])
+#define NODE_HI(ni, i) LOADH(nodes[ni].hi[i])
+#endif
+
+HVEC3 slot_lo(uint ni, uint s) { return HVEC3(NODE_LO(ni, s), NODE_LO(ni, B + s), NODE_LO(ni, 2 * B + s)); }
+HVEC3 slot_hi(uint ni, uint s) { return HVEC3(NODE_HI(ni, s), NODE_HI(ni, B + s), NODE_HI(ni, 2 * B + s)); }
 
 void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     lo = vec3(slot_lo(ni, s));
@@ -25,6 +47,11 @@ void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
 #ifdef HALF_PAIRS
 // Axis a of slots s and s + 1 (s even) as the lanes of one f16vec2: adjacent halves in the
 // node, one 32-bit word, no packing.
+#ifdef HALF_WORDS
+f16vec2 pair_lo(uint ni, uint s, int a) { return unpackFloat2x16(nodes[ni].lo[(uint(a) * B + s) >> 1]); }
+f16vec2 pair_hi(uint ni, uint s, int a) { return unpackFloat2x16(nodes[ni].hi[(uint(a) * B + s) >> 1]); }
+#else
 f16vec2 pair_lo(uint ni, uint s, int a) { return f16vec2(nodes[ni].lo[a * B + s], nodes[ni].lo[a * B + s + 1]); }
 f16vec2 pair_hi(uint ni, uint s, int a) { return f16vec2(nodes[ni].hi[a * B + s], nodes[ni].hi[a * B + s + 1]); }
+#endif
 #endif

@@ -177,8 +177,8 @@ impl Variant {
         v
     }
 
-    /// Preprocessor definitions of this variant's kernel.
-    pub fn defines(&self, imp: PacketImpl, stats: bool, f64_fallback: bool) -> Vec<(String, String)> {
+    /// Preprocessor definitions of this variant's kernel on a device offering `dev`.
+    pub fn defines(&self, imp: PacketImpl, stats: bool, dev: DeviceBuild) -> Vec<(String, String)> {
         let mut d = vec![
             ("B".to_string(), self.branching.to_string()),
             ("P".to_string(), self.packet.to_string()),
@@ -198,8 +198,11 @@ impl Variant {
         if stats {
             d.push(("STATS".into(), "1".into()));
         }
-        if f64_fallback {
+        if dev.f64 {
             d.push(("HAS_F64".into(), "1".into()));
+        }
+        if !dev.storage16 {
+            d.push(("HALF_WORDS".into(), "1".into()));
         }
         if self.fc == FloatControls::Off {
             d.push(("FC_OFF".into(), "1".into()));
@@ -331,4 +334,21 @@ mod tests {
         );
         assert_eq!(Variant::new(LayoutId::f32(), 4, 1).with_math(Math::F16).math, Math::F32, "f32 has one math mode");
     }
+}
+
+/// What a kernel's build takes from the device beyond its variant. Neither changes a value, so
+/// neither is in the kernel's name: `f64`, the triangle test recomputes an edge function that
+/// is zero in fp32 with fp64 (`HAS_F64`), else with integer operations giving the same f32
+/// (`glsl/tri.glsl`, `edge_f64`); `storage16`, fp16 nodes are read as `float16_t`, else as
+/// pairs of halves in 32-bit words (`HALF_WORDS`, `glsl/node16.glsl`: the same bytes; a word
+/// costs a shift or a conversion per half, so it is used only where 16-bit storage is missing).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DeviceBuild {
+    pub f64: bool,
+    pub storage16: bool,
+}
+
+impl DeviceBuild {
+    /// A device with both (the SPIR-V in `spirv/`, `halftrace shaders`).
+    pub const FULL: DeviceBuild = DeviceBuild { f64: true, storage16: true };
 }

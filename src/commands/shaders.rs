@@ -2,7 +2,7 @@
 
 use super::outln;
 use crate::gpu::shader;
-use crate::variant::{spirv_matrix, KernelId};
+use crate::variant::{spirv_matrix, DeviceBuild, KernelId};
 use anyhow::Context;
 use std::path::Path;
 
@@ -11,7 +11,7 @@ pub fn shaders(dir: &Path) -> anyhow::Result<()> {
     for (v, imp) in spirv_matrix() {
         for stats in [false, true] {
             let k = KernelId::new(v, imp, stats);
-            let code = shader::compile(&k, true)?;
+            let code = shader::compile(&k, DeviceBuild::FULL)?;
             let p = dir.join(format!("{k}.spv"));
             std::fs::write(&p, bytemuck::cast_slice(&code)).with_context(|| format!("writing {}", p.display()))?;
             outln!("{}", p.display());

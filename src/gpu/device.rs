@@ -51,6 +51,13 @@ pub struct DeviceInfo {
 }
 
 impl DeviceInfo {
+    /// What a kernel's build takes from this device beyond its variant.
+    pub fn build(&self) -> crate::variant::DeviceBuild {
+        crate::variant::DeviceBuild { f64: self.shader_float64, storage16: self.storage_16bit }
+    }
+}
+
+impl DeviceInfo {
     /// Treats feature `name` (one of [`MASKABLE`]) as missing.
     pub fn mask(&mut self, name: &str) -> Result<(), String> {
         match name {

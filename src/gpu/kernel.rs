@@ -65,10 +65,10 @@ impl<'g> Kernel<'g> {
     pub fn build(gpu: &'g Gpu, k: &KernelId, source: &Source) -> Result<Kernel<'g>, GpuError> {
         super::support::check(&gpu.info, &k.variant).map_err(GpuError::Unsupported)?;
         let pin = subgroup_pin(gpu, k)?;
-        let f64 = gpu.info.shader_float64;
+        let dev = gpu.info.build();
         let code = match source {
-            Source::Builtin => shader::compile(k, f64)?,
-            Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, k, f64)?, k, gpu)?,
+            Source::Builtin => shader::compile(k, dev)?,
+            Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, k, dev)?, k, gpu)?,
             Source::Spirv(p) => {
                 // The interface first (its messages say what a kernel must look like), then the
                 // SPIRV-Tools validator (its message instead of a driver's "unknown error").
@@ -98,7 +98,7 @@ impl<'g> Kernel<'g> {
     pub fn user_counting(gpu: &'g Gpu, k: &KernelId, source: &Source) -> Result<Option<Kernel<'g>>, GpuError> {
         let Source::Glsl(p) = source else { return Ok(None) };
         let k = k.with_stats(true);
-        let code = shader::compile_user(p, &k, gpu.info.shader_float64)?;
+        let code = shader::compile_user(p, &k, gpu.info.build())?;
         let itf =
             shader::parse_interface(&code).map_err(|msg| GpuError::Spirv { path: p.display().to_string(), msg })?;
         if !itf.bindings.contains(&(0, binding::COUNTERS)) {

@@ -107,7 +107,9 @@ impl LayoutInfo {
 /// tests, fp32 root box — need none of these).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Needs {
-    /// 16-bit values in storage buffers (`storageBuffer16BitAccess`).
+    /// 16-bit values in storage buffers (`storageBuffer16BitAccess`). No built-in layout needs
+    /// it: their nodes hold fp16 pairs in 32-bit words (`glsl/node16.glsl`); a user's module
+    /// may declare it.
     pub storage16: bool,
     /// fp16 arithmetic (`shaderFloat16`); with float controls on, also fp16
     /// round-to-nearest-even and fp16 signed-zero/inf/NaN preservation.

@@ -33,60 +33,62 @@ void main() {
         o[b + 6u * uint(B) + s] = child_word(i, s);
     }
 }"#;
-    for layout in LayoutId::all() {
-        for b in BRANCHINGS {
-            let enc = encode(&p, layout, b);
-            let v = Variant::new(layout, b, 1);
-            let code = shader::compile_source(
-                "node round trip",
-                "roundtrip.comp",
-                src,
-                &v.defines(PacketImpl::Single, false, false),
-                &Includes::variant(&v),
-            )
-            .unwrap();
-            let pipe = ComputePipeline::new(
-                &g,
-                "round trip",
-                &code,
-                binding::COUNT,
-                std::mem::size_of::<PushConstants>() as u32,
-            )
-            .unwrap();
-            let n = enc.node_count();
-            let mut expect = vec![0u32; n * 7 * b];
-            for node in 0..n {
-                for s in 0..b {
-                    let (lo, hi) = enc.nodes.child_box(node, s);
-                    for a in 0..3 {
-                        expect[node * 7 * b + a * b + s] = lo[a].to_bits();
-                        expect[node * 7 * b + (3 + a) * b + s] = hi[a].to_bits();
-                    }
-                    expect[node * 7 * b + 6 * b + s] = enc.nodes.child(node, s);
+    // Both node reads: fp16 storage, and halves in 32-bit words (devices without 16-bit
+    // storage), in every math mode (a conversion or a bit cast per half).
+    use halftrace::variant::DeviceBuild;
+    let words = DeviceBuild { f64: false, storage16: false };
+    let builds = LayoutId::all().flat_map(|l| {
+        BRANCHINGS.into_iter().flat_map(move |b| {
+            l.info().maths.iter().flat_map(move |&m| [(l, b, m, DeviceBuild::FULL), (l, b, m, words)])
+        })
+    });
+    for (layout, b, math, dev) in builds {
+        let enc = encode(&p, layout, b);
+        let v = Variant::new(layout, b, 1).with_math(math);
+        let code = shader::compile_source(
+            "node round trip",
+            "roundtrip.comp",
+            src,
+            &v.defines(PacketImpl::Single, false, dev),
+            &Includes::variant(&v),
+        )
+        .unwrap();
+        let pipe =
+            ComputePipeline::new(&g, "round trip", &code, binding::COUNT, std::mem::size_of::<PushConstants>() as u32)
+                .unwrap();
+        let n = enc.node_count();
+        let mut expect = vec![0u32; n * 7 * b];
+        for node in 0..n {
+            for s in 0..b {
+                let (lo, hi) = enc.nodes.child_box(node, s);
+                for a in 0..3 {
+                    expect[node * 7 * b + a * b + s] = lo[a].to_bits();
+                    expect[node * 7 * b + (3 + a) * b + s] = hi[a].to_bits();
                 }
+                expect[node * 7 * b + 6 * b + s] = enc.nodes.child(node, s);
             }
-            let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER | ash::vk::BufferUsageFlags::TRANSFER_SRC;
-            let nodes = Buffer::upload(&g, "nodes", &enc.nodes.to_bytes()).unwrap();
-            let out =
-                Buffer::new(&g, "out", (n * 7 * b * 4) as u64, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
-            let dummy = Buffer::new(&g, "unused", 16, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
-            pipe.bind(&[&nodes, &dummy, &dummy, &dummy, &dummy, &out]);
-            let push = PushConstants { node_count: n as u32, root: enc.push_root, ..Default::default() };
-            g.submit_and_wait(|cmd| {
-                pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(64));
-                pipe.barrier(cmd);
-            })
-            .unwrap();
-            let got: Vec<u32> = bytemuck::pod_collect_to_vec(&out.download(n * 7 * b * 4).unwrap());
-            assert_eq!(got.len(), expect.len());
-            if let Some(i) = (0..got.len()).find(|&i| got[i] != expect[i]) {
-                panic!(
-                    "{layout} B={b}: word {i} of node {} read as {:#x}, written as {:#x}",
-                    i / (7 * b),
-                    got[i],
-                    expect[i]
-                );
-            }
+        }
+        let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER | ash::vk::BufferUsageFlags::TRANSFER_SRC;
+        let nodes = Buffer::upload(&g, "nodes", &enc.nodes.to_bytes()).unwrap();
+        let out =
+            Buffer::new(&g, "out", (n * 7 * b * 4) as u64, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
+        let dummy = Buffer::new(&g, "unused", 16, usage, gpu_allocator::MemoryLocation::GpuOnly).unwrap();
+        pipe.bind(&[&nodes, &dummy, &dummy, &dummy, &dummy, &out]);
+        let push = PushConstants { node_count: n as u32, root: enc.push_root, ..Default::default() };
+        g.submit_and_wait(|cmd| {
+            pipe.dispatch(cmd, bytemuck::bytes_of(&push), (n as u32).div_ceil(64));
+            pipe.barrier(cmd);
+        })
+        .unwrap();
+        let got: Vec<u32> = bytemuck::pod_collect_to_vec(&out.download(n * 7 * b * 4).unwrap());
+        assert_eq!(got.len(), expect.len());
+        if let Some(i) = (0..got.len()).find(|&i| got[i] != expect[i]) {
+            panic!(
+                "{layout} B={b} {math:?} {dev:?}: word {i} of node {} read as {:#x}, written as {:#x}",
+                i / (7 * b),
+                got[i],
+                expect[i]
+            );
         }
     }
     clean(&g);
@@ -109,7 +111,8 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             let p = dir.join(format!("{name}.spv"));
             let on_disk = std::fs::read(&p)
                 .unwrap_or_else(|e| panic!("{}: {e}; run `halftrace shaders --emit spirv/`", p.display()));
-            let fresh = shader::compile(&KernelId::new(*v, *imp, stats), true).unwrap();
+            let fresh =
+                shader::compile(&KernelId::new(*v, *imp, stats), halftrace::variant::DeviceBuild::FULL).unwrap();
             assert!(
                 on_disk == bytemuck::cast_slice::<u32, u8>(&fresh),
                 "{} is stale against glsl/; run `halftrace shaders --emit spirv/`",

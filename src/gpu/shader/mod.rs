@@ -16,7 +16,7 @@ pub use spirv::{parse_interface, read_spirv, Interface};
 use super::GpuError;
 use crate::interface;
 use crate::layout::LayoutId;
-use crate::variant::{KernelId, Variant};
+use crate::variant::{DeviceBuild, KernelId, Variant};
 use std::path::{Path, PathBuf};
 
 /// The shared GLSL sources: every file directly in `glsl/` (layout hooks come from the
@@ -74,26 +74,24 @@ impl Includes {
     }
 }
 
-/// Compiles one built-in kernel. `f64_fallback`: use fp64 for the watertight test's
-/// exact-zero edge case (needs `shaderFloat64`; the CPU reference always does).
-pub fn compile(k: &KernelId, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+/// Compiles one built-in kernel for a device offering `dev`.
+pub fn compile(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
     let src = source("trav.comp").expect("glsl/trav.comp is embedded");
     let v = &k.variant;
-    let words =
-        compile_source(&k.name(), "trav.comp", src, &v.defines(k.imp, k.stats, f64_fallback), &Includes::variant(v))?;
+    let words = compile_source(&k.name(), "trav.comp", src, &v.defines(k.imp, k.stats, dev), &Includes::variant(v))?;
     Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
 }
 
 /// Compiles a user's GLSL kernel file with the defines and includes of the built-in kernel
 /// `k` (plus the file's own folder).
-pub fn compile_user(path: &Path, k: &KernelId, f64_fallback: bool) -> Result<Vec<u32>, GpuError> {
+pub fn compile_user(path: &Path, k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
     let v = &k.variant;
     let src = std::fs::read_to_string(path)
         .map_err(|e| GpuError::Spirv { path: path.display().to_string(), msg: format!("cannot read: {e}") })?;
     let mut inc = Includes::variant(v);
     inc.user_dir = path.parent().map(Path::to_path_buf);
     let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-    let defines = v.defines(k.imp, k.stats, f64_fallback);
+    let defines = v.defines(k.imp, k.stats, dev);
     let words = compile_source(&format!("{} ({})", k.name(), path.display()), &file, &src, &defines, &inc)?;
     Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
 }

@@ -32,7 +32,7 @@ impl Layout for F16h {
         // emulates its few fp16 roundings (frame centres, bounds) with fp32 and integer
         // operations (glsl/half.glsl, `rte16`), so it runs without `shaderFloat16`.
         float_controls_off: true,
-        needs: |math| Needs { storage16: true, float16: math != Math::F32 },
+        needs: |math| Needs { storage16: false, float16: math != Math::F32 },
         // frame (w.xyz, k), origin in the node's frame, its error bound, tp, tlo.
         stack_entry: |math| match math {
             Math::F32 => &[("wk", "vec4"), ("o", "vec3"), ("e", "float"), ("tp", "float"), ("tlo", "float")],

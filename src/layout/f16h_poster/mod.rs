@@ -52,7 +52,7 @@ impl Layout for F16hPoster {
         maths: &[Math::F16],
         glsl: include_str!("../../../glsl/layout/f16h-poster.glsl"),
         conservative: false,
-        needs: |_| Needs { storage16: true, float16: true },
+        needs: |_| Needs { storage16: false, float16: true },
         stack_entry: |_| &[("wk", "vec4"), ("o", "f16vec3"), ("tp", "float")],
         defer_entries: true,
         glsl_constants: super::half::glsl_constants,
