@@ -19,10 +19,15 @@ float inv_pow2(float k) { return uintBitsToFloat((254u - (floatBitsToUint(k) >> 
 
 // A stored plane decoded to world fp32: w + x with x exact (fp16 or 8-bit times a power of
 // two), one rounding; monotone rounding keeps it outward of the true (fp32) plane
-// (anchored.rs, decode_plane). precise: no fused multiply-add.
+// (anchored.rs, decode_plane). precise: no fused multiply-add. Without float controls the
+// sum is add_rte's, IEEE's on any device.
 float decode_plane(float w, float x) {
+#ifdef FC_OFF
+    return add_rte(w, x);
+#else
     precise float s = w + x;
     return s;
+#endif
 }
 
 Entry root_entry(RayPre r, float near_t) { return Entry(near_t); }

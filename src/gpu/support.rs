@@ -71,7 +71,9 @@ pub fn check(info: &DeviceInfo, v: &Variant) -> Result<(), String> {
 }
 
 /// The variant this device runs for `v` under `--float-controls choice` (auto: on where the
-/// device has the modes, else off where the layout has such a build), or why it cannot run.
+/// device has the modes, else off where the layout has such a build), or why it cannot run
+/// (auto: what the build without float controls lacks, where the layout has one — the
+/// feature that really stands in the way, such as shaderFloat16 on SwiftShader).
 pub fn resolve(info: &DeviceInfo, v: Variant, choice: FcChoice) -> Result<Variant, String> {
     match choice {
         FcChoice::On => check(info, &v.with_fc(FloatControls::On)).map(|_| v.with_fc(FloatControls::On)),
@@ -80,9 +82,9 @@ pub fn resolve(info: &DeviceInfo, v: Variant, choice: FcChoice) -> Result<Varian
             let on = v.with_fc(FloatControls::On);
             match check(info, &on) {
                 Ok(()) => Ok(on),
-                Err(why) => {
-                    check(info, &v.with_fc(FloatControls::Off)).map(|_| v.with_fc(FloatControls::Off)).map_err(|_| why)
-                }
+                Err(why) => check(info, &v.with_fc(FloatControls::Off))
+                    .map(|_| v.with_fc(FloatControls::Off))
+                    .map_err(|off| if v.layout.info().float_controls_off { off } else { why }),
             }
         }
     }

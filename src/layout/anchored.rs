@@ -22,6 +22,20 @@
 //! A hit child's entry bound is its tn_lb mapped back to world units and rounded down
 //! (`half::half_child_tlo`). No origin is carried from node to node, so the bound never compounds
 //! and nothing is ever re-anchored; the stack entry is one fp32 value.
+//!
+//! # Without float controls (`FC_OFF`)
+//! The build for devices without round-to-nearest-even and inf/NaN preservation keeps every
+//! hit under any faithful rounding: fp32 math decodes each plane with `add_rte` (integer
+//! operations, `fp16::add_rte_emulated`, equal to IEEE addition), so the decoded box is this
+//! reference's bit for bit and still contains the true box; the fp32 slab test is `f32`'s,
+//! whose 2⁻²⁰ widening is far beyond what a faithful rounding of its three operations moves.
+//! fp16 math takes the shared fp16 machinery's `off` path, whose bounds allow every rounding
+//! a full ulp (f16h's argument, `half` and `f16h::hooks`): the anchor's error bound uses 2⁻²¹
+//! for 2⁻²³, the fp16 conversions are emulated (`rte16`), products saturate at ±SAT instead of
+//! overflowing, the widening and the child's entry bound are those of the `off` build. The
+//! frames need nothing: f16w's is the push constants', f16a's and q8's are stored, each scale a
+//! power of two whose reciprocal comes from the exponent bits; q8's grid values times powers of
+//! two are exact. This reference passes `r16.off` to the same functions.
 
 use super::frames::Frame;
 use super::half::{self, HVisit, Ray16};
@@ -56,7 +70,8 @@ pub fn inv_pow2(k: f32) -> f32 {
 /// rounding to nearest is monotone, and the true plane is an fp32 value (a triangle vertex
 /// coordinate) on the inner side of the exact stored plane, so the rounded plane stays on the
 /// outer side of it — a lower plane v ≤ w + x gives v = fl(v) ≤ fl(w + x), and likewise above.
-/// (The kernels compute it with `precise`, so no fused multiply-add changes the rounding.)
+/// (The kernels compute it with `precise`, so no fused multiply-add changes the rounding;
+/// without float controls with `add_rte`, the same sum whatever the device rounds.)
 #[inline]
 pub fn decode_plane(w: f32, x: f32) -> f32 {
     w + x
@@ -68,7 +83,7 @@ pub fn visit(frame: &Frame, t: f32, r: &RayPre, r16: &Ray16, best_t: f32) -> Vis
     if r16.math == Math::F32 {
         return Visit { tmax: best_t, t, frame: *frame, o: [0.0; 3], h: NO_HALF_VISIT };
     }
-    let (o, e) = half::anchor(r, frame, t, Math::F16, false);
+    let (o, e) = half::anchor(r, frame, t, Math::F16, r16.off);
     Visit { tmax: best_t, t, frame: *frame, o, h: half::half_visit(frame.k, e, t, t, r16, best_t) }
 }
 
@@ -91,7 +106,7 @@ pub fn child_entry(v: &Visit, (tn, tn_lb): (f32, f32), r16: &Ray16) -> f32 {
     if r16.math == Math::F32 {
         tn
     } else {
-        half::half_child_tlo(&v.h, v.t, v.t, tn_lb, false)
+        half::half_child_tlo(&v.h, v.t, v.t, tn_lb, r16.off)
     }
 }
 

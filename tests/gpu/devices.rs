@@ -4,7 +4,8 @@ use super::*;
 
 /// A device without a feature runs what does not need it, with the same hits, and skips the
 /// rest with a line naming the feature: shaderFloat16 → f32, rq and f16h with fp32 math;
-/// 16-bit storage → f32; float controls → every layout through its build without them;
+/// 16-bit storage → everything (fp16 nodes are read from 32-bit words); float controls →
+/// every conservative layout through its build without them (f16h-poster skipped);
 /// clustered subgroup operations (SwiftShader has none) → hybrid packets, and without subgroup
 /// arithmetic → shared-memory packets, the subgroup kernels refused by name.
 #[test]
@@ -26,8 +27,15 @@ fn missing_features_fall_back_to_what_stays_exact() {
         ),
         (
             "storageBuffer16BitAccess",
-            vec![Variant::new(LayoutId::f32(), 4, 1)],
-            vec![Variant::new(f16h, 4, 1).with_math(Math::F32)],
+            vec![
+                Variant::new(LayoutId::f32(), 4, 1),
+                Variant::new(f16h, 4, 1).with_math(Math::F32),
+                Variant::new(f16h, 8, 8).with_math(Math::F16),
+                Variant::new(layout("f16w"), 4, 1).with_math(Math::F32),
+                Variant::new(layout("f16a"), 8, 1).with_math(Math::F32),
+                Variant::new(layout("q8"), 4, 1).with_math(Math::F32),
+            ],
+            vec![],
         ),
         (
             "floatControls",
@@ -36,8 +44,11 @@ fn missing_features_fall_back_to_what_stays_exact() {
                 Variant::new(LayoutId::f32(), 4, 4),
                 Variant::new(f16h, 4, 1).with_math(Math::F16),
                 Variant::new(f16h, 8, 8).with_math(Math::F32),
+                Variant::new(layout("f16w"), 4, 1).with_math(Math::F16),
+                Variant::new(layout("f16a"), 8, 1).with_math(Math::F32),
+                Variant::new(layout("q8"), 4, 4).with_math(Math::F16),
             ],
-            vec![],
+            vec![Variant::new(layout("f16h-poster"), 4, 1)],
         ),
         (
             "subgroupSizeControl",

@@ -103,7 +103,8 @@ impl Layout for F16a {
         summary: "fp16 child boxes in a per-node fp32 anchored frame, origin re-derived per node",
         maths: &[Math::F16, Math::F32],
         glsl: include_str!("../../../glsl/layout/f16a.glsl"),
-        needs: |math| Needs { storage16: true, float16: math == Math::F16 },
+        needs: |math| Needs { storage16: false, float16: math == Math::F16 },
+        float_controls_off: true,
         stack_entry: |_| anchored::STACK_ENTRY,
         glsl_constants: super::half::glsl_constants,
         ..LayoutInfo::DEFAULT

@@ -74,7 +74,8 @@ impl Layout for F16w {
         summary: "fp16 child boxes in one global frame (Koskela et al. 2015)",
         maths: &[Math::F32, Math::F16],
         glsl: include_str!("../../../glsl/layout/f16w.glsl"),
-        needs: |math| Needs { storage16: true, float16: math == Math::F16 },
+        needs: |math| Needs { storage16: false, float16: math == Math::F16 },
+        float_controls_off: true,
         stack_entry: |_| anchored::STACK_ENTRY,
         glsl_constants: super::half::glsl_constants,
         ..LayoutInfo::DEFAULT

@@ -252,6 +252,7 @@ impl Layout for Q8 {
         maths: &[Math::F32, Math::F16],
         glsl: include_str!("../../../glsl/layout/q8.glsl"),
         needs: |math| Needs { storage16: false, float16: math == Math::F16 },
+        float_controls_off: true,
         stack_entry: |_| anchored::STACK_ENTRY,
         glsl_constants,
         ..LayoutInfo::DEFAULT
