@@ -48,12 +48,25 @@ layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer CounterBuf 
 #define FLT_MIN_NORMAL uintBitsToFloat(0x00800000u)
 const int NO_PRIM = 0x7fffffff;
 
+// The significand of a non-zero |x| (its bits, sign cleared) normalised to [2^23, 2^24), and
+// e with |x| = m * 2^(e - 150), subnormals included.
+uint significand(uint x, out int e) {
+    e = int(x >> 23);
+    uint m = x & 0x7fffffu;
+    if (e == 0) {
+        int s = 23 - findMSB(m);
+        e = 1 - s;
+        return m << uint(s);
+    }
+    return m | 0x800000u;
+}
+
 // a / b rounded to nearest even wherever a result must be the CPU's bit for bit (the
-// triangle test and its shear constants): Vulkan allows fp32 division an error of 2.5 ulp, float controls
-// or not (RADV multiplies by a reciprocal; SwiftShader's is not correctly rounded), so the
-// quotient's significand comes from integer operations, the native division giving only the
-// first estimate. fp16.rs, div_rte_emulated, takes the same steps and is tested against IEEE
-// division with the estimate off by up to 100 units either way. b = 0 divides natively.
+// triangle test and its shear constants): Vulkan allows fp32 division an error of 2.5 ulp,
+// float controls or not (RADV multiplies by a reciprocal), so the quotient's significand comes
+// from integer operations, the native division giving only the first estimate. fp16.rs,
+// div_rte_emulated, takes the same steps and is tested against IEEE division with the estimate
+// off by up to 100 units either way. b = 0 divides natively.
 float div_rte(float a, float b) {
     uint ua = floatBitsToUint(a);
     uint ub = floatBitsToUint(b);
@@ -63,12 +76,9 @@ float div_rte(float a, float b) {
     if (xb == 0u) return a / b;
     if (xa == 0u) return uintBitsToFloat(sgn);
     // significands in [2^23, 2^24): a = ma * 2^(ea - 150), b = mb * 2^(eb - 150)
-    int ea = int(xa >> 23);
-    int eb = int(xb >> 23);
-    uint ma = xa & 0x7fffffu;
-    uint mb = xb & 0x7fffffu;
-    if (ea == 0) { int s = 23 - findMSB(ma); ma <<= uint(s); ea = 1 - s; } else ma |= 0x800000u;
-    if (eb == 0) { int s = 23 - findMSB(mb); mb <<= uint(s); eb = 1 - s; } else mb |= 0x800000u;
+    int ea, eb;
+    uint ma = significand(xa, ea);
+    uint mb = significand(xb, eb);
     // g = floor(ma * 2^sh / mb) in [2^23, 2^24); the quotient is (g + rem / mb) * 2^(e - 150)
     uint sh = ma >= mb ? 23u : 24u;
     int e = ea - eb + 127 - int(sh - 23u);

@@ -41,12 +41,9 @@ Product edge_product(float x, float y, bool negate) {
     ux &= 0x7fffffffu;
     uy &= 0x7fffffffu;
     if (ux == 0u || uy == 0u) return Product(sign, 0, uvec2(0u));
-    int ex = int(ux >> 23);
-    int ey = int(uy >> 23);
-    uint mx = ux & 0x7fffffu;
-    uint my = uy & 0x7fffffu;
-    if (ex == 0) { int s = 23 - findMSB(mx); mx <<= uint(s); ex = 1 - s; } else mx |= 0x800000u;
-    if (ey == 0) { int s = 23 - findMSB(my); my <<= uint(s); ey = 1 - s; } else my |= 0x800000u;
+    int ex, ey;
+    uint mx = significand(ux, ex);
+    uint my = significand(uy, ey);
     uint hi, lo;
     umulExtended(mx, my, hi, lo);
     uvec2 m = uvec2(lo, hi);                            // in [2^46, 2^48)

@@ -162,9 +162,21 @@ pub fn add_rte_emulated(a: f32, b: f32) -> f32 {
     f32::from_bits(sign | field | (m & 0x7f_ffff))
 }
 
+/// The significand of a non-zero |x| (its bits, sign cleared) normalised to [2^23, 2^24), and
+/// e with |x| = m·2^(e − 150), subnormals included (`significand` in `glsl/ray.glsl`).
+pub fn significand(x: u32) -> (u32, i32) {
+    let (e, m) = ((x >> 23) as i32, x & 0x7f_ffff);
+    if e == 0 {
+        let s = m.leading_zeros() as i32 - 8;
+        (m << s, 1 - s)
+    } else {
+        (m | 0x80_0000, e)
+    }
+}
+
 /// `a / b` rounded to nearest even, computed the way every kernel divides where a result must
 /// be the CPU's bit for bit (`glsl/ray.glsl`, `div_rte`): Vulkan allows fp32 division an error
-/// of 2.5 ulp (RADV multiplies by a reciprocal; SwiftShader's is not correctly rounded), so the
+/// of 2.5 ulp (RADV multiplies by a reciprocal), so the
 /// quotient's significand comes from integer operations, the native division giving only the
 /// first estimate. Equal to `a / b` for finite `a` and finite non-zero `b` (tested, with the
 /// estimate off by up to 100 units either way); `b = 0` divides natively.
@@ -184,17 +196,8 @@ fn div_rte_nudged(a: f32, b: f32, nudge: i32) -> f32 {
         return f32::from_bits(sgn);
     }
     // Significands in [2^23, 2^24): a = ma·2^(ea − 150), b = mb·2^(eb − 150).
-    let normalise = |x: u32| -> (u32, i32) {
-        let (e, m) = ((x >> 23) as i32, x & 0x7f_ffff);
-        if e == 0 {
-            let s = m.leading_zeros() as i32 - 8;
-            (m << s, 1 - s)
-        } else {
-            (m | 0x80_0000, e)
-        }
-    };
-    let (ma, ea) = normalise(xa);
-    let (mb, eb) = normalise(xb);
+    let (ma, ea) = significand(xa);
+    let (mb, eb) = significand(xb);
     // The quotient's significand g = floor(ma·2^sh / mb) lies in [2^23, 2^24); the result is
     // (g + rem/mb)·2^(e − 150) with e biased.
     let sh: u32 = if ma >= mb { 23 } else { 24 };

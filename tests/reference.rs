@@ -161,13 +161,21 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
                 let (hf, _) = f.reference_default(&rays);
                 for &l in &layouts {
                     let enc = encode(&p, l, b);
-                    for &math in l.info().maths {
-                        let (h, _) = enc.reference(&rays, 1, math, halftrace::precision::FloatControls::On);
+                    use halftrace::precision::FloatControls;
+                    // The builds without float controls keep the hits too (their own bounds).
+                    let fcs: &[FloatControls] = if l.info().float_controls_off {
+                        &[FloatControls::On, FloatControls::Off]
+                    } else {
+                        &[FloatControls::On]
+                    };
+                    for (&math, &fc) in l.info().maths.iter().flat_map(|m| fcs.iter().map(move |f| (m, f))) {
+                        let (h, _) = enc.reference(&rays, 1, math, fc);
                         let bad = (0..rays.len()).find(|&i| !hf[i].same_bits(&h[i]));
                         prop_assert!(
                             bad.is_none(),
-                            "{l}/{} B={b}: ray {:?}: f32 {:?}, got {:?}",
+                            "{l}/{} {} B={b}: ray {:?}: f32 {:?}, got {:?}",
                             math.name(),
+                            fc.name(),
                             rays[bad.unwrap()],
                             hf[bad.unwrap()],
                             h[bad.unwrap()]

@@ -71,6 +71,7 @@ pub fn edge_f64_emulated(a: f32, b: f32, c: f32, d: f32) -> f32 {
         if xx == 0 || xy == 0 {
             return (sign, 0, 0);
         }
+        // Significands in [2^23, 2^24) (fp16::significand's steps; base may not import fp16).
         let normalise = |u: u32| -> (u64, i32) {
             let (e, m) = ((u >> 23) as i32, u & 0x7f_ffff);
             if e == 0 {

@@ -3,7 +3,8 @@
 use super::*;
 
 /// A device without a feature runs what does not need it, with the same hits, and skips the
-/// rest with a line naming the feature: shaderFloat16 → f32, rq and f16h with fp32 math;
+/// rest with a line naming the feature: shaderFloat64 → everything (the triangle test's fp64
+/// fallback emulated); shaderFloat16 → f32, rq and f16h with fp32 math;
 /// 16-bit storage → everything (fp16 nodes are read from 32-bit words); float controls →
 /// every conservative layout through its build without them (f16h-poster skipped);
 /// clustered subgroup operations (SwiftShader has none) → hybrid packets, and without subgroup
@@ -15,7 +16,13 @@ fn missing_features_fall_back_to_what_stays_exact() {
     let p = prepare(&scenes_dir().join("teapot.obj"));
     let rays = &ray_sets(&p, 24, 200)[3].1;
     let f16h = layout("f16h");
-    let cases: [(&str, Vec<Variant>, Vec<Variant>); 6] = [
+    let cases: [(&str, Vec<Variant>, Vec<Variant>); 7] = [
+        (
+            // The triangle test's fp64 edge recomputation, emulated with integers.
+            "shaderFloat64",
+            vec![Variant::new(LayoutId::f32(), 4, 1), Variant::new(layout("q8"), 8, 1).with_math(Math::F16)],
+            vec![],
+        ),
         (
             "shaderFloat16",
             vec![
