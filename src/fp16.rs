@@ -246,6 +246,16 @@ fn div_rte_nudged(a: f32, b: f32, nudge: i32) -> f32 {
 mod tests {
     use super::*;
 
+    /// A xorshift64 generator: the random bit patterns of the emulation tests, reproducible.
+    fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        }
+    }
+
     #[test]
     fn directed_rounding_every_bit_pattern_neighbourhood() {
         // Exhaustive over all finite fp16 values: points just above/below each value and
@@ -337,13 +347,7 @@ mod tests {
 
     #[test]
     fn emulated_fp32_addition_equals_the_native_one() {
-        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let check = |a: f32, b: f32| {
             let want = a + b;
             if !want.is_finite() {
@@ -387,13 +391,7 @@ mod tests {
 
     #[test]
     fn emulated_fp32_division_equals_the_native_one() {
-        let mut x: u64 = 0x2545_f491_4f6c_dd1d;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let check = |a: f32, b: f32, nudge: i32| {
             let want = a / b;
             let got = div_rte_nudged(a, b, nudge);

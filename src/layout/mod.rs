@@ -108,8 +108,8 @@ impl LayoutInfo {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Needs {
     /// 16-bit values in storage buffers (`storageBuffer16BitAccess`). No built-in layout needs
-    /// it: their nodes hold fp16 pairs in 32-bit words (`glsl/node16.glsl`); a user's module
-    /// may declare it.
+    /// it (on a device without it, fp16 nodes are read from 32-bit words: `HALF_WORDS` in
+    /// `glsl/node16.glsl`); a layout added with hooks that declare 16-bit buffers sets it.
     pub storage16: bool,
     /// fp16 arithmetic (`shaderFloat16`); with float controls on, also fp16
     /// round-to-nearest-even and fp16 signed-zero/inf/NaN preservation.
