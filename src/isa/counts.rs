@@ -1,31 +1,58 @@
 //! The instruction mix of an AMD disassembly (RADV's "Assembly" representation, LLVM's
 //! syntax): vector ALU instructions split into packed fp16, scalar fp16, fp32 and
 //! conversions; scratch loads and stores; what the disassembler could not decode.
+//!
+//! A conversion is a `v_cvt_*`, or ACO's other spelling of one: a mixed-precision fma
+//! (`v_fma_mix_f32`, `v_fma_mixlo_f16`, `v_fma_mixhi_f16`) by `1.0` plus a zero, which is
+//! exactly the conversion of its other source (1·x + (−0) = x, signed zeros kept), and which
+//! ACO emits on GFX9+ to write one half of a register or read one.
 
 use crate::report::isa::AsmCounts;
 
+/// One operation: its mnemonic and the text of its operands.
+#[derive(Clone)]
+struct Op {
+    mnemonic: String,
+    operands: String,
+}
+
 /// One instruction of operations `ops` (two for a dual-issue one): one vector ALU
 /// instruction if any is one, as the driver counts them, each operation classified.
-fn instruction(c: &mut AsmCounts, ops: &[String], flat_scratch: bool) {
+fn instruction(c: &mut AsmCounts, ops: &[Op], flat_scratch: bool) {
     c.instructions += 1;
     if ops.is_empty() {
         c.undecoded += 1;
     }
-    if ops.iter().any(|m| m.starts_with("v_")) {
+    if ops.iter().any(|o| o.mnemonic.starts_with("v_")) {
         c.valu += 1;
     }
-    for m in ops {
-        op(c, m, flat_scratch);
+    for o in ops {
+        op(c, o, flat_scratch);
     }
 }
 
+/// A mixed-precision fma that only converts: one multiplicand `1.0`, the addend a zero. The
+/// sources are the last three operands in both syntaxes (LLVM's lists the destination first,
+/// ACO's before ` = `); modifiers after them (`op_sel…`, `clamp`) are dropped.
+fn is_mix_conversion(o: &Op) -> bool {
+    if !o.mnemonic.starts_with("v_fma_mix") {
+        return false;
+    }
+    let text = o.operands.split(" op_sel").next().unwrap_or("").split(" clamp").next().unwrap_or("");
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [.., a, b, addend] = parts[..] else { return false };
+    let zero = addend.replace(['(', ')', '-'], "").trim_start_matches("neg").trim_start_matches("lo").trim_start_matches("hi").to_string();
+    (a == "1.0" || b == "1.0") && (zero == "0" || zero == "0.0")
+}
+
 /// One operation's class.
-fn op(c: &mut AsmCounts, m: &str, flat_scratch: bool) {
+fn op(c: &mut AsmCounts, o: &Op, flat_scratch: bool) {
+    let m = o.mnemonic.as_str();
     if let Some(rest) = m.strip_prefix("v_") {
         // Packed: v_pk_*_f16, and the dot products of fp16 pairs (v_dot2_f32_f16, …).
         if (rest.starts_with("pk_") || rest.starts_with("dot2")) && m.contains("_f16") {
             c.packed_f16 += 1;
-        } else if rest.starts_with("cvt_") {
+        } else if rest.starts_with("cvt_") || is_mix_conversion(o) {
             c.conversions += 1;
         } else if m.contains("_f16") {
             c.scalar_f16 += 1;
@@ -58,7 +85,7 @@ pub fn count(asm: &str, flat_scratch: bool) -> AsmCounts {
         scratch_stores: flat_scratch.then_some(0),
         ..AsmCounts::default()
     };
-    let mut last: Option<Vec<String>> = None;
+    let mut last: Option<Vec<Op>> = None;
     for line in asm.lines() {
         let indented = line.starts_with([' ', '\t']);
         let code = line.split(';').next().unwrap_or("").trim();
@@ -79,16 +106,20 @@ pub fn count(asm: &str, flat_scratch: bool) -> AsmCounts {
         if !indented || code.is_empty() || code.starts_with("//") || code.starts_with("/*") {
             continue;
         }
-        let ops: Vec<String> = code
+        let ops: Vec<Op> = code
             .split("::")
             .filter_map(|part| {
                 let part = match part.find(" = ") {
                     Some(i) if part[..i].contains(':') => &part[i + 3..],
                     _ => part,
                 };
-                part.split_whitespace().next()
+                let part = part.trim();
+                let m = part.split_whitespace().next()?;
+                Some(Op {
+                    mnemonic: m.strip_prefix("v_dual_").map(|r| format!("v_{r}")).unwrap_or_else(|| m.to_string()),
+                    operands: part[m.len()..].trim().to_string(),
+                })
             })
-            .map(|m| m.strip_prefix("v_dual_").map(|r| format!("v_{r}")).unwrap_or_else(|| m.to_string()))
             .collect();
         instruction(&mut c, &ops, flat_scratch);
         last = Some(ops);
@@ -167,5 +198,21 @@ mod tests {
         // Without flat scratch (GCN1–4), the scratch counts are unknown, not zero.
         let old = count(asm, false);
         assert_eq!((old.scratch_loads, old.scratch_stores, old.valu), (None, None, 11));
+    }
+
+    /// ACO's conversions spelled as mixed-precision fmas (1·x + 0) count as conversions, in
+    /// both syntaxes; a mixed fma that computes something stays scalar fp16 or fp32.
+    #[test]
+    fn mix_fmas_by_one_plus_zero_are_conversions() {
+        let asm = "\tv_fma_mixlo_f16 v13, 1.0, v12, neg(0) op_sel_hi:[0,0,1]     ; cc21400d 820218f2\n\
+            \tv_fma_mix_f32 v66, -v70, 1.0, neg(0) op_sel_hi:[1,0,0]      ; cc200042 aa01e546\n\
+            \tv_fma_mixhi_f16 v13, v12, 1.0, 0 op_sel_hi:[0,0,1]          ; cc22400d 82020d0c\n\
+            \tv_fma_mixlo_f16 v13, v1, v12, v2 op_sel_hi:[0,0,1]          ; cc21400d 040a1901\n\
+            \tv_fma_mix_f32 v66, v70, 1.0, v3 op_sel_hi:[1,0,0]           ; cc200042 040de546\n\
+            \t v2b: (SzInfNaNPreserve)%413:v[13][0:16] = v_fma_mixlo_f16 1.0, %409:v[12], neg(lo(0))\n\
+            \t v2b: %414:v[14][0:16] = v_fma_mixlo_f16 %1:v[1], %409:v[12], %2:v[2]\n";
+        let c = count(asm, true);
+        assert_eq!((c.instructions, c.valu), (7, 7));
+        assert_eq!((c.conversions, c.scalar_f16, c.f32), (4, 2, 1), "{c:?}");
     }
 }
