@@ -43,6 +43,7 @@ int frexp_exp(float x) {
 }
 float pow2(int e) { return uintBitsToFloat(uint(e + 127) << 23); }
 
+#ifdef FC_OFF
 // Round-to-nearest-even of x to fp16, returned exactly in fp32: integer operations on the
 // bits and one exact power-of-two product, so it needs no fp16 arithmetic (fp16.rs,
 // rte16_emulated, takes the same steps and is tested against the conversion for every fp16
@@ -65,6 +66,21 @@ float rte16(float x) {
     precise float r = float(q) * pow2(lsb);
     return uintBitsToFloat(floatBitsToUint(r) | sgn);
 }
+#else
+// Round-to-nearest-even of x to fp16, returned exactly in fp32, with the build's RTE fp32
+// additions (fp16.rs, rte16_by_add, tested like rte16_emulated): x + m, m = 1.5 * 2^(e + 13)
+// with x's exponent e clamped to fp16's, lies in one binade spaced as fp16 at e, so the sum
+// rounds x to fp16 and subtracting m is exact. Branch-free: no bit-by-bit rounding.
+float rte16(float x) {
+    uint u = floatBitsToUint(x);
+    uint eb = clamp((u & 0x7fffffffu) >> 23, 113u, 143u);
+    float m = uintBitsToFloat(((eb + 13u) << 23) | 0x400000u);
+    precise float s = x + m;
+    precise float r = s - m;
+    float a = abs(r) >= 65536.0 ? INF : abs(r);
+    return uintBitsToFloat(floatBitsToUint(a) | (u & 0x80000000u));
+}
+#endif
 
 // a + b rounded to nearest even with integer operations only: three guard bits and a sticky
 // bit (fp16.rs, add_rte_emulated, takes the same steps and is tested against IEEE addition).
