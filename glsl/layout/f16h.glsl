@@ -85,8 +85,10 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     fits = om + abs(se) + cm <= MOVE_LIMIT;
 #endif
     if (v.prec && cr <= R_MAX && fits) {
-        float emag = 0.0, ecmag = 0.0, omag = 0.0;
-        bool finite = true;
+        // in_cap: every |o2| <= OCAP, so finite (ordered comparisons are false for NaN): the
+        // same as hooks.rs's `finite && omag <= OCAP`, one comparison an axis.
+        float emag = 0.0, ecmag = 0.0;
+        bool in_cap = true;
 #if !defined(MATH_F32) && !defined(FC_OFF)
         // The move (half.glsl, move16): per axis the operations of the loop below.
         f16vec3 ea3, ec3;
@@ -94,8 +96,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
         for (int a = 0; a < 3; a++) {
             emag = max(emag, abs(float(ea3[a])));
             ecmag = max(ecmag, abs(float(ec3[a])));
-            omag = max(omag, abs(float(o2[a])));
-            finite = finite && !isinf(o2[a]) && !isnan(o2[a]);
+            in_cap = in_cap && abs(float(o2[a])) <= OCAP;
         }
 #else
         for (int a = 0; a < 3; a++) {
@@ -116,7 +117,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
                 precise float16_t op = ec * r16c;
                 oa = op;
             }
-            finite = finite && !big;
+            in_cap = in_cap && !big;
 #else
             precise float16_t oa = ec * r16c;
 #endif
@@ -124,10 +125,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
             o2[a] = oa;
             emag = max(emag, abs(float(ea)));
             ecmag = max(ecmag, abs(float(ec)));
-            omag = max(omag, abs(float(oa)));
-#ifndef FC_OFF
-            finite = finite && !isinf(oa) && !isnan(oa);
-#endif
+            in_cap = in_cap && abs(float(oa)) <= OCAP;
         }
 #endif
         precise float step_t = se / v.mk;
@@ -145,7 +143,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
             + (abs(en.tp) + abs(step_t)) * TWO_M22 * mk2)
             * (1.0 + TWO_M18);
 #endif
-        if (finite && omag <= OCAP && ee <= EMAX) {
+        if (in_cap && ee <= EMAX) {
             return Entry(vec4(cw, ck), o2, ee, tpn, tlo_c);
         }
     }
