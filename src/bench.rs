@@ -35,6 +35,9 @@ pub struct BenchConfig {
     pub validation: bool,
     /// Reduced-precision layouts to time beside f32 (empty: every conservative one).
     pub layouts: Vec<LayoutId>,
+    /// Branching factors of the P = 1 variants (f32 and the reduced layouts); the fixed ratios
+    /// at B = 8 need 8 among them.
+    pub branchings: Vec<usize>,
 }
 
 /// The packet sizes of the packet ratios (against P = 1), f32 at B = 4 on primary rays.
@@ -84,10 +87,10 @@ pub struct BenchResult {
     pub speeds: Vec<(String, String, String, f64, f64, f64)>,
 }
 
-/// The variants timed on every scene and ray kind: the f32 baseline at B = 4 and 8, every
-/// conservative reduced-precision layout (or those of `only`) in every math at B = 4 and 8
-/// (P = 1); on primary rays also f32 at B = 4 with every packet size.
-fn variants(kind: &RayKind, only: &[LayoutId]) -> Vec<Variant> {
+/// The variants timed on every scene and ray kind: the f32 baseline and every conservative
+/// reduced-precision layout (or those of `only`) in every math at each of `branchings` (P = 1);
+/// on primary rays also f32 at B = 4 with every packet size.
+fn variants(kind: &RayKind, only: &[LayoutId], branchings: &[usize]) -> Vec<Variant> {
     let mut v = Vec::new();
     for layout in LayoutId::all() {
         let l = layout.info();
@@ -96,7 +99,7 @@ fn variants(kind: &RayKind, only: &[LayoutId]) -> Vec<Variant> {
             continue;
         }
         for &math in l.maths {
-            for b in [4, 8] {
+            for &b in branchings {
                 v.push(Variant::new(layout, b, 1).with_math(math));
             }
         }
@@ -171,6 +174,18 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
             let hv = |m: Math| Key::Variant(Variant::new(f16h, 8, 1).with_math(m));
             push("f16h fp32-math ÷ f32, B = 8, P = 1", &hv(Math::F32), &f32_(8, 1), Some(0.9));
             push("f16h fp16-math ÷ f32, B = 8, P = 1", &hv(Math::F16), &f32_(8, 1), Some(0.35));
+            // f16h in each math at the other branching factors timed (no goal).
+            for &b in cfg.branchings.iter().filter(|&&b| b != 8) {
+                for m in f16h.info().maths {
+                    let a = Key::Variant(Variant::new(f16h, b, 1).with_math(*m));
+                    let math = match m {
+                        Math::F16 => "fp16",
+                        Math::F32 => "fp32",
+                        Math::Mixed => "mixed",
+                    };
+                    push(&format!("f16h {math}-math ÷ f32, B = {b}, P = 1"), &a, &f32_(b, 1), None);
+                }
+            }
             // The best reduced-precision variant against f32 at the same B, by median ratio.
             let mut best: Option<(Key, Key, f64)> = None;
             for (kk, k) in times.keys() {
@@ -252,7 +267,7 @@ fn bench_scene(runner: &mut Runner, cfg: &BenchConfig, scene: &str) -> anyhow::R
     }
     let mut keys: Vec<(usize, Key)> = Vec::new();
     for (ki, (_, s)) in sets.iter().enumerate() {
-        keys.extend(variants(&s.kind, &cfg.layouts).into_iter().map(|v| (ki, Key::Variant(v))));
+        keys.extend(variants(&s.kind, &cfg.layouts, &cfg.branchings).into_iter().map(|v| (ki, Key::Variant(v))));
         keys.extend(BaselineId::all().map(|b| (ki, Key::Baseline(b))));
     }
     // Validated once, each against its reference (ours: the CPU reference; baselines: f32).

@@ -374,6 +374,10 @@ pub struct BenchArgs {
     pub width: u32,
     #[arg(long, default_value_t = 256)]
     pub height: u32,
+    /// Branching factors of the P = 1 kernels, comma-separated: 2, 4, 8, 16 (the fixed ratios
+    /// are at B = 8; f16h ÷ f32 is reported at each other one).
+    #[arg(long, default_value = "4,8", value_delimiter = ',')]
+    pub branchings: Vec<usize>,
     /// Interleaved rounds (every target once per round).
     #[arg(long, default_value_t = 5)]
     pub rounds: usize,

@@ -1,5 +1,6 @@
 //! `halftrace bench`: the speed ratios a kernel change is judged by.
 
+use anyhow::Context as _;
 use super::outln;
 use crate::bench::{self, BenchConfig};
 use crate::cli::{BenchArgs, LayoutArg};
@@ -31,6 +32,10 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
             o.display()
         );
     }
+    anyhow::ensure!(!a.branchings.is_empty(), "--branchings: name at least one of 2, 4, 8, 16");
+    for &b in &a.branchings {
+        crate::bvh::check_branching(b).context("--branchings")?;
+    }
     let mut layouts = Vec::new();
     for l in &a.layouts {
         match l {
@@ -50,6 +55,7 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
         device: a.device.clone(),
         validation: a.validation,
         layouts,
+        branchings: a.branchings.clone(),
     };
     let r = bench::run(&cfg)?;
     let md = bench::markdown(&cfg, &r);
