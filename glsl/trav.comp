@@ -21,8 +21,8 @@
 //         RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1): slots s and s + 1 at once
 //   Entry child_entry(uint ni, uint s, Entry e, Visit v, ChildHit h, RayPre r, inout uint reanchors)
 //
-// DEFER_ENTRIES (with GROUPS; Variant::defines sets them for layouts whose entries are large,
-// at B > 2): a child's entry is derived when the child is entered, not when the visit that hit
+// DEFER_ENTRIES (with GROUPS; Variant::defines sets them for layouts whose entries are large):
+// a child's entry is derived when the child is entered, not when the visit that hit
 // it pushes it. The stack then holds one group per visit that left inner children for later:
 // the node, its entry, this ray's hit mask and the children's order — not one entry per child.
 // Entering child s of node n under n's entry e calls visit_node(n, e, r, best_t), test_child
@@ -43,7 +43,9 @@
 #ifdef DEFER_ENTRIES
 // A group's Meta: this ray's hit mask over the node's children, how many inner children are
 // left, and their slots nearest first (SB bits each). One word up to B = 8.
-#if B == 4
+#if B == 2
+#define SB 1u
+#elif B == 4
 #define SB 2u
 #else
 #define SB 3u

@@ -231,7 +231,7 @@ fn embree_baseline_agrees_with_f32_on_every_scene() {
     baseline_agrees_with_f32("embree", &halftrace::baseline::embree::host(), 1);
 }
 
-/// Kernels that defer entries (trav.comp, `DEFER_ENTRIES`: f16h and f16h-poster above B = 2)
+/// Kernels that defer entries (trav.comp, `DEFER_ENTRIES`: f16h and f16h-poster)
 /// derive a child's entry when they enter the child, with the node's visit recomputed under the
 /// closest hit found by then, and keep only the hit result of the push. That gives the same
 /// entries only if a layout's box-test data and child entries ignore the closest hit: checked
@@ -335,10 +335,11 @@ fn deferred_entries_ignore_the_closest_hit() {
     for name in ["teapot_in_stadium.obj", "teapot.obj"] {
         let p = prepare(&scenes_dir().join(name));
         let rays: Vec<_> = ray_sets(&p, 24, 300).into_iter().flat_map(|(_, r)| r).collect();
-        for b in [4usize, 8, 16] {
+        for b in [2usize, 4, 8, 16] {
             let f16h = encode(&p, LayoutId::parse("f16h").unwrap(), b);
             let poster = encode(&p, LayoutId::parse("f16h-poster").unwrap(), b);
             let n = match b {
+                2 => walk::<F16h, 2>(&f16h, &rays) + walk::<F16hPoster, 2>(&poster, &rays),
                 4 => walk::<F16h, 4>(&f16h, &rays) + walk::<F16hPoster, 4>(&poster, &rays),
                 8 => walk::<F16h, 8>(&f16h, &rays) + walk::<F16hPoster, 8>(&poster, &rays),
                 _ => walk::<F16h, 16>(&f16h, &rays) + walk::<F16hPoster, 16>(&poster, &rays),

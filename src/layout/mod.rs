@@ -73,7 +73,7 @@ pub struct LayoutInfo {
     /// The stack entry's fields besides the node index, as (name, GLSL type), per math mode:
     /// generated into the kernels' `struct Entry` and counted in the report's stack bytes.
     pub stack_entry: fn(Math) -> &'static [(&'static str, &'static str)],
-    /// Whether the kernels at B > 2 derive a child's entry when they enter the child rather
+    /// Whether the kernels derive a child's entry when they enter the child rather
     /// than when they push it (trav.comp, `DEFER_ENTRIES`): the stack then holds one group
     /// per visit (node, entry, hit mask and order of the children left), not an entry per
     /// child — for layouts whose entries are large. The hooks' `ChildHit` and `child_entry`
