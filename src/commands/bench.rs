@@ -1,10 +1,10 @@
 //! `halftrace bench`: the speed ratios a kernel change is judged by.
 
-use anyhow::Context as _;
 use super::outln;
 use crate::bench::{self, BenchConfig};
 use crate::cli::{BenchArgs, LayoutArg};
 use crate::rays::RayKind;
+use anyhow::Context as _;
 use std::path::PathBuf;
 
 pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {

@@ -41,7 +41,12 @@ fn is_mix_conversion(o: &Op) -> bool {
     let text = o.operands.split(" op_sel").next().unwrap_or("").split(" clamp").next().unwrap_or("");
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let [.., a, b, addend] = parts[..] else { return false };
-    let zero = addend.replace(['(', ')', '-'], "").trim_start_matches("neg").trim_start_matches("lo").trim_start_matches("hi").to_string();
+    let zero = addend
+        .replace(['(', ')', '-'], "")
+        .trim_start_matches("neg")
+        .trim_start_matches("lo")
+        .trim_start_matches("hi")
+        .to_string();
     (a == "1.0" || b == "1.0") && (zero == "0" || zero == "0.0")
 }
 
