@@ -18,7 +18,7 @@
 //! Packets are P consecutive rays; the last may be partial. Packet counters (nodes the packet
 //! visited, active rays summed over them) are stored in its first ray.
 //!
-//! Kernels built with `DEFER_ENTRIES` (f16h, f16h-poster above B = 2) derive each child's entry
+//! Kernels built with `DEFER_ENTRIES` (f16h, f16h-poster) derive each child's entry
 //! when they enter the child instead of when it is pushed, from the same arguments: the
 //! entries here are theirs (docs/architecture.md, "Deferred entries").
 

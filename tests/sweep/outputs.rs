@@ -100,13 +100,13 @@ fn small_sweep_writes_consistent_outputs() {
         assert_eq!((r.differs_from_f32, r.false_misses, r.max_abs_dt), (0, 0, 0.0), "{} differs from f32", r.kernel);
         assert_eq!(r.bytes_per_node as usize, if r.layout == "f32" { 28 } else { 16 } * r.branching);
         // Stack bytes per ray: entries × (node index + the layout's entry in this math); f16h
-        // above B = 2 keeps groups instead: depth − 1 of them, each an entry and an order word.
+        // keeps groups instead: depth − 1 of them, each an entry and an order word.
         let entry = match (r.layout.as_str(), r.math.as_str()) {
             ("f32", _) => 8,
             ("f16h", "f32") => 44,
             _ => 38,
         };
-        let expect = if r.layout == "f16h" && r.branching > 2 {
+        let expect = if r.layout == "f16h" {
             let depth = (halftrace::variant::stack_entries(r.branching) - 1) / (r.branching - 1);
             (depth - 1) * (entry + if r.branching > 8 { 12 } else { 4 })
         } else {
