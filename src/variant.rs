@@ -306,10 +306,9 @@ mod tests {
         let f32 = LayoutId::f32();
         let f16h = LayoutId::parse("f16h").unwrap();
         assert_eq!(Variant::new(f32, 4, 1).stack_bytes(), 97 * 8);
-        // At B = 2, an entry per child: node 4 + frame 16 + origin (fp16 6 or fp32 12) + e, tp,
-        // tlo 12.
-        // Groups: depth - 1 of them (63 at B = 2, 31 at B = 4, 23 at B = 8, 15 at B = 16), each
-        // an entry and its order word (4 bytes, 12 at B = 16).
+        // f16h's entry: node 4 + frame 16 + origin (fp16 6 or fp32 12) + e, tp, tlo 12 = 38 or
+        // 44 bytes. Groups: depth - 1 of them (63 at B = 2, 31 at B = 4, 23 at B = 8, 15 at
+        // B = 16), each an entry and its order word (4 bytes, 12 at B = 16).
         assert_eq!(Variant::new(f16h, 2, 1).with_math(Math::F16).stack_bytes(), 63 * 42);
         assert_eq!(Variant::new(f16h, 2, 1).with_math(Math::F32).stack_bytes(), 63 * 48);
         assert_eq!(Variant::new(f16h, 4, 1).with_math(Math::F16).stack_bytes(), 31 * 42);
