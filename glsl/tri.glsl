@@ -154,19 +154,54 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float nu, out float nv, o
     return true;
 }
 
-// Closest hit so far; ties (equal t) go to the lower prim. The barycentrics are divided only
-// for a hit that becomes the closest.
+// Closest hit so far under the closest-hit rule (src/base/hit.rs, module docs): t >= tmin,
+// the box rule (admit), then the smallest t, ties (equal t) to the lower prim. The
+// barycentrics are divided only for a hit that becomes the closest.
 float best_t;
 int best_prim;
 float best_u;
 float best_v;
 
+// GLSL's min and max, spelled as hit.rs spells them (sel_min, sel_max).
+float sel_min(float x, float y) { return y < x ? y : x; }
+float sel_max(float x, float y) { return x < y ? y : x; }
+
+// The box rule (hit.rs, admit): the exact ray must reach triangle ti's box, padded by the
+// scene's pc.hit_pad, at a parameter >= tmin, certified with inward rounding; the hit keeps
+// t' = max(t, enter). Its argument is in hit.rs.
+bool admit(RayPre r, uint ti, float t, out float t_kept) {
+    uint b = 9u * ti;
+    float enter = r.tmin;
+    float exit_t = HIT_CAP;
+    for (int a = 0; a < 3; a++) {
+        float x0 = tri_v[b + uint(a)];
+        float x1 = tri_v[b + 3u + uint(a)];
+        float x2 = tri_v[b + 6u + uint(a)];
+        precise float lo = sel_min(sel_min(x0, x1), x2) - pc.hit_pad;
+        precise float hi = sel_max(sel_max(x0, x1), x2) + pc.hit_pad;
+        if (r.d[a] == 0.0) {
+            if (!(r.o[a] >= lo && r.o[a] <= hi)) return false;
+        } else {
+            precise float x = (lo - r.o[a]) * r.inv[a];
+            precise float y = (hi - r.o[a]) * r.inv[a];
+            enter = sel_max(enter, upper32(sel_min(x, y)));
+            exit_t = sel_min(exit_t, lower32(sel_max(x, y)));
+        }
+    }
+    t_kept = sel_max(t, enter);
+    return enter <= exit_t;
+}
+
+bool closer(float t, int prim) { return t < best_t || (t == best_t && prim < best_prim); }
+
 void closest_test(RayPre r, uint ti) {
     float t, nu, nv, det;
     if (tri_intersect(r, ti, t, nu, nv, det)) {
         int prim = int(tri_id[ti]);
-        if (t >= r.tmin && (t < best_t || (t == best_t && prim < best_prim))) {
-            best_t = t; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
+        // The box rule only raises t: it runs only for a hit that would be kept.
+        float tk;
+        if (t >= r.tmin && closer(t, prim) && admit(r, ti, t, tk) && closer(tk, prim)) {
+            best_t = tk; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
         }
     }
 }

@@ -51,13 +51,14 @@ pub fn leaf_parts(w: u32) -> (u32, u32) {
 
 glsl_struct! {
     /// Push constants of every traversal kernel (64 bytes): the ray count, the node count,
-    /// the layout's root data (`Layout::push_root`: the f16h root frame w.xyz, k; unused by
-    /// f32) and the root's world box, which every kernel tests first.
+    /// the scene's triangle-box padding of the closest-hit rule (`base::hit_pad`), the
+    /// layout's root data (`Layout::push_root`: the f16h root frame w.xyz, k; unused by f32)
+    /// and the root's world box, which every kernel tests first.
     #[derive(Clone, Copy, Debug, Default, PartialEq)]
     pub struct PushConstants {
         pub ray_count: u32,
         pub node_count: u32,
-        pub pad0: u32,
+        pub hit_pad: f32,
         pub pad1: u32,
         pub root: [f32; 4],
         pub box_lo: [f32; 4],
@@ -136,6 +137,7 @@ pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
     s += &format!("const uint LEAF_FIRST_MASK = {:#010x}u;\nconst uint LEAF_COUNT_SHIFT = {LEAF_FIRST_BITS}u;\nconst uint LEAF_COUNT_MASK = {:#x}u;\n", (1u32 << LEAF_FIRST_BITS) - 1, (1u32 << LEAF_COUNT_BITS) - 1);
     s += &format!("const uint RAY_FLOATS = {RAY_FLOATS}u;\nconst int PRIM_OVERFLOW = {PRIM_OVERFLOW};\n");
     s += &glsl_float("MARGIN32", crate::base::slab::MARGIN32);
+    s += &glsl_float("HIT_CAP", crate::base::HIT_CAP);
     for (name, value) in [
         ("NODES", binding::NODES),
         ("TRI_VERTS", binding::TRI_VERTS),
@@ -175,7 +177,7 @@ mod tests {
         assert!(h.contains("const uint LEAF_BIT = 0x80000000u;"), "{h}");
         assert!(h.contains("const uint LEAF_FIRST_MASK = 0x07ffffffu;"), "{h}");
         assert!(h.contains("const uint LEAF_COUNT_SHIFT = 27u;"), "{h}");
-        assert!(h.contains("layout(push_constant) uniform Push { uint ray_count; uint node_count; uint pad0; uint pad1; vec4 root; vec4 box_lo; vec4 box_hi; } pc;"), "{h}");
+        assert!(h.contains("layout(push_constant) uniform Push { uint ray_count; uint node_count; float hit_pad; uint pad1; vec4 root; vec4 box_lo; vec4 box_hi; } pc;"), "{h}");
         assert!(h.contains("struct Hit { float t; int prim; float u; float v; };"), "{h}");
         assert!(h.contains("struct Entry { float t; };") && h.contains("#define STACK_ENTRY_BYTES 8"), "{h}");
     }

@@ -2,13 +2,45 @@
 //! [`Closest`]), its work counters ([`Counters`]) and how far two results agree
 //! ([`agreement`]).
 //!
-//! Rules shared by every layout and kernel:
-//! - Closest-hit ties (bit-identical t) go to the lower `prim`, so results never depend on
-//!   traversal order and variants compare ray for ray without tolerance.
-//! - Box tests are conservative (never reject a box the exact ray touches), so a traversal
-//!   returns exactly the brute-force closest hit.
+//! # The closest-hit rule
+//!
+//! A triangle's hit is a property of the ray and the triangle alone — never of the boxes a
+//! traversal tested, their precision, B or P — so that every conservative layout returns
+//! exactly the brute-force closest hit, bit for bit, on every scene:
+//!
+//! 1. The watertight test ([`tri::intersect`]) gives `t`; it must satisfy `t >= tmin`.
+//! 2. **The box rule** ([`admit`]): the exact ray must reach the triangle's *padded box*
+//!    (its vertices' box, each bound moved out by the scene's [`hit_pad`]) at some parameter
+//!    `s >= tmin`, certified in fp32 with inward rounding; the hit's t becomes
+//!    `max(t, enter)`, `enter` being the certified upper bound of where that reach can begin
+//!    (so `s <= t`). A hit the rule cannot certify is not a hit.
+//! 3. Of the admitted hits the smallest t wins; ties (bit-identical t) go to the lower `prim`,
+//!    so results never depend on traversal order.
+//!
+//! Why (docs/layouts.md, "The closest-hit rule"): the watertight test's t carries an error that
+//! grows with the triangle's extent, not with t — a huge ground quad can report a hit in front
+//! of a ray whose true crossing is behind it. Before this rule such a hit was found or not
+//! depending on whether a tight box culled its leaf, so layouts, B and P disagreed.
+//!
+//! **The argument.** Let T's admitted hit have t' = max(t, enter). The exact ray meets T's
+//! padded box at s = max(tmin, exact entry) with tmin <= s <= t'. Every BVH node above T stores
+//! a box containing the padded box (the build refits with padded boxes, `bvh::build`; the
+//! encoders round outward), and a conservative box test never rejects a box that the exact ray
+//! reaches inside [tmin, best] (every layout's bound is argued beside its test). While a
+//! traversal runs, best >= the final t* >= t' for the winning triangle and every triangle tied
+//! with it, so every node above them is visited (entry bounds are <= s <= best too) and their
+//! tests compute the same t' — the traversal returns the brute-force minimum.
+//!
+//! **Why padded.** An axis-aligned triangle has a flat box, reached at one exact parameter that
+//! no fp32 value equals; with no padding the inward-rounded check would reject every hit on a
+//! floor. With padding p the check succeeds for a ray that truly meets the box whenever
+//! p >= 1.25·2⁻²⁰·D (D: the ∞-norm distance from the ray origin to the hit), i.e. for origins
+//! within 3.2× the scene's extent of the triangle (p = 2⁻¹⁸ of the extent) — the default
+//! camera frames a scene from about 2× its extent. Farther origins stay exact; near the edges
+//! of a triangle's box they may lose a hit that fp32 cannot place inside it.
 
-use super::slab::RayPre;
+use super::geom::Aabb;
+use super::slab::{lower32, upper32, RayPre};
 use super::tri;
 use crate::glsl_struct;
 
@@ -70,28 +102,114 @@ impl std::ops::AddAssign for Counters {
     }
 }
 
-/// The closest hit so far. `prim == i32::MAX` until something is hit, so a hit exactly at
-/// `tmax` is accepted like any other (`t <= tmax`).
+/// The padding of every triangle's box in the closest-hit rule, as a share of the scene's
+/// largest extent (2⁻¹⁸; see the module docs for why this size).
+pub const HIT_PAD_SHARE: f32 = 1.0 / 262_144.0;
+
+/// Exits beyond this parameter count as this (2¹²⁷): a computed exit that overflowed to +inf
+/// then still bounds the exact one from below.
+pub const HIT_CAP: f32 = 1.701_411_834_604_692_3e38;
+
+/// The padding of a scene whose vertices span `bounds` ([`HIT_PAD_SHARE`] of its largest
+/// extent, halved before subtracting so that no extent overflows fp32).
+pub fn hit_pad(bounds: &Aabb) -> f32 {
+    let h = (bounds.max * 0.5 - bounds.min * 0.5).max_element().max(0.0);
+    h * (2.0 * HIT_PAD_SHARE)
+}
+
+/// A triangle's padded box: its vertices' box, each bound moved out by `pad` (one rounding;
+/// what the BVH is refitted with and what the rule tests — `glsl/tri.glsl` computes the same).
+#[inline]
+pub fn padded_box(v: &[f32; 9], pad: f32) -> ([f32; 3], [f32; 3]) {
+    let mut lo = [0f32; 3];
+    let mut hi = [0f32; 3];
+    for a in 0..3 {
+        let (x, y, z) = (v[a], v[3 + a], v[6 + a]);
+        lo[a] = sel_min(sel_min(x, y), z) - pad;
+        hi[a] = sel_max(sel_max(x, y), z) + pad;
+    }
+    (lo, hi)
+}
+
+/// GLSL's `min` and `max` (`y < x ? y : x`, `x < y ? y : x`), spelled out so that a signed
+/// zero comes out as the kernels give it.
+#[inline]
+fn sel_min(x: f32, y: f32) -> f32 {
+    if y < x {
+        y
+    } else {
+        x
+    }
+}
+#[inline]
+fn sel_max(x: f32, y: f32) -> f32 {
+    if x < y {
+        y
+    } else {
+        x
+    }
+}
+
+/// The box rule of the closest-hit rule (module docs): for a hit of triangle `v` at `t >=
+/// r.tmin`, the t it is kept with, or `None` when the exact ray's reach of the padded box at
+/// or after `tmin` cannot be certified.
+///
+/// Each plane parameter `(bound − o)·inv` is the exact one times (1 + η), |η| < 3.0001·2⁻²⁴
+/// (three roundings), so [`upper32`]/[`lower32`] (2⁻²⁰ ≫ 4·2⁻²⁴) bound the exact entry from
+/// above and the exact exit from below; both are monotone, so they commute with the slab's
+/// min and max. An axis the ray does not move along is tested exactly. Plane parameters that
+/// underflow fp32's normal range (below 2⁻¹²⁶ in magnitude) are outside this argument.
+#[inline]
+pub fn admit(r: &RayPre, v: &[f32; 9], pad: f32, t: f32) -> Option<f32> {
+    let (lo, hi) = padded_box(v, pad);
+    let mut enter = r.tmin;
+    let mut exit = HIT_CAP;
+    for a in 0..3 {
+        if r.d[a] == 0.0 {
+            if !(r.o[a] >= lo[a] && r.o[a] <= hi[a]) {
+                return None;
+            }
+        } else {
+            let x = (lo[a] - r.o[a]) * r.inv[a];
+            let y = (hi[a] - r.o[a]) * r.inv[a];
+            enter = sel_max(enter, upper32(sel_min(x, y)));
+            exit = sel_min(exit, lower32(sel_max(x, y)));
+        }
+    }
+    (enter <= exit).then(|| sel_max(t, enter))
+}
+
+/// The closest hit so far under the closest-hit rule (module docs). `prim == i32::MAX` until
+/// something is hit, so a hit exactly at `tmax` is accepted like any other (`t <= tmax`).
 #[derive(Clone, Copy, Debug)]
 pub struct Closest {
     pub t: f32,
     pub prim: i32,
     pub u: f32,
     pub v: f32,
+    /// The scene's triangle-box padding ([`hit_pad`]).
+    pub pad: f32,
 }
 
 impl Closest {
-    pub fn new(tmax: f32) -> Closest {
-        Closest { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0 }
+    pub fn new(tmax: f32, pad: f32) -> Closest {
+        Closest { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0, pad }
     }
     /// Tests triangle `verts` with public id `prim` and keeps it if closer (ties: lower prim).
+    /// The box rule only ever raises t, so it is applied only to a hit that would be kept.
     #[inline]
     pub fn test(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
         if let Some((t, u, v)) = tri::intersect(r, verts) {
-            if t >= r.tmin && (t < self.t || (t == self.t && prim < self.prim)) {
-                *self = Closest { t, prim, u, v };
+            if t >= r.tmin && self.closer(t, prim) {
+                if let Some(t) = admit(r, verts, self.pad, t).filter(|&t| self.closer(t, prim)) {
+                    *self = Closest { t, prim, u, v, pad: self.pad };
+                }
             }
         }
+    }
+    #[inline]
+    fn closer(&self, t: f32, prim: i32) -> bool {
+        t < self.t || (t == self.t && prim < self.prim)
     }
     pub fn hit(&self) -> Hit {
         if self.prim == i32::MAX {

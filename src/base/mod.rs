@@ -13,7 +13,10 @@ pub mod slab;
 pub mod tri;
 
 pub use geom::{max_abs_axis, Aabb};
-pub use hit::{agreement, mean_counters, simd_utilisation, Agreement, Closest, Counters, Hit, RunOutput};
+pub use hit::{
+    admit, agreement, hit_pad, mean_counters, padded_box, simd_utilisation, Agreement, Closest, Counters, Hit, RunOutput,
+    HIT_CAP,
+};
 pub use ray::{validate, Ray, RayError, DIR_MAX, DIR_MIN};
 pub use rng::Rng;
 pub use slab::{lower32, slab32, upper32, RayPre};

@@ -112,7 +112,44 @@ fn build_binary_quiet(scene: &Scene) -> BinaryBvh {
     let mut slots: Vec<BinaryNode> = bytemuck::zeroed_vec((2 * n).max(2) - 1);
     let top = build_top(&mut refs, &mut prims, 0, &mut slots, b, cb);
     drop(refs);
-    BinaryBvh { nodes: assemble(top), prims }
+    let mut bvh = BinaryBvh { nodes: assemble(top), prims };
+    refit_padded(scene, &mut bvh);
+    bvh
+}
+
+/// Refits every node to the padded boxes of its triangles (`base::padded_box` with the scene's
+/// `hit_pad`): the closest-hit rule admits a hit only where the exact ray reaches its
+/// triangle's padded box, so every box above a triangle must contain that box for a
+/// conservative traversal to find it. The tree was chosen with the unpadded boxes, so padding
+/// changes no split, only the bounds (by 2⁻¹⁸ of the scene's extent).
+fn refit_padded(scene: &Scene, bvh: &mut BinaryBvh) {
+    let pad = scene.hit_pad();
+    // Parents before children in `order`, so children are refitted first walking it backwards.
+    let mut order = Vec::with_capacity(bvh.nodes.len());
+    let mut stack = vec![0usize];
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        let n = bvh.nodes[i];
+        if !n.is_leaf() {
+            stack.push(n.first as usize);
+            stack.push(n.first as usize + 1);
+        }
+    }
+    for &i in order.iter().rev() {
+        let n = bvh.nodes[i];
+        let mut b = Aabb::EMPTY;
+        if n.is_leaf() {
+            for &p in &bvh.prims[n.first as usize..(n.first + n.count) as usize] {
+                let t = &scene.tris[p as usize];
+                let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
+                let (lo, hi) = crate::base::padded_box(&v, pad);
+                b = b.union(&Aabb { min: lo.into(), max: hi.into() });
+            }
+        } else {
+            b = bvh.nodes[n.first as usize].bounds.union(&bvh.nodes[n.first as usize + 1].bounds);
+        }
+        bvh.nodes[i].bounds = b;
+    }
 }
 
 /// The parallel top of the tree: inner nodes over at least `PAR_SUBTREE` triangles, down to
@@ -551,7 +588,10 @@ mod tests {
                 for &p in &bvh.prims[n.first as usize..(n.first + n.count) as usize] {
                     assert!(!seen[p as usize]);
                     seen[p as usize] = true;
-                    assert!(n.bounds.contains(&Aabb::from_points(&scene.tris[p as usize])));
+                    let t = &scene.tris[p as usize];
+                    let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
+                    let (lo, hi) = crate::base::padded_box(&v, scene.hit_pad());
+                    assert!(n.bounds.contains(&Aabb { min: lo.into(), max: hi.into() }));
                 }
             } else {
                 for c in [n.first as usize, n.first as usize + 1] {

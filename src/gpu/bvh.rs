@@ -44,7 +44,7 @@ impl<'g> GpuBvh<'g> {
         let Encoded { nodes: host_nodes, tris: host_tris, .. } = enc;
         let nodes = plan.nodes(gpu, &*host_nodes)?;
         drop(host_nodes);
-        let TriBuffer { verts, ids: host_ids } = host_tris;
+        let TriBuffer { verts, ids: host_ids, .. } = host_tris;
         let tris = plan.upload(gpu, "triangles", bytemuck::cast_slice(&verts))?;
         drop(verts);
         let ids = plan.upload(gpu, "triangle ids", bytemuck::cast_slice(&host_ids))?;
@@ -84,6 +84,7 @@ impl UploadPlan {
         let (lo, hi) = (enc.root_box.min, enc.root_box.max);
         let push = PushConstants {
             node_count: enc.node_count() as u32,
+            hit_pad: enc.tris.pad,
             root: enc.push_root,
             box_lo: [lo.x, lo.y, lo.z, 0.0],
             box_hi: [hi.x, hi.y, hi.z, 0.0],

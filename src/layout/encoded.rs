@@ -9,11 +9,13 @@ use crate::scene::Scene;
 use std::any::Any;
 
 /// Triangles in leaf order, shared by every layout: 9 floats each (`v0 v1 v2`, xyz), 36 bytes,
-/// plus the public `prim` id of each.
+/// plus the public `prim` id of each, and the scene's triangle-box padding of the closest-hit
+/// rule (`base::hit_pad`; the kernels get it in the push constants).
 #[derive(Clone, Debug)]
 pub struct TriBuffer {
     pub verts: Vec<[f32; 9]>,
     pub ids: Vec<u32>,
+    pub pad: f32,
 }
 
 impl TriBuffer {
@@ -26,7 +28,7 @@ impl TriBuffer {
                 [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z]
             })
             .collect();
-        TriBuffer { verts, ids: w.prims.clone() }
+        TriBuffer { verts, ids: w.prims.clone(), pad: scene.hit_pad() }
     }
 
     pub fn bytes(&self) -> usize {

@@ -91,16 +91,22 @@ impl Scene {
         self.tris.is_empty()
     }
 
-    /// The closest hit of `ray` among every triangle, tested one by one: the oracle of the
-    /// `f32` traversal.
+    /// The closest hit of `ray` among every triangle, tested one by one under the closest-hit
+    /// rule (`base::hit`): the oracle of every conservative traversal.
     pub fn brute_force(&self, ray: &Ray) -> Hit {
         let r = RayPre::new(ray);
-        let mut best = Closest::new(ray.tmax);
+        let mut best = Closest::new(ray.tmax, self.hit_pad());
         for (i, t) in self.tris.iter().enumerate() {
             let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
             best.test(&r, &v, i as i32);
         }
         best.hit()
+    }
+
+    /// The padding of every triangle's box in the closest-hit rule (`base::hit_pad` of the
+    /// scene's bounds): the BVH is built with it and every traversal's hits obey it.
+    pub fn hit_pad(&self) -> f32 {
+        crate::base::hit_pad(&self.bounds)
     }
 
     /// Geometric (unnormalised) normal of triangle `prim`.
