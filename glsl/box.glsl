@@ -1,15 +1,6 @@
 // The conservative fp32 slab test (Ize 2013), shared by every layout's root box test.
-// Mirrors src/base/slab.rs (lower32, upper32, slab32). No NaN is ever formed: zero direction
-// components get an explicit inside test.
-
-float lower32(float t) {
-    precise float r = t * (t > 0.0 ? (1.0 - MARGIN32) : (1.0 + MARGIN32));
-    return r;
-}
-float upper32(float t) {
-    precise float r = t * (t > 0.0 ? (1.0 + MARGIN32) : (1.0 - MARGIN32));
-    return r;
-}
+// Mirrors src/base/slab.rs (slab32; lower32 and upper32 are in ray.glsl). No NaN is ever
+// formed: zero direction components get an explicit inside test.
 
 // Returns (near, far); hit when near <= far.
 vec2 slab32(RayPre r, vec3 lo, vec3 hi, float t0, float t1) {

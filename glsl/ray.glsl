@@ -104,6 +104,17 @@ float div_rte(float a, float b) {
     return uintBitsToFloat(sgn | q);
 }
 
+// A computed ray parameter moved down (lower32) or up (upper32) by the relative 2^-20 of
+// src/base/slab.rs: the slab tests' widening and the closest-hit rule's inward rounding.
+float lower32(float t) {
+    precise float r = t * (t > 0.0 ? (1.0 - MARGIN32) : (1.0 + MARGIN32));
+    return r;
+}
+float upper32(float t) {
+    precise float r = t * (t > 0.0 ? (1.0 + MARGIN32) : (1.0 - MARGIN32));
+    return r;
+}
+
 uint ray_index() {
     return (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * uint(WG) + gl_LocalInvocationID.x;
 }

@@ -35,8 +35,8 @@
 // most at depth (STACK_SIZE - 1) / (B - 1) - 2: at most GROUPS of them.
 #include "interface.glsl"
 #include "ray.glsl"
-#include "box.glsl"
 #include "tri.glsl"
+#include "box.glsl"
 #include "layout.glsl"
 #include "packet.glsl"
 

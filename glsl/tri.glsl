@@ -198,10 +198,15 @@ void closest_test(RayPre r, uint ti) {
     float t, nu, nv, det;
     if (tri_intersect(r, ti, t, nu, nv, det)) {
         int prim = int(tri_id[ti]);
-        // The box rule only raises t: it runs only for a hit that would be kept.
-        float tk;
-        if (t >= r.tmin && closer(t, prim) && admit(r, ti, t, tk) && closer(tk, prim)) {
-            best_t = tk; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
+        // The box rule only raises t: it runs only for a hit that would be kept (the
+        // barycentrics first, so that fewer values are held across it).
+        if (t >= r.tmin && closer(t, prim)) {
+            float u = div_rte(nu, det);
+            float v = div_rte(nv, det);
+            float tk;
+            if (admit(r, ti, t, tk) && closer(tk, prim)) {
+                best_t = tk; best_prim = prim; best_u = u; best_v = v;
+            }
         }
     }
 }

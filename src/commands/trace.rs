@@ -2,7 +2,7 @@
 //! runner: validated against the CPU reference, timed, and written out on request.
 
 use super::outln;
-use crate::base::{mean_counters, simd_utilisation, Counters, Hit};
+use crate::base::{agreement, mean_counters, simd_utilisation, Counters, Hit};
 use crate::baseline::BaselineId;
 use crate::cli::{Backend, LayoutArg, TraceArgs};
 use crate::gpu::{self, Gpu, Source};
@@ -10,6 +10,7 @@ use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::rays::{RayKind, RayParams};
 use crate::report::Status;
+use crate::runner::measure::compare;
 use crate::runner::{KernelTarget, Measurement, Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
 use crate::variant::{Buffers, Variant, PACKETS};
 use anyhow::Context;
@@ -67,6 +68,21 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
             let secs = t.elapsed().as_secs_f64();
             let rate = n as f64 / secs / 1e6;
             outln!("backend cpu (reference): {:.1} ms, {rate:.2} Mrays/s; BVH build {build_ms:.1} ms", secs * 1e3);
+            // The device path's first check: a conservative layout returns the f32 hits.
+            if layout != LayoutId::f32() {
+                let rays = runner.rays(set).rays.clone();
+                let f32_hits = runner.f32_hits(set)?;
+                let label = format!("{variant} (CPU reference)");
+                let vs = agreement(&hits, f32_hits);
+                if layout.info().conservative {
+                    compare(&label, "hits", "the f32 reference", &rays, &hits, f32_hits, 0, Hit::same_bits).map_err(
+                        |e| anyhow::anyhow!("{e} (a conservative layout must return the f32 hits)"),
+                    )?;
+                    outln!("against f32: all {n} rays identical");
+                } else {
+                    outln!("against f32: {} rays differ, {} false misses", vs.differs(), vs.false_misses);
+                }
+            }
             (hits, Some(counters))
         }
         Some(g) => {
