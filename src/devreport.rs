@@ -9,9 +9,11 @@
 //! the report), its output streamed to `logs/<step>.log`; `device-report.json` records each
 //! finished step, so an interrupted report rerun with `--resume` runs only what did not finish
 //! (the sweep continues with its own `--resume`). A child that runs far past the budget is
-//! stopped and recorded as such.
+//! stopped and recorded as such. The folder has one writer ([`OutDir::claim`]); each step's
+//! child claims the subfolder it writes.
 
 use crate::gpu::{self, DeviceInfo};
+use crate::outdir::OutDir;
 use crate::report::{self, Row};
 use crate::sweep;
 use anyhow::Context;
@@ -149,9 +151,25 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     }
     crate::units::check_seconds("--budget", opts.budget_s).map_err(anyhow::Error::msg)?;
     crate::rays::check_image_size(opts.width, opts.height).map_err(anyhow::Error::msg)?;
+    // A folder named by --out is claimed (and refused when it is no folder, another run's, or
+    // holds files without --resume or --force) before Vulkan is opened; the default one is
+    // known only once the device is.
+    let named = match &opts.out {
+        Some(o) => {
+            let lock = OutDir::claim(o, "--out")?;
+            check_held(o, opts)?;
+            Some(lock)
+        }
+        None => None,
+    };
     let start = Instant::now();
     let dev = choose_device(opts.device.as_deref())?;
     let out = opts.out.clone().unwrap_or_else(|| opts.reports.join(slug(&dev.name)));
+    // Held to the end; each step's child locks the subfolder it writes (conformance/, sweep/).
+    let _lock = match named {
+        Some(l) => l,
+        None => OutDir::claim(&out, "the report folder")?,
+    };
     let scenes: Vec<String> = opts.scenes.iter().map(|p| p.display().to_string()).collect();
     let mut state = prepare(&out, opts, &dev, &scenes)?;
     std::fs::create_dir_all(out.join("logs")).with_context(|| format!("creating {}", out.join("logs").display()))?;
@@ -297,6 +315,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
 
     // The sweep's report again, with the compiler's view beside it when isa ran.
     if out.join("sweep/results.csv").is_file() {
+        let _sweep = OutDir::claim(&out.join("sweep"), "the sweep folder")?;
         report::merge::merge(&[out.join("sweep")], None).context("rendering sweep/report.md")?;
     }
     let seconds = start.elapsed().as_secs_f64();
@@ -325,15 +344,7 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
         height: opts.height,
         ..Default::default()
     };
-    let meta = std::fs::symlink_metadata(out);
-    if let Ok(m) = &meta {
-        anyhow::ensure!(m.is_dir(), "--out {}: exists and is not a folder", out.display());
-    }
-    let entries: Vec<String> = match std::fs::read_dir(out) {
-        Ok(d) => d.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().to_string()).collect(),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
-    };
+    let entries = check_held(out, opts)?;
     if entries.is_empty() {
         return Ok(fresh);
     }
@@ -345,13 +356,6 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
         }
         return Ok(fresh);
     }
-    anyhow::ensure!(
-        opts.resume,
-        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
-         replace it, or choose another folder",
-        out.display(),
-        entries.len()
-    );
     let path = out.join(STATE);
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("--resume: {} is not a device report (no readable {STATE})", out.display()))?;
@@ -370,6 +374,24 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
         );
     }
     Ok(old)
+}
+
+/// What the folder holds (its lock aside); refused when that is anything without --resume or
+/// --force.
+fn check_held(out: &Path, opts: &Options) -> anyhow::Result<Vec<String>> {
+    let entries = match OutDir::entries(out) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
+    };
+    anyhow::ensure!(
+        entries.is_empty() || opts.resume || opts.force,
+        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
+         replace it, or choose another folder",
+        out.display(),
+        entries.len()
+    );
+    Ok(entries)
 }
 
 /// Whether a step is recorded as finished (a resumed report does not run it again).

@@ -394,3 +394,44 @@ fn a_closed_stdout_ends_quietly() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!err.contains("Broken pipe") && !err.contains("panicked"), "{err}");
 }
+
+/// Every command that writes results checks where before it works: an `--out` that exists and
+/// is no folder (a regular file, a device) is refused in well under a second, before a scene is
+/// loaded or Vulkan opened, and nothing is written there.
+#[test]
+fn outputs_are_refused_before_any_work() {
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    let file = tmp("mine.txt");
+    std::fs::write(&file, "mine").unwrap();
+    let file = file.to_str().unwrap();
+    let dir = tmp("report-input");
+    std::fs::create_dir_all(&dir).unwrap();
+    let dir = dir.to_str().unwrap();
+    for out in ["/dev/full", file] {
+        let what = if out == file { "exists and is a regular file" } else { "exists and is a character device" };
+        let runs: Vec<Vec<&str>> = vec![
+            vec!["sweep", "--scene", t, "--out", out],
+            vec!["sweep", "--scene", t, "--resume", "--out", out],
+            vec!["conformance", "--quick", "--scene", t, "--out", out],
+            vec!["isa", "--quick", "--out", out],
+            vec!["device-report", "--scene", t, "--scenes-dir", "none", "--out", out],
+            vec!["report", dir, "--out", out],
+            vec!["bench", "--scene", t, "--out", out],
+        ];
+        for args in runs {
+            let t0 = std::time::Instant::now();
+            let e = fails(&args);
+            let secs = t0.elapsed().as_secs_f64();
+            eprintln!("{} --out {out}: refused in {secs:.3} s", args[0]);
+            // bench writes one file: an existing one is never overwritten, a device never written.
+            let want = if args[0] == "bench" && out == file { "exists; a report is never overwritten" } else { what };
+            assert!(e.contains(&format!("--out {out}")) && e.contains(want), "{args:?}: {e}");
+            assert!(secs < 5.0, "{args:?}: refused only after {secs:.1} s");
+        }
+    }
+    assert_eq!(std::fs::read_to_string(file).unwrap(), "mine");
+    // bench writes its report at the end: a folder that is not there fails it now.
+    let e = fails(&["bench", "--scene", t, "--out", "/nonexistent/bench.md"]);
+    assert!(e.contains("/nonexistent is not a folder"), "{e}");
+}
