@@ -217,7 +217,9 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         say("conformance --quick");
         let mut args: Vec<String> = vec!["conformance".into(), "--quick".into(), "--scene".into(), first.clone()];
         args.extend(common.iter().cloned());
-        args.extend(["--out".into(), out.join("conformance").display().to_string()]);
+        // The folder is the report's own: a rerun (after an interrupt, or a deleted file)
+        // replaces what an earlier one left there.
+        args.extend(["--out".into(), out.join("conformance").display().to_string(), "--force".into()]);
         let mut r = runner.run("conformance", &args, None, HANG)?;
         if let Some(c) = conformance_counts(&out.join("conformance/conformance.csv")) {
             r.status = format!("{} ({c})", r.status);

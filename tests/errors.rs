@@ -397,7 +397,8 @@ fn a_closed_stdout_ends_quietly() {
 
 /// Every command that writes results checks where before it works: an `--out` that exists and
 /// is no folder (a regular file, a device) is refused in well under a second, before a scene is
-/// loaded or Vulkan opened, and nothing is written there.
+/// loaded or Vulkan opened, and nothing is written there; so is a folder with an earlier
+/// conformance run's files, without `--force`.
 #[test]
 fn outputs_are_refused_before_any_work() {
     let t = teapot();
@@ -434,4 +435,23 @@ fn outputs_are_refused_before_any_work() {
     // bench writes its report at the end: a folder that is not there fails it now.
     let e = fails(&["bench", "--scene", t, "--out", "/nonexistent/bench.md"]);
     assert!(e.contains("/nonexistent is not a folder"), "{e}");
+    // An earlier conformance run's files are kept unless --force (which gets past the check
+    // to the scene, here one that does not exist).
+    let conf = tmp("conformance-out");
+    std::fs::create_dir_all(&conf).unwrap();
+    std::fs::write(conf.join("conformance.md"), "earlier").unwrap();
+    let c = conf.to_str().unwrap();
+    let t0 = std::time::Instant::now();
+    let e = fails(&["conformance", "--quick", "--scene", t, "--out", c]);
+    eprintln!("conformance into a folder with results: refused in {:.3} s", t0.elapsed().as_secs_f64());
+    assert!(e.contains("already holds conformance.md") && e.contains("--force"), "{e}");
+    assert!(t0.elapsed().as_secs_f64() < 5.0);
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["conformance", "--quick", "--force", "--scene", "/nonexistent/scene.obj", "--out", c])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("error: /nonexistent/scene.obj") && !e.contains("already holds"), "{e}");
+    assert_eq!(std::fs::read_to_string(conf.join("conformance.md")).unwrap(), "earlier");
+    assert_eq!(std::fs::read_dir(&conf).unwrap().count(), 1, "a refused run left something behind");
 }

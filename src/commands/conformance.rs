@@ -7,6 +7,9 @@ use crate::outdir::OutDir;
 use anyhow::Context;
 use std::path::PathBuf;
 
+/// The files `conformance` writes into its folder (`--force` replaces them, nothing else).
+const OUTPUTS: &[&str] = &["conformance.csv", "conformance.md"];
+
 pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
     // The folder first: a bad one is refused before the run, not after it.
     let out = a.out.clone().unwrap_or_else(|| {
@@ -15,6 +18,13 @@ pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
         d.with_file_name(format!("conformance-{stamp}"))
     });
     let _lock = OutDir::claim(&out, "--out")?;
+    let held: Vec<&str> = OUTPUTS.iter().copied().filter(|f| out.join(f).exists()).collect();
+    anyhow::ensure!(
+        held.is_empty() || a.force,
+        "{} already holds {} from an earlier conformance run; name another --out, or --force to replace them",
+        out.display(),
+        held.join(", ")
+    );
     let mut scenes = a.scene.clone();
     if let Some(d) = &a.scenes_dir {
         let found = crate::scene::obj_files_in(d).with_context(|| format!("--scenes-dir {}", d.display()))?;
