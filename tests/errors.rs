@@ -455,3 +455,29 @@ fn outputs_are_refused_before_any_work() {
     assert_eq!(std::fs::read_to_string(conf.join("conformance.md")).unwrap(), "earlier");
     assert_eq!(std::fs::read_dir(&conf).unwrap().count(), 1, "a refused run left something behind");
 }
+
+/// A scene's name comes from its file name and names rows and table cells: one with a newline
+/// (or another control character, or '|') is refused as a kernel's name is; so is a scene
+/// given twice to `bench`, as to `sweep`.
+#[test]
+fn scene_names_that_would_split_a_report_are_refused() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    for name in ["two\nlines.obj", "tab\there.obj", "pipe|name.obj"] {
+        let p = obj(name, text);
+        let e = trace_scene(&p);
+        let quoted = format!("{:?}", name.trim_end_matches(".obj"));
+        assert!(e.contains(&quoted) && e.contains("rename the file"), "{name:?}: {e}");
+        assert_eq!(e.lines().count(), 1, "the message itself is split: {e}");
+        let e = fails(&["sweep", "--scene", p.to_str().unwrap(), "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("rename the file"), "{e}");
+    }
+    assert!(!tmp("never").exists());
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    let e = fails(&["bench", "--scene", t, "--scene", t]);
+    assert!(e.contains("--scene") && e.contains("are the same file"), "{e}");
+    let copy = tmp("teapot.obj");
+    std::fs::copy(t, &copy).unwrap();
+    let e = fails(&["bench", "--scene", t, "--scene", copy.to_str().unwrap()]);
+    assert!(e.contains("would both be 'teapot'"), "{e}");
+}

@@ -35,6 +35,8 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
         let dir = o.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
         anyhow::ensure!(dir.is_dir(), "--out {}: {} is not a folder", o.display(), dir.display());
     }
+    // Each scene once: its rows would be timed twice under one name.
+    crate::sweep::check_scenes("--scene", &scenes)?;
     anyhow::ensure!(!a.branchings.is_empty(), "--branchings: name at least one of 2, 4, 8, 16");
     for &b in &a.branchings {
         crate::bvh::check_branching(b).context("--branchings")?;
