@@ -481,3 +481,56 @@ fn scene_names_that_would_split_a_report_are_refused() {
     let e = fails(&["bench", "--scene", t, "--scene", copy.to_str().unwrap()]);
     assert!(e.contains("would both be 'teapot'"), "{e}");
 }
+
+/// `.npy` headers are read as the Python literal NumPy writes: keys in any order and either
+/// quote, big-endian float32; a shape whose size overflows is an error, not a panic.
+#[test]
+fn npy_headers_are_read_as_numpy_reads_them() {
+    let ray = [0.5f32, 0.25, 10.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY];
+    let le: Vec<u8> = ray.iter().flat_map(|x| x.to_le_bytes()).collect();
+    let be: Vec<u8> = ray.iter().flat_map(|x| x.to_be_bytes()).collect();
+    let want = Ray { origin: [0.5, 0.25, 10.0], tmin: 0.0, dir: [0.0, 0.0, -1.0], tmax: f32::INFINITY };
+    for (name, header, data) in [
+        ("reordered.npy", r#"{"shape": (1, 8), "fortran_order": False, "descr": "<f4"}"#, &le),
+        ("big_endian.npy", "{'descr': '>f4', 'fortran_order': False, 'shape': (1, 8), }", &be),
+    ] {
+        let p = write_raw_npy(name, header, data);
+        let r = npy::read_rays(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(r.len(), 1);
+        assert_eq!((r[0].origin, r[0].tmin, r[0].dir, r[0].tmax), (want.origin, want.tmin, want.dir, want.tmax));
+    }
+    // Before, the first "'shape'" in the text was taken for the key, here a field's name.
+    let p = write_raw_npy(
+        "field_named_shape.npy",
+        "{'descr': [('shape', '<f4'), ('prim', '<i4'), ('u', '<f4'), ('v', '<f4')], 'fortran_order': False, 'shape': (1,), }",
+        &[0u8; 16],
+    );
+    let e = npy::read_hits(&p).unwrap_err().to_string();
+    assert!(e.contains("field_named_shape.npy") && e.contains("structured hits") && e.contains("(1,)"), "{e}");
+    let p =
+        write_raw_npy("huge.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (4611686018427387904, 8), }", &le);
+    let e = npy::read_rays(&p).unwrap_err().to_string();
+    assert!(e.contains("huge.npy") && e.contains("4611686018427387904 rays"), "{e}");
+    let p = write_raw_npy(
+        "huge3.npy",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 8), }",
+        &le,
+    );
+    let e = npy::read_rays(&p).unwrap_err().to_string();
+    assert!(e.contains("huge3.npy") && e.contains("(N, 8)"), "{e}");
+    let p = write_raw_npy("v9.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 8), }", &le);
+    let mut b = std::fs::read(&p).unwrap();
+    b[6] = 9;
+    std::fs::write(&p, b).unwrap();
+    let e = npy::read_rays(&p).unwrap_err().to_string();
+    assert!(e.contains("v9.npy") && e.contains("not a .npy file") && e.contains("version"), "{e}");
+    // What halftrace writes reads back bit for bit.
+    let p = tmp("hits_rt.npy");
+    let hits = [
+        halftrace::base::Hit { t: 1.5, prim: 7, u: 0.25, v: 0.5 },
+        halftrace::base::Hit { t: f32::INFINITY, prim: -1, u: 0.0, v: 0.0 },
+    ];
+    npy::write_hits(&p, &hits).unwrap();
+    let back = npy::read_hits(&p).unwrap();
+    assert!(back.iter().zip(&hits).all(|(a, b)| a.same_bits(b)) && back.len() == 2);
+}
