@@ -306,9 +306,13 @@ pub struct ConformanceArgs {
     #[arg(long)]
     pub device: Option<String>,
     /// Output folder for conformance.md and conformance.csv (default
-    /// reports/conformance-<UTC timestamp>/).
+    /// reports/conformance-<UTC timestamp>/). Its conformance files, if any, are refused
+    /// unless --force; other files there are left alone.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Replace the conformance files in --out.
+    #[arg(long)]
+    pub force: bool,
     /// Run under the Khronos validation layer; any message fails the run.
     #[arg(long)]
     pub validation: bool,

@@ -8,10 +8,12 @@
 //! Each step runs as a child process of this binary (a crash in a driver ends one step, not
 //! the report), its output streamed to `logs/<step>.log`; `device-report.json` records each
 //! finished step, so an interrupted report rerun with `--resume` runs only what did not finish
-//! (the sweep continues with its own `--resume`). A child that runs far past the budget is
-//! stopped and recorded as such.
+//! or whose files are gone (the sweep continues with its own `--resume`). A child that runs far
+//! past the budget is stopped and recorded as such. The folder has one writer
+//! ([`OutDir::claim`]); each step's child claims the subfolder it writes.
 
 use crate::gpu::{self, DeviceInfo};
+use crate::outdir::OutDir;
 use crate::report::{self, Row};
 use crate::sweep;
 use anyhow::Context;
@@ -149,11 +151,32 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     }
     crate::units::check_seconds("--budget", opts.budget_s).map_err(anyhow::Error::msg)?;
     crate::rays::check_image_size(opts.width, opts.height).map_err(anyhow::Error::msg)?;
+    // A folder named by --out is claimed (and refused when it is no folder, another run's, or
+    // holds files without --resume or --force) before Vulkan is opened; the default one is
+    // known only once the device is.
+    let named = match &opts.out {
+        Some(o) => {
+            let lock = OutDir::claim(o, "--out")?;
+            check_held(o, opts)?;
+            Some(lock)
+        }
+        None => None,
+    };
     let start = Instant::now();
     let dev = choose_device(opts.device.as_deref())?;
     let out = opts.out.clone().unwrap_or_else(|| opts.reports.join(slug(&dev.name)));
+    // Held to the end; each step's child locks the subfolder it writes (conformance/, sweep/).
+    let _lock = match named {
+        Some(l) => l,
+        None => OutDir::claim(&out, "the report folder")?,
+    };
     let scenes: Vec<String> = opts.scenes.iter().map(|p| p.display().to_string()).collect();
     let mut state = prepare(&out, opts, &dev, &scenes)?;
+    for step in STEPS {
+        if let Some(f) = missing(&state, &out, step) {
+            say(&format!("{step} is recorded as finished but {f} is missing: it runs again"));
+        }
+    }
     std::fs::create_dir_all(out.join("logs")).with_context(|| format!("creating {}", out.join("logs").display()))?;
     let started_unix =
         std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
@@ -172,7 +195,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     let runner = Steps { exe, out: &out };
 
     // devices, and what the machine's own tools say.
-    if !finished(&state, "devices") {
+    if !finished(&state, &out, "devices") {
         say("devices");
         let mut args: Vec<String> = vec!["devices".into()];
         for m in &opts.mask_features {
@@ -191,24 +214,26 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
                 let _ = runner.tool(&t, args, file);
             }
         }
-        record(&mut state, "devices", r, "devices.txt");
+        record(&mut state, "devices", r);
         save(&out, &state)?;
     }
 
-    if !finished(&state, "conformance") {
+    if !finished(&state, &out, "conformance") {
         say("conformance --quick");
         let mut args: Vec<String> = vec!["conformance".into(), "--quick".into(), "--scene".into(), first.clone()];
         args.extend(common.iter().cloned());
-        args.extend(["--out".into(), out.join("conformance").display().to_string()]);
+        // The folder is the report's own: a rerun (after an interrupt, or a deleted file)
+        // replaces what an earlier one left there.
+        args.extend(["--out".into(), out.join("conformance").display().to_string(), "--force".into()]);
         let mut r = runner.run("conformance", &args, None, HANG)?;
         if let Some(c) = conformance_counts(&out.join("conformance/conformance.csv")) {
             r.status = format!("{} ({c})", r.status);
         }
-        record(&mut state, "conformance", r, "conformance/conformance.md");
+        record(&mut state, "conformance", r);
         save(&out, &state)?;
     }
 
-    if !finished(&state, "bench") {
+    if !finished(&state, &out, "bench") {
         say("bench (short)");
         let mut args: Vec<String> = vec![
             "bench".into(),
@@ -227,7 +252,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         ];
         size(&mut args);
         let r = runner.run("bench", &args, None, HANG)?;
-        record(&mut state, "bench", r, "bench.md");
+        record(&mut state, "bench", r);
         save(&out, &state)?;
     }
 
@@ -237,7 +262,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     let cfg =
         sweep::Config { scenes: opts.scenes.clone(), width: opts.width, height: opts.height, ..Default::default() };
     let jobs = sweep::jobs::list(&cfg).len();
-    if !finished(&state, "sweep") {
+    if !finished(&state, &out, "sweep") {
         let reserve = if isa_runs { (opts.budget_s * 0.1).max(20.0) } else { 2.0 };
         let left = deadline.saturating_duration_since(Instant::now()).as_secs_f64() - reserve;
         let budget = left.max(1.0);
@@ -259,6 +284,10 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         ]);
         if dir.join("results.csv").is_file() {
             args.push("--resume".into());
+        } else if OutDir::entries(&dir).is_ok_and(|e| !e.is_empty()) {
+            // No rows to keep, but an earlier run's report or isa files: the sweep replaces its
+            // own and leaves isa's.
+            args.push("--force".into());
         }
         // The sweep stops itself between jobs; a job far longer than the budget is stopped.
         let limit = Duration::from_secs_f64(budget + (budget / 2.0).max(120.0));
@@ -272,11 +301,11 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         } else {
             r.status = format!("{}; {rows} of {jobs} jobs", r.status);
         }
-        record(&mut state, "sweep", r, "sweep/report.md");
+        record(&mut state, "sweep", r);
         save(&out, &state)?;
     }
 
-    if !finished(&state, "isa") {
+    if !finished(&state, &out, "isa") {
         let r = if isa_runs {
             say("isa");
             let mut args: Vec<String> = vec!["isa".into(), "--quiet".into(), "--device".into(), device_arg.clone()];
@@ -291,12 +320,13 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
                 ..Default::default()
             }
         };
-        record(&mut state, "isa", r, "sweep/isa.md");
+        record(&mut state, "isa", r);
         save(&out, &state)?;
     }
 
     // The sweep's report again, with the compiler's view beside it when isa ran.
     if out.join("sweep/results.csv").is_file() {
+        let _sweep = OutDir::claim(&out.join("sweep"), "the sweep folder")?;
         report::merge::merge(&[out.join("sweep")], None).context("rendering sweep/report.md")?;
     }
     let seconds = start.elapsed().as_secs_f64();
@@ -325,15 +355,7 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
         height: opts.height,
         ..Default::default()
     };
-    let meta = std::fs::symlink_metadata(out);
-    if let Ok(m) = &meta {
-        anyhow::ensure!(m.is_dir(), "--out {}: exists and is not a folder", out.display());
-    }
-    let entries: Vec<String> = match std::fs::read_dir(out) {
-        Ok(d) => d.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().to_string()).collect(),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
-    };
+    let entries = check_held(out, opts)?;
     if entries.is_empty() {
         return Ok(fresh);
     }
@@ -345,13 +367,6 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
         }
         return Ok(fresh);
     }
-    anyhow::ensure!(
-        opts.resume,
-        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
-         replace it, or choose another folder",
-        out.display(),
-        entries.len()
-    );
     let path = out.join(STATE);
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("--resume: {} is not a device report (no readable {STATE})", out.display()))?;
@@ -372,17 +387,56 @@ fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> a
     Ok(old)
 }
 
-/// Whether a step is recorded as finished (a resumed report does not run it again).
-fn finished(state: &State, step: &str) -> bool {
-    state.steps.get(step).is_some_and(|s| s.done)
+/// What the folder holds (its lock aside); refused when that is anything without --resume or
+/// --force.
+fn check_held(out: &Path, opts: &Options) -> anyhow::Result<Vec<String>> {
+    let entries = match OutDir::entries(out) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
+    };
+    anyhow::ensure!(
+        entries.is_empty() || opts.resume || opts.force,
+        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
+         replace it, or choose another folder",
+        out.display(),
+        entries.len()
+    );
+    Ok(entries)
+}
+
+/// The files each step writes, relative to the report's folder (the first is the one its row
+/// in report.md links to).
+fn outputs(step: &str) -> &'static [&'static str] {
+    match step {
+        "devices" => &["devices.txt"],
+        "conformance" => &["conformance/conformance.md", "conformance/conformance.csv"],
+        "bench" => &["bench.md"],
+        "sweep" => &["sweep/report.md", "sweep/results.csv"],
+        "isa" => &["sweep/isa.md", "sweep/isa.json"],
+        _ => &[],
+    }
+}
+
+/// A file of a step recorded as finished that is not there (deleted since, or never written
+/// by a step that failed): the record is not trusted, the step runs again.
+fn missing(state: &State, out: &Path, step: &str) -> Option<&'static str> {
+    state.steps.get(step).filter(|s| s.done && !s.status.starts_with("skipped"))?;
+    outputs(step).iter().copied().find(|f| !out.join(f).is_file())
+}
+
+/// Whether a step is finished: recorded so, with its files there (a resumed report does not
+/// run it again).
+fn finished(state: &State, out: &Path, step: &str) -> bool {
+    state.steps.get(step).is_some_and(|s| s.done) && missing(state, out, step).is_none()
 }
 
 fn save(out: &Path, state: &State) -> anyhow::Result<()> {
     crate::fsx::write_atomic(&out.join(STATE), serde_json::to_string_pretty(state)?.as_bytes())
 }
 
-fn record(state: &mut State, name: &str, mut r: StepRecord, output: &str) {
-    r.output = output.into();
+fn record(state: &mut State, name: &str, mut r: StepRecord) {
+    r.output = outputs(name)[0].into();
     state.steps.insert(name.into(), r);
 }
 

@@ -3,11 +3,12 @@
 //!
 //! Layers, bottom up (each module imports only those below it; `docs/architecture.md` has the
 //! picture and `tests/architecture.rs` checks it): [`base`] (rays, hits, counters, the fp32
-//! tests), [`precision`], [`fp16`]; [`interface`] (what Rust and GLSL share), [`scene`],
-//! [`rays`], [`npy`]; [`bvh`]; [`layout`] (one folder per precision layout, the CPU
-//! traversal); [`variant`]; [`gpu`] (the Vulkan backend, the only `unsafe`); [`baseline`]
-//! (`rq`, `embree`); [`report`]; [`runner`] (validate, then time — the one way to a result);
-//! [`sweep`], [`bench`], [`conformance`], [`isa`]; [`devreport`]; [`cli`] and [`commands`].
+//! tests), [`precision`], [`fp16`], [`fsx`] and [`outdir`] (files and output folders);
+//! [`interface`] (what Rust and GLSL share), [`scene`], [`rays`], [`npy`]; [`bvh`]; [`layout`]
+//! (one folder per precision layout, the CPU traversal); [`variant`]; [`gpu`] (the Vulkan
+//! backend, the only `unsafe`); [`baseline`] (`rq`, `embree`); [`report`]; [`runner`]
+//! (validate, then time — the one way to a result); [`sweep`], [`bench`], [`conformance`],
+//! [`isa`]; [`devreport`]; [`cli`] and [`commands`].
 
 // The exact arithmetic loops over the three axes index several arrays in step, as the GLSL
 // they mirror does; iterators would hide that correspondence.
@@ -30,6 +31,7 @@ pub mod interface;
 pub mod isa;
 pub mod layout;
 pub mod npy;
+pub mod outdir;
 pub mod precision;
 pub mod progress;
 pub mod rays;

@@ -1,10 +1,11 @@
-//! Minimal NumPy `.npy` (format 1.0–3.0) reading and writing for the two arrays halftrace
-//! exchanges: rays (float32, shape (N, 8)) and hits (structured `t, prim, u, v`).
-//! Written by hand because the hit file needs a structured dtype and every error must name
-//! the file and what is wrong with it.
+//! NumPy `.npy` files for the two arrays halftrace exchanges: rays (float32, shape (N, 8)) and
+//! hits (structured `t, prim, u, v`), through the `npyz` crate, which reads the header as the
+//! Python literal NumPy writes (any key order or quoting, versions 1.0 to 3.0). This wrapper
+//! checks the shape, dtype and data size of each array and names the file in every error.
 
 use crate::base::Hit;
 use crate::base::Ray;
+use npyz::WriterBuilder;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -18,111 +19,79 @@ pub enum NpyError {
     Shape { path: PathBuf, expected: String, found: String },
 }
 
-const MAGIC: &[u8] = b"\x93NUMPY";
-
-struct Header {
-    descr: String,
-    fortran: bool,
-    shape: Vec<usize>,
-    data_offset: usize,
+/// One element of a hit file: the structured dtype `[('t', '<f4'), ('prim', '<i4'), ('u',
+/// '<f4'), ('v', '<f4')]`, 16 bytes.
+#[derive(npyz::Serialize, npyz::Deserialize, npyz::AutoSerialize)]
+struct HitRecord {
+    t: f32,
+    prim: i32,
+    u: f32,
+    v: f32,
 }
 
-fn parse_header(path: &Path, b: &[u8]) -> Result<Header, NpyError> {
-    let fmt = |msg: &str| NpyError::Format { path: path.into(), msg: msg.into() };
-    if b.len() < 10 || &b[..6] != MAGIC {
-        return Err(fmt("missing \\x93NUMPY magic"));
-    }
-    let major = b[6];
-    let (hlen, start) = match major {
-        1 => (u16::from_le_bytes([b[8], b[9]]) as usize, 10),
-        2 | 3 => {
-            if b.len() < 12 {
-                return Err(fmt("truncated header"));
-            }
-            (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12)
-        }
-        v => return Err(fmt(&format!("unsupported format version {v}"))),
-    };
-    if b.len() < start + hlen {
-        return Err(fmt("truncated header"));
-    }
-    let h = std::str::from_utf8(&b[start..start + hlen]).map_err(|_| fmt("header is not text"))?;
-    let value_of = |key: &str| -> Result<&str, NpyError> {
-        let k = format!("'{key}'");
-        let i = h.find(&k).ok_or_else(|| fmt(&format!("header has no {k}")))?;
-        let rest = h[i + k.len()..].trim_start();
-        let rest = rest.strip_prefix(':').ok_or_else(|| fmt("malformed header"))?;
-        Ok(rest.trim_start())
-    };
-    let d = value_of("descr")?;
-    let descr = if let Some(s) = d.strip_prefix('\'') {
-        s.split('\'').next().unwrap_or("").to_string()
-    } else {
-        // Structured dtype: keep the list text for the error message.
-        d.split("),").next().unwrap_or("").to_string()
-    };
-    let f = value_of("fortran_order")?;
-    let fortran = if f.starts_with("True") {
-        true
-    } else if f.starts_with("False") {
-        false
-    } else {
-        return Err(fmt("fortran_order is neither True nor False"));
-    };
-    let s = value_of("shape")?;
-    let s = s.strip_prefix('(').ok_or_else(|| fmt("shape is not a tuple"))?;
-    let s = s.split(')').next().ok_or_else(|| fmt("shape is not a tuple"))?;
-    let mut shape = Vec::new();
-    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        shape.push(part.trim_end_matches('L').parse::<usize>().map_err(|_| fmt(&format!("bad shape entry '{part}'")))?);
-    }
-    Ok(Header { descr, fortran, shape, data_offset: start + hlen })
+/// A file's header and the bytes after it.
+fn open<'b>(path: &Path, bytes: &'b [u8]) -> Result<(npyz::NpyHeader, &'b [u8]), NpyError> {
+    let f = npyz::NpyFile::new(bytes).map_err(|e| NpyError::Format { path: path.into(), msg: e.to_string() })?;
+    Ok((f.header().clone(), f.into_inner()))
 }
 
-fn write_npy(path: &Path, descr: &str, shape: &str, data: &[u8]) -> Result<(), NpyError> {
-    let mut header = format!("{{'descr': {descr}, 'fortran_order': False, 'shape': {shape}, }}");
-    let unpadded = 10 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
-    header.push('\n');
-    let mut bytes = Vec::with_capacity(MAGIC.len() + 4 + header.len() + data.len());
-    bytes.extend_from_slice(MAGIC);
-    bytes.extend_from_slice(&[1, 0]);
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    bytes.extend_from_slice(data);
-    // Through a temporary file and a rename: a failed write never leaves a truncated file.
-    crate::fsx::write_atomic(path, &bytes)
-        .map_err(|e| NpyError::Io { path: path.into(), source: std::io::Error::other(format!("{e:#}")) })
+/// `shape` as text, as NumPy prints it.
+fn shape_text(shape: &[u64]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!("({})", shape.iter().map(u64::to_string).collect::<Vec<_>>().join(", ")),
+    }
 }
 
-/// Reads rays from a float32 array of shape (N, 8): `ox oy oz tmin dx dy dz tmax`.
-/// The rays are not validated here; see [`crate::base::validate`].
+/// Refuses data that is not exactly `count` elements of `size` bytes (`what`: "rays", "hits").
+fn check_size(path: &Path, data: &[u8], count: u64, size: u64, what: &str) -> Result<(), NpyError> {
+    let Some(need) = count.checked_mul(size).filter(|&n| usize::try_from(n).is_ok()) else {
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: format!("a count of {what} whose data fits in memory"),
+            found: format!("{count} {what}"),
+        });
+    };
+    if data.len() as u64 != need {
+        return Err(NpyError::Shape {
+            path: path.into(),
+            expected: format!("{need} data bytes for {count} {what}"),
+            found: format!("{} bytes", data.len()),
+        });
+    }
+    Ok(())
+}
+
+/// Reads rays from a float32 array of shape (N, 8): `ox oy oz tmin dx dy dz tmax`, either byte
+/// order. The rays are not validated here; see [`crate::base::validate`].
 pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
     let b = crate::fsx::read_regular(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
-    let h = parse_header(path, &b)?;
-    if h.descr != "<f4" && h.descr != "=f4" {
+    let (h, data) = open(path, &b)?;
+    let shape = h.shape().to_vec();
+    let float32 = matches!(h.dtype(), npyz::DType::Plain(t)
+        if t.type_char() == npyz::TypeChar::Float && t.size_field() == 4);
+    if !float32 {
         return Err(NpyError::Shape {
             path: path.into(),
             expected: "dtype float32 ('<f4')".into(),
-            found: format!("dtype '{}'", h.descr),
+            found: format!("dtype {}", h.dtype().descr()),
         });
     }
-    if h.fortran {
+    if h.order() == npyz::Order::Fortran {
         return Err(NpyError::Shape {
             path: path.into(),
             expected: "C order".into(),
             found: "fortran_order True".into(),
         });
     }
-    if h.shape.len() != 2 || h.shape[1] != 8 {
+    if shape.len() != 2 || shape[1] != 8 {
         return Err(NpyError::Shape {
             path: path.into(),
             expected: "shape (N, 8)".into(),
-            found: format!("shape {:?}", h.shape),
+            found: format!("shape {}", shape_text(&shape)),
         });
     }
-    let n = h.shape[0];
-    if n == 0 {
+    if shape[0] == 0 {
         // Nothing to trace: a speed or a SIMD utilisation of no rays means nothing.
         return Err(NpyError::Shape {
             path: path.into(),
@@ -130,63 +99,62 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>, NpyError> {
             found: "shape (0, 8)".into(),
         });
     }
-    let data = &b[h.data_offset..];
-    let Some(need) = n.checked_mul(32) else {
-        return Err(NpyError::Shape {
-            path: path.into(),
-            expected: "a ray count whose data fits in memory".into(),
-            found: format!("shape ({n}, 8)"),
-        });
-    };
-    if data.len() != need {
-        return Err(NpyError::Shape {
-            path: path.into(),
-            expected: format!("{need} data bytes for {n} rays"),
-            found: format!("{} bytes", data.len()),
-        });
-    }
-    Ok(data
-        .chunks_exact(32)
-        .map(|c| {
-            let f = |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
-            Ray { origin: [f(0), f(1), f(2)], tmin: f(3), dir: [f(4), f(5), f(6)], tmax: f(7) }
-        })
+    check_size(path, data, shape[0], 32, "rays")?;
+    let floats = npyz::NpyFile::with_header(h, data)
+        .into_vec::<f32>()
+        .map_err(|e| NpyError::Format { path: path.into(), msg: e.to_string() })?;
+    Ok(floats
+        .chunks_exact(8)
+        .map(|f| Ray { origin: [f[0], f[1], f[2]], tmin: f[3], dir: [f[4], f[5], f[6]], tmax: f[7] })
         .collect())
+}
+
+/// Writes an array through a temporary file and a rename: a failed write never leaves a
+/// truncated file.
+fn write_array<T: npyz::AutoSerialize>(
+    path: &Path,
+    shape: &[u64],
+    items: impl IntoIterator<Item = T>,
+) -> Result<(), NpyError> {
+    let io = |source| NpyError::Io { path: path.into(), source };
+    let mut bytes = Vec::new();
+    let mut w =
+        npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(&mut bytes).begin_nd().map_err(io)?;
+    w.extend(items).map_err(io)?;
+    w.finish().map_err(io)?;
+    crate::fsx::write_atomic(path, &bytes).map_err(|e| io(std::io::Error::other(format!("{e:#}"))))
 }
 
 /// Writes rays as float32 (N, 8).
 pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<(), NpyError> {
-    write_npy(path, "'<f4'", &format!("({}, 8)", rays.len()), bytemuck::cast_slice(rays))
+    let floats =
+        rays.iter().flat_map(|r| [r.origin[0], r.origin[1], r.origin[2], r.tmin, r.dir[0], r.dir[1], r.dir[2], r.tmax]);
+    write_array(path, &[rays.len() as u64, 8], floats)
 }
 
 /// Writes hits as a structured array with fields `t` (f32), `prim` (i32), `u`, `v` (f32).
 pub fn write_hits(path: &Path, hits: &[Hit]) -> Result<(), NpyError> {
-    write_npy(
-        path,
-        "[('t', '<f4'), ('prim', '<i4'), ('u', '<f4'), ('v', '<f4')]",
-        &format!("({},)", hits.len()),
-        bytemuck::cast_slice(hits),
-    )
+    let records = hits.iter().map(|h| HitRecord { t: h.t, prim: h.prim, u: h.u, v: h.v });
+    write_array(path, &[hits.len() as u64], records)
 }
 
 /// Reads a hit file written by [`write_hits`] (used by tests and `report`).
 pub fn read_hits(path: &Path) -> Result<Vec<Hit>, NpyError> {
-    let b = std::fs::read(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
-    let h = parse_header(path, &b)?;
-    if !h.descr.contains("'t'") || h.shape.len() != 1 {
-        return Err(NpyError::Shape {
-            path: path.into(),
-            expected: "structured hits (t, prim, u, v), shape (N,)".into(),
-            found: format!("{} {:?}", h.descr, h.shape),
-        });
+    let b = crate::fsx::read_regular(path).map_err(|source| NpyError::Io { path: path.into(), source })?;
+    let (h, data) = open(path, &b)?;
+    let shape = h.shape().to_vec();
+    let wrong = || NpyError::Shape {
+        path: path.into(),
+        expected: "structured hits (t, prim, u, v), shape (N,)".into(),
+        found: format!("{} {}", h.dtype().descr(), shape_text(&shape)),
+    };
+    if shape.len() != 1 {
+        return Err(wrong());
     }
-    let data = &b[h.data_offset..];
-    if h.shape[0].checked_mul(16) != Some(data.len()) {
-        return Err(NpyError::Shape {
-            path: path.into(),
-            expected: format!("{} hits × 16 bytes", h.shape[0]),
-            found: format!("{} bytes", data.len()),
-        });
-    }
-    Ok(data.chunks_exact(16).map(bytemuck::pod_read_unaligned).collect())
+    check_size(path, data, shape[0], 16, "hits")?;
+    let records = npyz::NpyFile::with_header(h.clone(), data).data::<HitRecord>().map_err(|_| wrong())?;
+    records
+        .map(|r| r.map(|r| Hit { t: r.t, prim: r.prim, u: r.u, v: r.v }))
+        .collect::<std::io::Result<Vec<Hit>>>()
+        .map_err(|e| NpyError::Format { path: path.into(), msg: e.to_string() })
 }

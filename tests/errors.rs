@@ -394,3 +394,143 @@ fn a_closed_stdout_ends_quietly() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!err.contains("Broken pipe") && !err.contains("panicked"), "{err}");
 }
+
+/// Every command that writes results checks where before it works: an `--out` that exists and
+/// is no folder (a regular file, a device) is refused in well under a second, before a scene is
+/// loaded or Vulkan opened, and nothing is written there; so is a folder with an earlier
+/// conformance run's files, without `--force`.
+#[test]
+fn outputs_are_refused_before_any_work() {
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    let file = tmp("mine.txt");
+    std::fs::write(&file, "mine").unwrap();
+    let file = file.to_str().unwrap();
+    let dir = tmp("report-input");
+    std::fs::create_dir_all(&dir).unwrap();
+    let dir = dir.to_str().unwrap();
+    for out in ["/dev/full", file] {
+        let what = if out == file { "exists and is a regular file" } else { "exists and is a character device" };
+        let runs: Vec<Vec<&str>> = vec![
+            vec!["sweep", "--scene", t, "--out", out],
+            vec!["sweep", "--scene", t, "--resume", "--out", out],
+            vec!["conformance", "--quick", "--scene", t, "--out", out],
+            vec!["isa", "--quick", "--out", out],
+            vec!["device-report", "--scene", t, "--scenes-dir", "none", "--out", out],
+            vec!["report", dir, "--out", out],
+            vec!["bench", "--scene", t, "--out", out],
+        ];
+        for args in runs {
+            let t0 = std::time::Instant::now();
+            let e = fails(&args);
+            let secs = t0.elapsed().as_secs_f64();
+            eprintln!("{} --out {out}: refused in {secs:.3} s", args[0]);
+            // bench writes one file: an existing one is never overwritten, a device never written.
+            let want = if args[0] == "bench" && out == file { "exists; a report is never overwritten" } else { what };
+            assert!(e.contains(&format!("--out {out}")) && e.contains(want), "{args:?}: {e}");
+            assert!(secs < 5.0, "{args:?}: refused only after {secs:.1} s");
+        }
+    }
+    assert_eq!(std::fs::read_to_string(file).unwrap(), "mine");
+    // bench writes its report at the end: a folder that is not there fails it now.
+    let e = fails(&["bench", "--scene", t, "--out", "/nonexistent/bench.md"]);
+    assert!(e.contains("/nonexistent is not a folder"), "{e}");
+    // An earlier conformance run's files are kept unless --force (which gets past the check
+    // to the scene, here one that does not exist).
+    let conf = tmp("conformance-out");
+    std::fs::create_dir_all(&conf).unwrap();
+    std::fs::write(conf.join("conformance.md"), "earlier").unwrap();
+    let c = conf.to_str().unwrap();
+    let t0 = std::time::Instant::now();
+    let e = fails(&["conformance", "--quick", "--scene", t, "--out", c]);
+    eprintln!("conformance into a folder with results: refused in {:.3} s", t0.elapsed().as_secs_f64());
+    assert!(e.contains("already holds conformance.md") && e.contains("--force"), "{e}");
+    assert!(t0.elapsed().as_secs_f64() < 5.0);
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .args(["conformance", "--quick", "--force", "--scene", "/nonexistent/scene.obj", "--out", c])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("error: /nonexistent/scene.obj") && !e.contains("already holds"), "{e}");
+    assert_eq!(std::fs::read_to_string(conf.join("conformance.md")).unwrap(), "earlier");
+    assert_eq!(std::fs::read_dir(&conf).unwrap().count(), 1, "a refused run left something behind");
+}
+
+/// A scene's name comes from its file name and names rows and table cells: one with a newline
+/// (or another control character, or '|') is refused as a kernel's name is; so is a scene
+/// given twice to `bench`, as to `sweep`.
+#[test]
+fn scene_names_that_would_split_a_report_are_refused() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    for name in ["two\nlines.obj", "tab\there.obj", "pipe|name.obj"] {
+        let p = obj(name, text);
+        let e = trace_scene(&p);
+        let quoted = format!("{:?}", name.trim_end_matches(".obj"));
+        assert!(e.contains(&quoted) && e.contains("rename the file"), "{name:?}: {e}");
+        assert_eq!(e.lines().count(), 1, "the message itself is split: {e}");
+        let e = fails(&["sweep", "--scene", p.to_str().unwrap(), "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("rename the file"), "{e}");
+    }
+    assert!(!tmp("never").exists());
+    let t = teapot();
+    let t = t.to_str().unwrap();
+    let e = fails(&["bench", "--scene", t, "--scene", t]);
+    assert!(e.contains("--scene") && e.contains("are the same file"), "{e}");
+    let copy = tmp("teapot.obj");
+    std::fs::copy(t, &copy).unwrap();
+    let e = fails(&["bench", "--scene", t, "--scene", copy.to_str().unwrap()]);
+    assert!(e.contains("would both be 'teapot'"), "{e}");
+}
+
+/// `.npy` headers are read as the Python literal NumPy writes: keys in any order and either
+/// quote, big-endian float32; a shape whose size overflows is an error, not a panic.
+#[test]
+fn npy_headers_are_read_as_numpy_reads_them() {
+    let ray = [0.5f32, 0.25, 10.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY];
+    let le: Vec<u8> = ray.iter().flat_map(|x| x.to_le_bytes()).collect();
+    let be: Vec<u8> = ray.iter().flat_map(|x| x.to_be_bytes()).collect();
+    let want = Ray { origin: [0.5, 0.25, 10.0], tmin: 0.0, dir: [0.0, 0.0, -1.0], tmax: f32::INFINITY };
+    for (name, header, data) in [
+        ("reordered.npy", r#"{"shape": (1, 8), "fortran_order": False, "descr": "<f4"}"#, &le),
+        ("big_endian.npy", "{'descr': '>f4', 'fortran_order': False, 'shape': (1, 8), }", &be),
+    ] {
+        let p = write_raw_npy(name, header, data);
+        let r = npy::read_rays(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(r.len(), 1);
+        assert_eq!((r[0].origin, r[0].tmin, r[0].dir, r[0].tmax), (want.origin, want.tmin, want.dir, want.tmax));
+    }
+    // Before, the first "'shape'" in the text was taken for the key, here a field's name.
+    let p = write_raw_npy(
+        "field_named_shape.npy",
+        "{'descr': [('shape', '<f4'), ('prim', '<i4'), ('u', '<f4'), ('v', '<f4')], 'fortran_order': False, 'shape': (1,), }",
+        &[0u8; 16],
+    );
+    let e = npy::read_hits(&p).unwrap_err().to_string();
+    assert!(e.contains("field_named_shape.npy") && e.contains("structured hits") && e.contains("(1,)"), "{e}");
+    let p =
+        write_raw_npy("huge.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (4611686018427387904, 8), }", &le);
+    let e = npy::read_rays(&p).unwrap_err().to_string();
+    assert!(e.contains("huge.npy") && e.contains("4611686018427387904 rays"), "{e}");
+    let p = write_raw_npy(
+        "huge3.npy",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 8), }",
+        &le,
+    );
+    let e = npy::read_rays(&p).unwrap_err().to_string();
+    assert!(e.contains("huge3.npy") && e.contains("(N, 8)"), "{e}");
+    let p = write_raw_npy("v9.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 8), }", &le);
+    let mut b = std::fs::read(&p).unwrap();
+    b[6] = 9;
+    std::fs::write(&p, b).unwrap();
+    let e = npy::read_rays(&p).unwrap_err().to_string();
+    assert!(e.contains("v9.npy") && e.contains("not a .npy file") && e.contains("version"), "{e}");
+    // What halftrace writes reads back bit for bit.
+    let p = tmp("hits_rt.npy");
+    let hits = [
+        halftrace::base::Hit { t: 1.5, prim: 7, u: 0.25, v: 0.5 },
+        halftrace::base::Hit { t: f32::INFINITY, prim: -1, u: 0.0, v: 0.0 },
+    ];
+    npy::write_hits(&p, &hits).unwrap();
+    let back = npy::read_hits(&p).unwrap();
+    assert!(back.iter().zip(&hits).all(|(a, b)| a.same_bits(b)) && back.len() == 2);
+}

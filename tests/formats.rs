@@ -180,6 +180,29 @@ fn instanced_glb_loads_every_copy() {
     }
 }
 
+/// A glTF with one triangle in node 0 (its mesh), node 1 (children `children`, no mesh), and
+/// scene 0 listing `nodes`; it loads with each list free of repeats.
+fn gltf_listing(nodes: &str, children: &str) -> String {
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":{nodes}}}],
+        "nodes":[{{"mesh":0}},{{"children":{children}}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}}]}}"#
+    )
+}
+
+#[test]
+fn gltf_lists_without_repeats_load() {
+    for (nodes, children, tris) in [("[0]", "[]", 1), ("[1]", "[0]", 1), ("[0, 1]", "[]", 1)] {
+        let p = dir().join("listing.gltf");
+        std::fs::write(&p, gltf_listing(nodes, children)).unwrap();
+        let s = scene::load(&p).unwrap_or_else(|e| panic!("{nodes} {children}: {e}"));
+        assert_eq!(s.len(), tris, "{nodes} {children}");
+    }
+}
+
 #[test]
 fn bad_files_name_the_file_and_element() {
     let d = dir();
@@ -193,6 +216,10 @@ fn bad_files_name_the_file_and_element() {
         ("missing.gltf", br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],"bufferViews":[{"buffer":0,"byteLength":36}],"buffers":[{"byteLength":36,"uri":"nowhere.bin"}]}"#.to_vec(), "buffer 0: "),
         ("short.gltf", br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],"accessors":[{"bufferView":0,"componentType":5126,"count":30,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],"bufferViews":[{"buffer":0,"byteLength":36}],"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]}"#.to_vec(), "runs past buffer view 0"),
         ("empty.glb", b"glTF\x02\x00\x00\x00\x0c\x00\x00\x00".to_vec(), "not a valid glTF 2.0 file"),
+        ("v2.ply", b"ply\nformat ascii 2.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n".to_vec(), "format version 2.0: this reads PLY 1.0"),
+        ("v1_1.ply", b"ply\nformat binary_little_endian 1.1\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec(), "format version 1.1"),
+        ("twice.gltf", gltf_listing("[0, 0]", "[]").into_bytes(), "scene 0 lists node 0 twice"),
+        ("child_twice.gltf", gltf_listing("[1]", "[0, 0]").into_bytes(), "node 1 lists child 0 twice"),
     ];
     for (name, bytes, want) in cases {
         let p = d.join(name);

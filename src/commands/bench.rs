@@ -31,7 +31,12 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
             "--out {} exists; a report is never overwritten (remove it or name another file)",
             o.display()
         );
+        // Written at the end of the run: a folder that is not there would fail it only then.
+        let dir = o.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        anyhow::ensure!(dir.is_dir(), "--out {}: {} is not a folder", o.display(), dir.display());
     }
+    // Each scene once: its rows would be timed twice under one name.
+    crate::sweep::check_scenes("--scene", &scenes)?;
     anyhow::ensure!(!a.branchings.is_empty(), "--branchings: name at least one of 2, 4, 8, 16");
     for &b in &a.branchings {
         crate::bvh::check_branching(b).context("--branchings")?;

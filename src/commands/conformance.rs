@@ -3,10 +3,28 @@
 use super::outln;
 use crate::cli::ConformanceArgs;
 use crate::conformance;
+use crate::outdir::OutDir;
 use anyhow::Context;
 use std::path::PathBuf;
 
+/// The files `conformance` writes into its folder (`--force` replaces them, nothing else).
+const OUTPUTS: &[&str] = &["conformance.csv", "conformance.md"];
+
 pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
+    // The folder first: a bad one is refused before the run, not after it.
+    let out = a.out.clone().unwrap_or_else(|| {
+        let d = crate::sweep::default_out();
+        let stamp = d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
+        d.with_file_name(format!("conformance-{stamp}"))
+    });
+    let _lock = OutDir::claim(&out, "--out")?;
+    let held: Vec<&str> = OUTPUTS.iter().copied().filter(|f| out.join(f).exists()).collect();
+    anyhow::ensure!(
+        held.is_empty() || a.force,
+        "{} already holds {} from an earlier conformance run; name another --out, or --force to replace them",
+        out.display(),
+        held.join(", ")
+    );
     let mut scenes = a.scene.clone();
     if let Some(d) = &a.scenes_dir {
         let found = crate::scene::obj_files_in(d).with_context(|| format!("--scenes-dir {}", d.display()))?;
@@ -16,11 +34,6 @@ pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
     if scenes.is_empty() {
         scenes.push(PathBuf::from(crate::sweep::DEFAULT_SCENE));
     }
-    let out = a.out.clone().unwrap_or_else(|| {
-        let d = crate::sweep::default_out();
-        let stamp = d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-        d.with_file_name(format!("conformance-{stamp}"))
-    });
     let opts = conformance::Options {
         quick: a.quick,
         scenes,

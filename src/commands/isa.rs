@@ -4,6 +4,7 @@
 use super::outln;
 use crate::cli::IsaArgs;
 use crate::isa::{self, Matrix, Target};
+use crate::outdir::OutDir;
 use crate::report::isa::IsaRow;
 use anyhow::Context;
 use std::path::PathBuf;
@@ -33,6 +34,20 @@ fn line(r: &IsaRow) -> String {
 
 pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
+    // The folder first: a bad one is refused before any null device is probed.
+    let out = a.out.clone().unwrap_or_else(|| {
+        let d = crate::sweep::default_out();
+        let name = d.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        d.with_file_name(format!("isa-{name}"))
+    });
+    let _lock = OutDir::claim(&out, "--out")?;
+    let held: Vec<&str> = OUTPUTS.iter().chain(&["disasm"]).copied().filter(|f| out.join(f).exists()).collect();
+    anyhow::ensure!(
+        held.is_empty() || a.force,
+        "{} already holds {} from an earlier isa run; name another --out, or --force to replace them",
+        out.display(),
+        held.join(", ")
+    );
     let mut targets: Vec<Target> = Vec::new();
     let exe = std::env::current_exe()?;
     let wants_families = !a.family.is_empty() || a.device.is_empty();
@@ -74,18 +89,6 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         (_, true) => Matrix::Full,
         _ => Matrix::Default,
     };
-    let out = a.out.clone().unwrap_or_else(|| {
-        let d = crate::sweep::default_out();
-        let name = d.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-        d.with_file_name(format!("isa-{name}"))
-    });
-    let held: Vec<&str> = OUTPUTS.iter().chain(&["disasm"]).copied().filter(|f| out.join(f).exists()).collect();
-    anyhow::ensure!(
-        held.is_empty() || a.force,
-        "{} already holds {} from an earlier isa run; name another --out, or --force to replace them",
-        out.display(),
-        held.join(", ")
-    );
     // The representations go to a folder of their own first, which replaces disasm/ only once
     // the run has succeeded (a failed run leaves the earlier one as it was).
     let disasm: Option<PathBuf> = a.disasm.then(|| out.join(format!(".disasm-{}.tmp", std::process::id())));

@@ -1,6 +1,7 @@
 //! `halftrace report`: one report from one or more result folders.
 
 use super::outln;
+use crate::outdir::OutDir;
 use std::path::{Path, PathBuf};
 
 pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
@@ -16,6 +17,10 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
             }
         })
         .collect();
+    // The folder written (--out, else the first folder) has one writer: a sweep still running
+    // there would overwrite this report, and a second merge would interleave with this one.
+    let target = out.map(Path::to_path_buf).unwrap_or_else(|| dirs[0].clone());
+    let _lock = OutDir::claim(&target, if out.is_some() { "--out" } else { "report" })?;
     let m = crate::report::merge::merge(&dirs, out)?;
     for s in &m.missing_shards {
         eprintln!("warning: {s} is not among the folders: the report covers only part of that sweep");

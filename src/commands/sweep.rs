@@ -3,6 +3,7 @@
 
 use super::outln;
 use crate::cli::SweepArgs;
+use crate::outdir::OutDir;
 use crate::sweep::{self, Config, OutMode, Shard};
 use std::time::Instant;
 
@@ -57,6 +58,9 @@ pub fn sweep(a: &SweepArgs) -> anyhow::Result<()> {
         (_, true) => OutMode::Force,
         _ => OutMode::New,
     };
+    // One writer per folder (a shard's own): a second run would rewrite results.csv without
+    // this one's rows.
+    let _lock = OutDir::claim(&out, "--out")?;
     let kept = sweep::prepare_out(&out, mode)?;
     crate::progress::set_quiet(a.quiet);
     let t0 = Instant::now();

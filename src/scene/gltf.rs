@@ -27,6 +27,7 @@ pub fn load(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Vec
         return Err(bad(path, format!("asset.version is {version}; this reads glTF 2.x")));
     }
     check_transforms(path, json)?;
+    check_unique(path, json)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     // The GLB binary chunk is borrowed, not copied (often the biggest array of a big scene).
     let mut buffers: Vec<Cow<[u8]>> = Vec::new();
@@ -127,6 +128,29 @@ fn check_transforms(path: &Path, json: &gltf::json::Root) -> Result<(), SceneErr
             if !len.is_finite() || (len - 1.0).abs() > 1e-3 {
                 return Err(bad(path, format!("node {i}: rotation {:?} is not a unit quaternion (length {len})", q.0)));
             }
+        }
+    }
+    Ok(())
+}
+
+/// Scenes' `nodes` and nodes' `children` list each node once (glTF 2.0's schema says
+/// `uniqueItems`): a node listed twice would have its meshes' triangles loaded twice, two
+/// copies in one place whose hits tie.
+fn check_unique(path: &Path, json: &gltf::json::Root) -> Result<(), SceneError> {
+    let twice = |list: &[gltf::json::Index<gltf::json::Node>]| {
+        list.iter().enumerate().find(|(i, n)| list[..*i].contains(n)).map(|(_, n)| n.value())
+    };
+    for (i, s) in json.scenes.iter().enumerate() {
+        if let Some(n) = twice(&s.nodes) {
+            return Err(bad(path, format!("scene {i} lists node {n} twice (a scene's nodes are unique in glTF 2.0)")));
+        }
+    }
+    for (i, node) in json.nodes.iter().enumerate() {
+        if let Some(n) = node.children.as_deref().and_then(twice) {
+            return Err(bad(
+                path,
+                format!("node {i} lists child {n} twice (a node's children are unique in glTF 2.0)"),
+            ));
         }
     }
     Ok(())

@@ -36,6 +36,12 @@ pub enum SceneError {
     NoTriangles { path: PathBuf },
     #[error("{path}: scene has {count} triangles; at most {max} are supported")]
     TooLarge { path: PathBuf, count: usize, max: usize },
+    /// The path is quoted and escaped: it holds the character the message is about.
+    #[error(
+        "{path:?}: the scene's name {name:?} (its file name) cannot name rows and table cells: it is blank or has a \
+         control character or '|' — rename the file"
+    )]
+    Name { path: PathBuf, name: String },
 }
 
 /// Most triangles a scene may have: leaf references keep 27 bits of triangle index.
@@ -131,6 +137,17 @@ pub fn scene_name(path: &Path) -> String {
     name_and_format(path).0
 }
 
+/// A scene file's short name ([`scene_name`]), refused where it cannot stand in a report: rows,
+/// Markdown cells and file names of the outputs carry it, so it must be non-blank and printable
+/// without '|' (a newline would split a table), as a user kernel's name must be.
+pub fn checked_name(path: &Path) -> Result<String, SceneError> {
+    let name = scene_name(path);
+    if name.trim().is_empty() || name.chars().any(|c| c.is_control() || c == '|') {
+        return Err(SceneError::Name { path: path.into(), name });
+    }
+    Ok(name)
+}
+
 /// A scene file's name without `.gz` and its format's extension, and the format that
 /// extension names (`None`: no known one).
 fn name_and_format(path: &Path) -> (String, Option<Format>) {
@@ -173,6 +190,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 }
 
 fn load_quiet(path: &Path) -> Result<Scene, SceneError> {
+    checked_name(path)?;
     // Only regular files: a FIFO would block and a device such as /dev/zero never ends.
     let meta = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.into(), source })?;
     if !meta.is_file() {

@@ -1,4 +1,4 @@
-//! PLY (ascii, binary little- and big-endian): element `vertex` (properties x, y, z of any
+//! PLY 1.0 (ascii, binary little- and big-endian): element `vertex` (properties x, y, z of any
 //! numeric type) and `face` (`vertex_indices` or `vertex_index`, polygons fanned from their
 //! first vertex), or `tristrips` (`vertex_indices`, strips separated by -1), in file order.
 
@@ -14,6 +14,12 @@ pub fn load(path: &Path, bytes: &[u8]) -> Result<Vec<[Vec3; 3]>, SceneError> {
     // where the header's counts say it does.
     let mut r = bytes;
     let header = parser.read_header(&mut r).map_err(|e| bad(path, format!("not a valid PLY header: {e}")))?;
+    // 1.0 is the only PLY version there is; another is a file this reader cannot know it reads
+    // right (ply-rs parses any number).
+    let v = &header.version;
+    if (v.major, v.minor) != (1, 0) {
+        return Err(bad(path, format!("format version {}.{}: this reads PLY 1.0", v.major, v.minor)));
+    }
     let mut payload = std::collections::HashMap::new();
     let ascii = matches!(header.encoding, ply_rs::ply::Encoding::Ascii);
     // An ascii element's first line in the file (the parser counts lines per element).

@@ -139,6 +139,32 @@ impl Default for Config {
     }
 }
 
+/// Refuses a scene list (named `what` in the message) with a file named twice, two files of one
+/// short name, or a name that cannot stand in a report ([`crate::scene::checked_name`]): rows
+/// name their scene by its short name, and two of one name would write rows that `--resume`
+/// and `report` cannot tell apart.
+pub fn check_scenes(what: &str, scenes: &[PathBuf]) -> anyhow::Result<()> {
+    for (i, a) in scenes.iter().enumerate() {
+        crate::scene::checked_name(a).with_context(|| what.to_string())?;
+        for b in &scenes[..i] {
+            anyhow::ensure!(
+                !crate::fsx::same_file(a, b),
+                "{what}: {} and {} are the same file",
+                b.display(),
+                a.display()
+            );
+            let (na, nb) = (crate::scene::scene_name(a), crate::scene::scene_name(b));
+            anyhow::ensure!(
+                na != nb,
+                "{what}: {} and {} would both be '{na}' in the results; rename one",
+                b.display(),
+                a.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 impl Config {
     pub fn load(path: &Path) -> anyhow::Result<Config> {
         let bytes = crate::fsx::read_regular(path).with_context(|| format!("reading {}", path.display()))?;
@@ -153,25 +179,7 @@ impl Config {
         anyhow::ensure!(!self.scenes.is_empty(), "scenes: at least one scene is needed");
         anyhow::ensure!(!self.rays.is_empty(), "rays: at least one ray kind is needed");
         anyhow::ensure!(!self.layouts.is_empty(), "layouts: at least one layout or baseline is needed");
-        // Rows name their scene by its short name: two files of one name (or one file named
-        // twice) would write rows `--resume` and `report` cannot tell apart.
-        for (i, a) in self.scenes.iter().enumerate() {
-            for b in &self.scenes[..i] {
-                anyhow::ensure!(
-                    !crate::fsx::same_file(a, b),
-                    "scenes: {} and {} are the same file",
-                    b.display(),
-                    a.display()
-                );
-                let (na, nb) = (crate::scene::scene_name(a), crate::scene::scene_name(b));
-                anyhow::ensure!(
-                    na != nb,
-                    "scenes: {} and {} would both be '{na}' in the results; rename one",
-                    b.display(),
-                    a.display()
-                );
-            }
-        }
+        check_scenes("scenes", &self.scenes)?;
         for r in &self.rays {
             r.parse::<RayKind>()?;
         }

@@ -8,6 +8,7 @@ use super::Config;
 use crate::base::{mean_counters, simd_utilisation, Hit};
 use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
+use crate::outdir::OutDir;
 use crate::rays::{RayKind, RayParams};
 use crate::report::{self, Row, RowId, Status};
 use crate::runner::{Outcome, Plan, RaySetId, RaySpec, Runner, Target};
@@ -38,10 +39,11 @@ pub enum OutMode {
 }
 
 /// Checks the output folder against `mode` before anything runs; returns the rows a resumed
-/// sweep keeps. A non-empty folder is refused unless `Resume` or `Force`.
+/// sweep keeps. A non-empty folder is refused unless `Resume` or `Force` (its lock, which the
+/// caller holds, is not content: [`OutDir::entries`]).
 pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
-    let entries: Vec<String> = match std::fs::read_dir(out) {
-        Ok(d) => d.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().to_string()).collect(),
+    let entries = match OutDir::entries(out) {
+        Ok(e) => e,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
         Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
     };

@@ -98,3 +98,65 @@ fn device_report_is_interrupted_refused_and_resumed() {
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_dir_all(&merged);
 }
+
+/// `--resume` does not trust device-report.json alone: a step recorded as finished whose file
+/// was deleted since runs again; the steps whose files are there do not.
+#[test]
+fn resume_reruns_a_finished_step_whose_file_is_gone() {
+    use halftrace::devreport::{choose_device, State, StepRecord};
+    let out = tmp("device-report-gone");
+    // A finished report, as far as its record goes: a real one-job sweep, stand-ins for the
+    // other steps' files.
+    let o = sweep(
+        &out.join("sweep"),
+        &["--rays", "primary", "--layouts", "f32", "--branchings", "4", "--packets", "1", "--layout-branchings", "4"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = halftrace::report::merge::merge(&[out.join("sweep")], None).unwrap();
+    assert!(md.report.is_file());
+    std::fs::create_dir_all(out.join("conformance")).unwrap();
+    for (f, text) in
+        [("conformance/conformance.md", "earlier"), ("conformance/conformance.csv", "earlier"), ("bench.md", "earlier")]
+    {
+        std::fs::write(out.join(f), text).unwrap();
+    }
+    let dev = choose_device(None).unwrap();
+    let done = |status: &str| StepRecord { status: status.into(), seconds: 1.0, done: true, output: String::new() };
+    let record = State {
+        device: dev.name.clone(),
+        driver: dev.driver.clone(),
+        scenes: vec![teapot()],
+        width: 16,
+        height: 16,
+        steps: [
+            ("devices", done("ok")),
+            ("conformance", done("ok")),
+            ("bench", done("ok")),
+            ("sweep", done("ok: 1 jobs")),
+            ("isa", done("skipped: not asked")),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect(),
+        ..Default::default()
+    };
+    std::fs::write(out.join("device-report.json"), serde_json::to_string(&record).unwrap()).unwrap();
+    // devices.txt is not there (deleted, say): devices runs again, nothing else does.
+    let o = report_cmd(&out, &["--budget", "60s", "--resume"]).output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("devices is recorded as finished but devices.txt is missing"), "{stderr}");
+    assert!(std::fs::read_to_string(out.join("devices.txt")).unwrap().contains(&dev.name));
+    assert!(out.join("logs/devices.log").is_file());
+    for step in ["conformance", "bench", "sweep"] {
+        assert!(!out.join(format!("logs/{step}.log")).exists(), "{step} ran again: {stderr}");
+    }
+    assert_eq!(std::fs::read_to_string(out.join("bench.md")).unwrap(), "earlier");
+    assert_eq!(std::fs::read_to_string(out.join("conformance/conformance.md")).unwrap(), "earlier");
+    let s = state(&out);
+    assert_eq!(s["steps"]["devices"]["status"], "ok");
+    assert_eq!(s["steps"]["devices"]["output"], "devices.txt");
+    assert!(s["steps"]["devices"]["seconds"].as_f64().unwrap() != 1.0, "{s}");
+    assert_eq!(s["runs"].as_array().unwrap().len(), 1);
+    let _ = std::fs::remove_dir_all(&out);
+}

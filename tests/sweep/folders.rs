@@ -180,3 +180,160 @@ fn progress_lines_when_not_a_terminal() {
     assert_eq!(lines.len(), 3, "{err}");
     assert!(lines[0].starts_with("[1/3] teapot primary trav_") && lines[2].contains("ETA 0 s"), "{err}");
 }
+
+/// The arguments of a one-job sweep.
+const ONE_JOB: [&str; 10] =
+    ["--rays", "primary", "--layouts", "f32", "--branchings", "4", "--packets", "1", "--layout-branchings", "4"];
+
+/// Runs `halftrace args`, expecting a fast refusal that names the lock's holder (this test
+/// process) and the folder; returns the seconds it took.
+fn refused_by_holder(args: &[&str], folder: &Path) -> f64 {
+    let t0 = std::time::Instant::now();
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace")).args(args).output().unwrap();
+    let secs = t0.elapsed().as_secs_f64();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+    let holder = format!("pid {} on ", std::process::id());
+    assert!(
+        err.contains(&format!("{}: another run is writing into it", folder.display())) && err.contains(&holder),
+        "{args:?}: {err}"
+    );
+    eprintln!("{} refused in {secs:.3} s", args[..2].join(" "));
+    assert!(secs < 5.0, "{args:?}: refused only after {secs:.1} s");
+    secs
+}
+
+/// One writer per folder: while a folder is claimed (here by this test process, whose pid is
+/// alive), every command that writes into it is refused at once, naming the holder, and
+/// touches nothing; the lock goes with its guard.
+#[test]
+fn a_claimed_folder_refuses_every_other_writer() {
+    use halftrace::outdir::{OutDir, LOCK_FILE};
+    let out = tmp("claimed");
+    let o = sweep(&out, &ONE_JOB);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.join(LOCK_FILE).exists(), "the sweep left its lock");
+    let before = OutDir::entries(&out).unwrap();
+    let csv = std::fs::read(out.join("results.csv")).unwrap();
+    let lock = OutDir::claim(&out, "--out").unwrap();
+    let (o, scene) = (out.to_str().unwrap(), teapot());
+    let s = scene.as_str();
+    for args in [
+        vec!["sweep", "--scene", s, "--out", o],
+        vec!["sweep", "--scene", s, "--out", o, "--resume"],
+        vec!["sweep", "--scene", s, "--out", o, "--force"],
+        vec!["device-report", "--scene", s, "--scenes-dir", "none", "--out", o, "--resume"],
+        vec!["conformance", "--quick", "--scene", s, "--out", o],
+        vec!["isa", "--quick", "--out", o, "--force"],
+        vec!["report", o],
+    ] {
+        refused_by_holder(&args, &out);
+    }
+    let merged = tmp("claimed-merged");
+    std::fs::create_dir_all(&merged).unwrap();
+    let m = OutDir::claim(&merged, "--out").unwrap();
+    refused_by_holder(&["report", o, "--out", merged.to_str().unwrap()], &merged);
+    drop(m);
+    // A shard's folder is the one it writes.
+    let shard = out.join("shard-1-of-2");
+    let sl = OutDir::claim(&shard, "--out").unwrap();
+    refused_by_holder(&["sweep", "--scene", s, "--out", o, "--shard", "1/2"], &shard);
+    drop(sl);
+    assert_eq!(OutDir::entries(&out).unwrap(), before, "a refused command changed the folder");
+    assert_eq!(std::fs::read(out.join("results.csv")).unwrap(), csv);
+    drop(lock);
+    assert!(!out.join(LOCK_FILE).exists());
+    // Released, the folder is the sweep's again (and its lock never reaches a merge).
+    let mut resume = ONE_JOB.to_vec();
+    resume.push("--resume");
+    let o = sweep(&out, &resume);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = Command::new(env!("CARGO_BIN_EXE_halftrace"))
+        .arg("report")
+        .arg(&out)
+        .arg("--out")
+        .arg(&merged)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!merged.join(LOCK_FILE).exists() && !out.join(LOCK_FILE).exists());
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&merged);
+}
+
+/// A lock left by a run that was killed (its pid no longer runs) is replaced, saying so; the
+/// sweep runs and leaves no lock.
+#[test]
+fn a_stale_lock_is_replaced() {
+    use halftrace::outdir::{Holder, LOCK_FILE};
+    let out = tmp("stale-lock");
+    std::fs::create_dir_all(&out).unwrap();
+    let mut gone = Command::new("true").spawn().unwrap();
+    let pid = gone.id();
+    gone.wait().unwrap();
+    let dead = Holder { pid, command: "halftrace sweep (killed)".into(), ..Holder::current() };
+    std::fs::write(out.join(LOCK_FILE), serde_json::to_string(&dead).unwrap()).unwrap();
+    let o = sweep(&out, &ONE_JOB);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("replaced a stale lock") && err.contains(&format!("pid {pid} ")), "{err}");
+    assert_eq!(read_rows(&out).unwrap().len(), 1);
+    assert!(!out.join(LOCK_FILE).exists());
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Two sweeps into one folder at once: before, both exited 0 and one run's rows vanished from
+/// results.csv. The second is refused while the first runs (as a second `--resume` is), and
+/// the first's rows are all there.
+#[test]
+fn a_second_sweep_into_a_running_ones_folder_is_refused() {
+    use halftrace::outdir::LOCK_FILE;
+    let out = tmp("race");
+    let args = [
+        "--rays",
+        "primary,ao",
+        "--layouts",
+        "f32,f16h",
+        "--branchings",
+        "4",
+        "--packets",
+        "1",
+        "--layout-branchings",
+        "4",
+    ];
+    let mut first = sweep_cmd(&out, &args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !out.join(LOCK_FILE).exists() {
+        assert!(first.try_wait().unwrap().is_none(), "the first sweep ended before it took its lock");
+        assert!(t0.elapsed().as_secs() < 60, "no lock within a minute");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    for extra in [&[][..], &["--resume"], &["--force"]] {
+        let mut a = args.to_vec();
+        a.extend_from_slice(extra);
+        let t = std::time::Instant::now();
+        let o = sweep(&out, &a);
+        let secs = t.elapsed().as_secs_f64();
+        let err = String::from_utf8_lossy(&o.stderr);
+        eprintln!("second sweep {extra:?}: refused in {secs:.3} s");
+        assert!(!o.status.success(), "a second sweep {extra:?} ran into a running one's folder: {err}");
+        assert!(
+            err.contains("another run is writing into it") && err.contains(&format!("pid {} ", first.id())),
+            "{err}"
+        );
+        assert!(secs < 5.0);
+    }
+    assert!(first.try_wait().unwrap().is_none(), "the first sweep ended before the refusals: the test proved nothing");
+    let o = first.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // "N variants in T s": every row the first sweep measured is in results.csv.
+    let said: usize = String::from_utf8_lossy(&o.stdout).split_whitespace().next().unwrap().parse().unwrap();
+    assert!(said >= 4);
+    assert_eq!(read_rows(&out).unwrap().len(), said, "rows of the first sweep vanished");
+    assert!(!out.join(LOCK_FILE).exists());
+    let _ = std::fs::remove_dir_all(&out);
+}
