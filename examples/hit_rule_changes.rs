@@ -60,7 +60,10 @@ fn main() -> anyhow::Result<()> {
             "other"
         };
         if changed <= 8 {
-            println!("ray {i} {:?}\n  old {:?}\n  new {:?}\n  old brute force {:?}\n  -> {why}", rays[i], old[i], new[i], ob);
+            println!(
+                "ray {i} {:?}\n  old {:?}\n  new {:?}\n  old brute force {:?}\n  -> {why}",
+                rays[i], old[i], new[i], ob
+            );
         }
     }
     println!(

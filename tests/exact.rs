@@ -22,8 +22,11 @@ fn check_all(p: &Prepared, rays: &[Ray], expected: &[Hit]) -> Result<usize, Stri
     for l in LayoutId::all().filter(|l| l.info().conservative) {
         for b in [2, 4, 8, 16] {
             let enc = encode(p, l, b);
-            let fcs: &[FloatControls] =
-                if l.info().float_controls_off { &[FloatControls::On, FloatControls::Off] } else { &[FloatControls::On] };
+            let fcs: &[FloatControls] = if l.info().float_controls_off {
+                &[FloatControls::On, FloatControls::Off]
+            } else {
+                &[FloatControls::On]
+            };
             for &math in l.info().maths {
                 for &fc in fcs {
                     for pk in PACKETS {

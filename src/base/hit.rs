@@ -108,7 +108,7 @@ pub const HIT_PAD_SHARE: f32 = 1.0 / 262_144.0;
 
 /// Exits beyond this parameter count as this (2¹²⁷): a computed exit that overflowed to +inf
 /// then still bounds the exact one from below.
-pub const HIT_CAP: f32 = 1.701_411_834_604_692_3e38;
+pub const HIT_CAP: f32 = f32::from_bits(0x7f00_0000);
 
 /// The padding of a scene whose vertices span `bounds` ([`HIT_PAD_SHARE`] of its largest
 /// extent, halved before subtracting so that no extent overflows fp32).

@@ -75,9 +75,8 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
                 let label = format!("{variant} (CPU reference)");
                 let vs = agreement(&hits, f32_hits);
                 if layout.info().conservative {
-                    compare(&label, "hits", "the f32 reference", &rays, &hits, f32_hits, 0, Hit::same_bits).map_err(
-                        |e| anyhow::anyhow!("{e} (a conservative layout must return the f32 hits)"),
-                    )?;
+                    compare(&label, "hits", "the f32 reference", &rays, &hits, f32_hits, 0, Hit::same_bits)
+                        .map_err(|e| anyhow::anyhow!("{e} (a conservative layout must return the f32 hits)"))?;
                     outln!("against f32: all {n} rays identical");
                 } else {
                     outln!("against f32: {} rays differ, {} false misses", vs.differs(), vs.false_misses);

@@ -148,7 +148,12 @@ fn packet<L: Layout, const B: usize>(
         let e = (near <= far).then(|| L::root_entry(root, &r, &lr, near));
         any_root |= e.is_some();
         entries.push(e);
-        lanes.push(Lane { r, lr, best: Closest::new(ray.tmax, tris.pad), c: Counters { box_tests: 1, ..Default::default() } });
+        lanes.push(Lane {
+            r,
+            lr,
+            best: Closest::new(ray.tmax, tris.pad),
+            c: Counters { box_tests: 1, ..Default::default() },
+        });
     }
     if any_root {
         stack.push(0);
