@@ -346,9 +346,12 @@ mod tests {
 pub struct DeviceBuild {
     pub f64: bool,
     pub storage16: bool,
+    /// The SPIR-V version the module is built for, 1.x: 5 (Vulkan 1.2 and later), 3 (1.1), 0
+    /// (1.0). The same kernel either way; an older device is handed the version it accepts.
+    pub spirv_minor: u8,
 }
 
 impl DeviceBuild {
-    /// A device with both (the SPIR-V in `spirv/`, `halftrace shaders`).
-    pub const FULL: DeviceBuild = DeviceBuild { f64: true, storage16: true };
+    /// A Vulkan 1.2 device with both (the SPIR-V in `spirv/`, `halftrace shaders`).
+    pub const FULL: DeviceBuild = DeviceBuild { f64: true, storage16: true, spirv_minor: 5 };
 }

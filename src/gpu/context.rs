@@ -126,16 +126,20 @@ impl Gpu {
             return Err(GpuError::MissingFeature { device: info.name.clone(), feature });
         }
         // No feature is required up front: each variant needs what its layout and math use
-        // (gpu::support), and what a device lacks becomes one skipped line per variant.
-        if !info.timestamps {
+        // (gpu::support), and what a device lacks becomes one skipped line per variant. Timing
+        // needs compute timestamps; reading the compiler's statistics does not.
+        if !info.timestamps && !opts.statistics {
             let feature = "timestamp queries on a compute queue".into();
             return Err(GpuError::MissingFeature { device: info.name.clone(), feature });
         }
         let qfs = unsafe { instance.get_physical_device_queue_family_properties(physical) };
+        let compute = |q: &vk::QueueFamilyProperties| q.queue_flags.contains(vk::QueueFlags::COMPUTE);
         let qfi = qfs
             .iter()
-            .position(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0)
-            .expect("a device with compute timestamps has such a queue family") as u32;
+            .position(|q| compute(q) && q.timestamp_valid_bits > 0)
+            .or_else(|| qfs.iter().position(compute))
+            .ok_or_else(|| GpuError::MissingFeature { device: info.name.clone(), feature: "a compute queue".into() })?
+            as u32;
         let logical = Self::create_device(&inst, physical, &info, qfi, opts.statistics)?;
         let queue = unsafe { logical.device.get_device_queue(qfi, 0) };
         // Parsed values are checked (crate::units); the clamp keeps any other caller's value
@@ -170,10 +174,15 @@ impl Gpu {
         let prio = [1.0f32];
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
         let (rq, bda) = (info.ray_query, info.buffer_device_address);
+        let v12_ok = info.spirv_minor >= 5;
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
             .shader_float16(info.shader_float16)
             .buffer_device_address(bda);
+        // Vulkan 1.0 and 1.1 devices: the same features through their extensions' structures.
+        let mut s16 = vk::PhysicalDevice16BitStorageFeatures::default().storage_buffer16_bit_access(true);
+        let mut f16 = vk::PhysicalDeviceShaderFloat16Int8Features::default().shader_float16(true);
+        let mut bdaf = vk::PhysicalDeviceBufferDeviceAddressFeatures::default().buffer_device_address(true);
         let mut sscf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true);
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
@@ -194,12 +203,35 @@ impl Gpu {
         if statistics {
             exts.push(ash::khr::pipeline_executable_properties::NAME.as_ptr());
         }
+        if !v12_ok {
+            if info.storage_16bit && info.spirv_minor == 0 {
+                exts.push(ash::khr::_16bit_storage::NAME.as_ptr());
+                exts.push(ash::khr::storage_buffer_storage_class::NAME.as_ptr());
+            }
+            if info.shader_float16 {
+                exts.push(ash::khr::shader_float16_int8::NAME.as_ptr());
+            }
+            if bda {
+                exts.push(ash::khr::buffer_device_address::NAME.as_ptr());
+            }
+        }
         let mut dinfo = vk::DeviceCreateInfo::default()
             .queue_create_infos(&qinfo)
             .enabled_features(&base)
-            .push_next(&mut v11)
-            .push_next(&mut v12)
             .enabled_extension_names(&exts);
+        if v12_ok {
+            dinfo = dinfo.push_next(&mut v11).push_next(&mut v12);
+        } else {
+            if info.storage_16bit {
+                dinfo = dinfo.push_next(&mut s16);
+            }
+            if info.shader_float16 {
+                dinfo = dinfo.push_next(&mut f16);
+            }
+            if bda {
+                dinfo = dinfo.push_next(&mut bdaf);
+            }
+        }
         if rq {
             dinfo = dinfo.push_next(&mut asf).push_next(&mut rqf);
         }

@@ -45,15 +45,45 @@ pub struct DeviceInfo {
     /// `VK_KHR_pipeline_executable_properties` with `pipelineExecutableInfo`: the driver
     /// reports each pipeline's compiler statistics and internal representations (`isa`).
     pub pipeline_statistics: bool,
-    /// A device that compiles pipelines but runs nothing (RADV's null device for a
-    /// `RADV_FORCE_FAMILY`): only `isa` uses it.
+    /// A device that compiles pipelines but runs nothing — RADV's null device for a
+    /// `RADV_FORCE_FAMILY`, or a driver under Mesa's drm-shim ([`shim`]): only `isa` uses it.
     pub compile_only: bool,
+    /// The newest SPIR-V the device accepts, as its minor version (1.x): 5 on Vulkan 1.2 and
+    /// later, 3 on 1.1 (4 with `VK_KHR_spirv_1_4`), 0 on 1.0.
+    pub spirv_minor: u8,
 }
 
 impl DeviceInfo {
     /// What a kernel's build takes from this device beyond its variant.
     pub fn build(&self) -> crate::variant::DeviceBuild {
-        crate::variant::DeviceBuild { f64: self.shader_float64, storage16: self.storage_16bit }
+        crate::variant::DeviceBuild {
+            f64: self.shader_float64,
+            storage16: self.storage_16bit,
+            spirv_minor: self.spirv_minor.min(5),
+        }
+    }
+}
+
+/// The drm-shim this process runs under, if any: Mesa's `lib<driver>_noop_drm_shim.so` in
+/// `LD_PRELOAD` fakes the kernel driver of `<driver>` (freedreno, panfrost, intel, nouveau,
+/// v3d), so that driver's Vulkan device builds pipelines and runs nothing.
+pub fn shim() -> Option<String> {
+    let pre = std::env::var("LD_PRELOAD").ok()?;
+    pre.split([':', ' ']).find_map(|p| {
+        let f = std::path::Path::new(p).file_name()?.to_str()?;
+        Some(f.strip_prefix("lib")?.strip_suffix("_noop_drm_shim.so")?.to_string())
+    })
+}
+
+/// Whether the driver `id` is the one the drm-shim `shim` fakes a kernel for.
+fn shimmed(shim: &str, id: vk::DriverId) -> bool {
+    match shim {
+        "freedreno" => id == vk::DriverId::MESA_TURNIP,
+        "panfrost" => id == vk::DriverId::MESA_PANVK,
+        "intel" => id == vk::DriverId::INTEL_OPEN_SOURCE_MESA,
+        "nouveau" => id == vk::DriverId::MESA_NVK,
+        "v3d" => id == vk::DriverId::MESA_V3DV,
+        _ => false,
     }
 }
 
@@ -105,42 +135,81 @@ pub const MASKABLE: &[&str] = &[
     "floatControls",
 ];
 
-/// What the harness reads of one physical device.
+/// What the harness reads of one physical device. Vulkan 1.0 and 1.1 devices (panvk on Mali,
+/// for one) are asked through the structures of their extensions, not the 1.2 aggregates.
 pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {
     unsafe {
         let props = instance.get_physical_device_properties(pd);
-        let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
-        let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
-        let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+        let v = props.api_version;
+        let minor = if vk::api_version_major(v) > 1 { 99 } else { vk::api_version_minor(v) };
         let exts0 = instance.enumerate_device_extension_properties(pd).unwrap_or_default();
         let has0 = |n: &CStr| exts0.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|x| x == n));
-        let rq_exts = has0(ash::khr::ray_query::NAME)
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
+        let mut s16 = vk::PhysicalDevice16BitStorageFeatures::default();
+        let mut f16 = vk::PhysicalDeviceShaderFloat16Int8Features::default();
+        let mut bdaf = vk::PhysicalDeviceBufferDeviceAddressFeatures::default();
+        let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
+        let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+        let rq_exts = minor >= 2
+            && has0(ash::khr::ray_query::NAME)
             && has0(ash::khr::acceleration_structure::NAME)
             && has0(ash::khr::deferred_host_operations::NAME);
-        let f64ok = {
-            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11).push_next(&mut v12);
-            if rq_exts {
-                f2 = f2.push_next(&mut asf).push_next(&mut rqf);
+        let (f64ok, shader_float16, storage_16bit, bda) = {
+            let mut f2 = vk::PhysicalDeviceFeatures2::default();
+            if minor >= 2 {
+                f2 = f2.push_next(&mut v11).push_next(&mut v12);
+                if rq_exts {
+                    f2 = f2.push_next(&mut asf).push_next(&mut rqf);
+                }
+            } else {
+                if minor >= 1 || has0(ash::khr::_16bit_storage::NAME) {
+                    f2 = f2.push_next(&mut s16);
+                }
+                if has0(ash::khr::shader_float16_int8::NAME) {
+                    f2 = f2.push_next(&mut f16);
+                }
+                if has0(ash::khr::buffer_device_address::NAME) {
+                    f2 = f2.push_next(&mut bdaf);
+                }
             }
             instance.get_physical_device_features2(pd, &mut f2);
-            f2.features.shader_float64 == vk::TRUE
+            if minor >= 2 {
+                (
+                    f2.features.shader_float64 == vk::TRUE,
+                    v12.shader_float16 == vk::TRUE,
+                    v11.storage_buffer16_bit_access == vk::TRUE,
+                    v12.buffer_device_address == vk::TRUE,
+                )
+            } else {
+                (
+                    f2.features.shader_float64 == vk::TRUE,
+                    f16.shader_float16 == vk::TRUE,
+                    s16.storage_buffer16_bit_access == vk::TRUE,
+                    bdaf.buffer_device_address == vk::TRUE,
+                )
+            }
         };
-        let rq_ok = rq_exts
-            && asf.acceleration_structure == vk::TRUE
-            && rqf.ray_query == vk::TRUE
-            && v12.buffer_device_address == vk::TRUE;
+        let rq_ok = rq_exts && asf.acceleration_structure == vk::TRUE && rqf.ray_query == vk::TRUE && bda;
         let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
         let mut drv = vk::PhysicalDeviceDriverProperties::default();
         let mut p11 = vk::PhysicalDeviceMaintenance3Properties::default();
         let mut fc = vk::PhysicalDeviceFloatControlsProperties::default();
         let mut ssc = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
         let ssc_ext = has0(ash::ext::subgroup_size_control::NAME);
-        let mut p2 = vk::PhysicalDeviceProperties2::default()
-            .push_next(&mut sub)
-            .push_next(&mut drv)
-            .push_next(&mut fc)
-            .push_next(&mut p11);
+        let mut p2 = vk::PhysicalDeviceProperties2::default();
+        if minor >= 1 {
+            p2 = p2.push_next(&mut sub);
+        }
+        if minor >= 1 || has0(ash::khr::maintenance3::NAME) {
+            p2 = p2.push_next(&mut p11);
+        }
+        if minor >= 2 || has0(ash::khr::driver_properties::NAME) {
+            p2 = p2.push_next(&mut drv);
+        }
+        if minor >= 2 || has0(ash::khr::shader_float_controls::NAME) {
+            p2 = p2.push_next(&mut fc);
+        }
         if ssc_ext {
             p2 = p2.push_next(&mut ssc);
         }
@@ -161,11 +230,17 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
         let qf = instance.get_physical_device_queue_family_properties(pd);
         let timestamps =
             qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
-        let v = props.api_version;
         let name = props.device_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let shimmed = shim().is_some_and(|s| shimmed(&s, drv.driver_id));
+        let spirv_minor = match minor {
+            0 => 0,
+            1 if has0(ash::khr::spirv_1_4::NAME) => 4,
+            1 => 3,
+            _ => 5,
+        };
         DeviceInfo {
             index,
-            compile_only: is_null_device(&name, drv.driver_id),
+            compile_only: is_null_device(&name, drv.driver_id) || shimmed,
             name,
             kind: format!("{:?}", props.device_type).to_lowercase(),
             driver: format!(
@@ -179,13 +254,13 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
                 vk::api_version_minor(v),
                 vk::api_version_patch(v)
             ),
-            shader_float16: v12.shader_float16 == vk::TRUE,
-            storage_16bit: v11.storage_buffer16_bit_access == vk::TRUE,
+            shader_float16,
+            storage_16bit,
             shader_float64: f64ok,
             subgroup_size: sub.subgroup_size,
             subgroup_ops: sub.supported_operations.as_raw(),
             ray_query: rq_ok,
-            buffer_device_address: v12.buffer_device_address == vk::TRUE,
+            buffer_device_address: bda,
             max_storage_buffer: props.limits.max_storage_buffer_range as u64,
             max_allocation: p11.max_memory_allocation_size,
             timestamp_period_ns: props.limits.timestamp_period,
@@ -198,6 +273,7 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             min_subgroup_size: if ssc_ok { ssc.min_subgroup_size } else { sub.subgroup_size },
             max_subgroup_size: if ssc_ok { ssc.max_subgroup_size } else { sub.subgroup_size },
             pipeline_statistics: stats_ok,
+            spirv_minor,
         }
     }
 }

@@ -34,9 +34,10 @@ void main() {
     }
 }"#;
     // Both node reads: fp16 storage, and halves in 32-bit words (devices without 16-bit
-    // storage), in every math mode (a conversion or a bit cast per half).
+    // storage), in every math mode (a conversion or a bit cast per half); the latter as SPIR-V
+    // 1.3, what a Vulkan 1.1 device (panvk on Mali) is handed.
     use halftrace::variant::DeviceBuild;
-    let words = DeviceBuild { f64: false, storage16: false };
+    let words = DeviceBuild { f64: false, storage16: false, spirv_minor: 3 };
     let builds = LayoutId::all().flat_map(|l| {
         BRANCHINGS.into_iter().flat_map(move |b| {
             l.info().maths.iter().flat_map(move |&m| [(l, b, m, DeviceBuild::FULL), (l, b, m, words)])
@@ -51,6 +52,7 @@ void main() {
             src,
             &v.defines(PacketImpl::Single, false, dev),
             &Includes::variant(&v),
+            dev.spirv_minor,
         )
         .unwrap();
         let pipe =

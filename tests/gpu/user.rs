@@ -109,7 +109,7 @@ fn user_kernels_are_checked_then_validated_and_timed() {
     std::fs::write(&odd, &good[..good.len() - 1]).unwrap();
     // Valid modules with the wrong interface.
     let module = |name: &str, src: &str| {
-        let code = shader::compile_source(name, "wrong.comp", src, &[], &Includes::plain()).unwrap();
+        let code = shader::compile_source(name, "wrong.comp", src, &[], &Includes::plain(), 5).unwrap();
         let p = tmp(&format!("{name}.spv"));
         std::fs::write(&p, bytemuck::cast_slice(&code)).unwrap();
         p

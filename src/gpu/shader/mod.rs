@@ -78,7 +78,14 @@ impl Includes {
 pub fn compile(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
     let src = source("trav.comp").expect("glsl/trav.comp is embedded");
     let v = &k.variant;
-    let words = compile_source(&k.name(), "trav.comp", src, &v.defines(k.imp, k.stats, dev), &Includes::variant(v))?;
+    let words = compile_source(
+        &k.name(),
+        "trav.comp",
+        src,
+        &v.defines(k.imp, k.stats, dev),
+        &Includes::variant(v),
+        dev.spirv_minor,
+    )?;
     Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
 }
 
@@ -92,7 +99,8 @@ pub fn compile_user(path: &Path, k: &KernelId, dev: DeviceBuild) -> Result<Vec<u
     inc.user_dir = path.parent().map(Path::to_path_buf);
     let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
     let defines = v.defines(k.imp, k.stats, dev);
-    let words = compile_source(&format!("{} ({})", k.name(), path.display()), &file, &src, &defines, &inc)?;
+    let words =
+        compile_source(&format!("{} ({})", k.name(), path.display()), &file, &src, &defines, &inc, dev.spirv_minor)?;
     Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
 }
 
@@ -100,22 +108,29 @@ pub fn compile_user(path: &Path, k: &KernelId, dev: DeviceBuild) -> Result<Vec<u
 pub fn compile_plain(name: &str, file: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
     let src = source(file)
         .ok_or_else(|| GpuError::Compile { variant: name.into(), log: format!("missing source {file}") })?;
-    compile_source(name, file, src, defines, &Includes::plain())
+    compile_source(name, file, src, defines, &Includes::plain(), 5)
 }
 
-/// Compiles GLSL compute source with defines; `#include`s resolve through `inc`.
+/// Compiles GLSL compute source with defines into SPIR-V 1.`spirv_minor` (5: for Vulkan 1.2;
+/// 3: Vulkan 1.1; 0: Vulkan 1.0); `#include`s resolve through `inc`.
 pub fn compile_source(
     name: &str,
     file: &str,
     src: &str,
     defines: &[(String, String)],
     inc: &Includes,
+    spirv_minor: u8,
 ) -> Result<Vec<u32>, GpuError> {
     let compile_err = |log: String| GpuError::Compile { variant: name.to_string(), log };
     let compiler = shaderc::Compiler::new().map_err(|e| compile_err(format!("shaderc unavailable: {e}")))?;
     let mut opts = shaderc::CompileOptions::new().map_err(|e| compile_err(format!("shaderc options: {e}")))?;
-    opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
-    opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
+    let (env, spirv) = match spirv_minor {
+        0 => (shaderc::EnvVersion::Vulkan1_0, shaderc::SpirvVersion::V1_0),
+        1..=4 => (shaderc::EnvVersion::Vulkan1_1, shaderc::SpirvVersion::V1_3),
+        _ => (shaderc::EnvVersion::Vulkan1_2, shaderc::SpirvVersion::V1_5),
+    };
+    opts.set_target_env(shaderc::TargetEnv::Vulkan, env as u32);
+    opts.set_target_spirv(spirv);
     opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
     for (k, val) in defines {
         opts.add_macro_definition(k, Some(val));
