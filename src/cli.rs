@@ -64,6 +64,11 @@ pub enum Cmd {
     /// learn which families the installed RADV knows: RADV aborts on the others).
     #[command(hide = true)]
     ProbeFamily,
+    /// Build the isa matrix on the one model whose drm-shim environment this process was
+    /// started with, printing one JSON row per kernel (how `isa` reads another vendor's
+    /// compiler: one driver and model per process).
+    #[command(hide = true)]
+    IsaModel(IsaModelArgs),
     /// Compile the default variant matrix and write one SPIR-V file per kernel.
     Shaders {
         /// Output folder (e.g. spirv/).
@@ -322,10 +327,30 @@ pub struct ConformanceArgs {
 }
 
 #[derive(clap::Args)]
+pub struct IsaModelArgs {
+    #[arg(long)]
+    pub model: String,
+    /// quick, default or full.
+    #[arg(long, default_value = "default")]
+    pub matrix: String,
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    #[arg(long)]
+    pub validation: bool,
+    /// Write the representations under this folder.
+    #[arg(long)]
+    pub disasm: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
 pub struct IsaArgs {
-    /// RADV GPU families, comma-separated (e.g. navi31,navi21,vega10; `all`: every family the
-    /// installed RADV knows, listed by `halftrace devices`). Default, without --device:
-    /// polaris10, vega10, navi10, navi21, navi31, gfx1201 (GCN4 to RDNA4).
+    /// GPU families and models, comma-separated. AMD through RADV's null devices (e.g.
+    /// navi31,navi21,vega10); other vendors through Mesa's drm-shims, once
+    /// scripts/install-compilers.sh has built them: a618,a660,a740,a750 (Qualcomm Adreno),
+    /// g52,g610 (Arm Mali), tgl,dg2,mtl,lnl,bmg (Intel), tu102,ga102,ad102 (NVIDIA),
+    /// v3d-42,v3d-71 (Broadcom). `vendors`: every model of the other vendors; `all`: every AMD
+    /// family the installed RADV knows and every model. Default, without --device: polaris10,
+    /// vega10, navi10, navi21, navi31, gfx1201 (GCN4 to RDNA4).
     #[arg(long, value_delimiter = ',')]
     pub family: Vec<String>,
     /// A Vulkan device (index or name substring) whose driver exposes

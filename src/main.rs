@@ -22,6 +22,7 @@ fn main() {
         Cmd::Isa(a) => commands::isa(a),
         Cmd::DeviceReport(a) => commands::device_report(a),
         Cmd::ProbeFamily => commands::probe_family(),
+        Cmd::IsaModel(a) => commands::isa_model(a),
         Cmd::Shaders { emit } => commands::shaders(emit),
         Cmd::Sweep(a) => commands::sweep(a),
         Cmd::Bench(a) => commands::bench(a),

@@ -19,16 +19,22 @@ fn line(r: &IsaRow) -> String {
     if !r.status.is_ok() {
         return format!("{:<10} {:<34} {}", r.family, r.kernel, r.status);
     }
-    let packed =
-        r.asm.map(|a| format!("fp16 VALU packed {}/{}", a.packed_f16, a.packed_f16 + a.scalar_f16)).unwrap_or_default();
+    let packed = r
+        .asm
+        .filter(|a| a.packed_f16 + a.scalar_f16 > 0)
+        .map(|a| format!(", fp16 ALU packed {}/{}", a.packed_f16, a.packed_f16 + a.scalar_f16))
+        .unwrap_or_default();
     format!(
-        "{:<10} {:<34} VGPRs {}, scratch {} KiB/wave, waves/SIMD {}, instructions {}, {packed}",
+        "{:<10} {:<34} registers {}, private {} B, spills {}, {} {}, instructions {}, cycles {}{packed}",
         if r.family.is_empty() { &r.device } else { &r.family },
         r.kernel,
-        f(r.vgprs),
-        r.scratch_bytes.map(|b| format!("{:.1}", b / 1024.0)).unwrap_or_else(|| "–".into()),
-        f(r.waves_per_simd),
-        f(r.instructions)
+        f(r.registers),
+        f(r.private_bytes),
+        f(r.spills),
+        f(r.occupancy),
+        if r.occupancy_unit.is_empty() { "occupancy" } else { &r.occupancy_unit },
+        f(r.instructions),
+        f(r.cycles)
     )
 }
 
@@ -51,28 +57,49 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let mut targets: Vec<Target> = Vec::new();
     let exe = std::env::current_exe()?;
     let wants_families = !a.family.is_empty() || a.device.is_empty();
-    let known = if wants_families { isa::known_families(&exe) } else { Vec::new() };
-    let families: Vec<String> = if a.family.iter().any(|f| f.eq_ignore_ascii_case("all")) {
-        known.iter().map(|f| f.name.to_string()).collect()
-    } else if a.family.is_empty() && a.device.is_empty() {
-        isa::default_families(&known)
-    } else {
-        a.family.iter().map(|f| f.to_lowercase()).collect()
-    };
+    // AMD families are probed (RADV aborts on a family it does not know); models need the
+    // compilers of scripts/install-compilers.sh, which `vendors::compilers` finds or names.
+    let amd_asked = a.family.is_empty()
+        || a.family.iter().any(|f| !f.eq_ignore_ascii_case("vendors") && isa::vendors::model(f).is_none());
+    let known = if wants_families && amd_asked { isa::known_families(&exe) } else { Vec::new() };
     let names: Vec<&str> = known.iter().map(|f| f.name).collect();
+    let mut families: Vec<String> = Vec::new();
+    let mut models: Vec<String> = Vec::new();
+    if a.family.is_empty() && a.device.is_empty() {
+        families = isa::default_families(&known);
+    }
+    for f in &a.family {
+        let f = f.to_lowercase();
+        match f.as_str() {
+            "all" => {
+                families.extend(known.iter().map(|k| k.name.to_string()));
+                models.extend(isa::vendors::MODELS.iter().map(|m| m.name.to_string()));
+            }
+            "vendors" => models.extend(isa::vendors::MODELS.iter().map(|m| m.name.to_string())),
+            _ if isa::vendors::model(&f).is_some() => models.push(f),
+            _ => families.push(f),
+        }
+    }
     anyhow::ensure!(
-        !wants_families || !names.is_empty(),
+        families.is_empty() || !names.is_empty(),
         "no RADV null device opens here (RADV, in Debian's mesa-vulkan-drivers, provides them for any AMD family); \
          or name a device whose driver reports pipeline statistics with --device"
     );
     for f in families {
+        let all_models: Vec<&str> = isa::vendors::MODELS.iter().map(|m| m.name).collect();
         anyhow::ensure!(
             names.contains(&f.as_str()),
-            "--family '{f}': the installed RADV opens no null device for it (it does for: {})",
-            names.join(", ")
+            "--family '{f}': neither an AMD family the installed RADV opens ({}) nor a model of the other vendors ({})",
+            names.join(", "),
+            all_models.join(", ")
         );
         targets.push(Target::Family(f));
     }
+    if !models.is_empty() {
+        // Before any work: the compilers must be there.
+        isa::vendors::compilers().map_err(anyhow::Error::msg)?;
+    }
+    targets.extend(models.into_iter().map(Target::Model));
     targets.extend(a.device.iter().cloned().map(Target::Device));
     // Each device once: a repeated name would give rows `report` refuses as duplicates.
     let mut seen = Vec::new();
@@ -92,10 +119,17 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     // The representations go to a folder of their own first, which replaces disasm/ only once
     // the run has succeeded (a failed run leaves the earlier one as it was).
     let disasm: Option<PathBuf> = a.disasm.then(|| out.join(format!(".disasm-{}.tmp", std::process::id())));
-    let cfg = isa::Config { targets, builds: isa::plan(matrix, &a.layouts), disasm, validation: a.validation };
+    let cfg = isa::Config {
+        targets,
+        matrix,
+        layouts: a.layouts.clone(),
+        builds: isa::plan(matrix, &a.layouts),
+        disasm,
+        validation: a.validation,
+    };
     let quiet = a.quiet;
     let mut stdout_err = None;
-    let result = isa::run(&cfg, |r| {
+    let result = isa::run(&cfg, &exe, |r| {
         if !quiet && stdout_err.is_none() {
             use std::io::Write as _;
             if let Err(e) = writeln!(std::io::stdout(), "{}", line(r)) {
@@ -122,6 +156,9 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         if tmp.exists() {
             std::fs::rename(tmp, &dest).with_context(|| format!("moving the representations to {}", dest.display()))?;
         }
+    }
+    for n in &s.notes {
+        eprintln!("warning: {n}");
     }
     let skipped = s.rows.iter().filter(|r| r.status.is_skipped()).count();
     let failed: Vec<&str> = s.rows.iter().filter(|r| r.status.is_failed()).map(|r| r.kernel.as_str()).collect();
@@ -152,5 +189,21 @@ pub fn probe_family() -> anyhow::Result<()> {
     for name in crate::gpu::null::listed()? {
         outln!("{name}");
     }
+    Ok(())
+}
+
+/// `halftrace isa-model` (hidden): the isa matrix on the model whose drm-shim environment this
+/// process has, one JSON row per line on stdout (read by `isa`, `isa::vendors::run_model`).
+pub fn isa_model(a: &crate::cli::IsaModelArgs) -> anyhow::Result<()> {
+    let m = isa::vendors::model(&a.model).ok_or_else(|| anyhow::anyhow!("--model {}: no such model", a.model))?;
+    let matrix =
+        Matrix::parse(&a.matrix).ok_or_else(|| anyhow::anyhow!("--matrix {}: quick, default or full", a.matrix))?;
+    let messages = isa::run_model_here(&m, &isa::plan(matrix, &a.layouts), a.validation, a.disasm.as_deref())?;
+    anyhow::ensure!(
+        messages.is_empty(),
+        "{} validation-layer message(s), the first: {}",
+        messages.len(),
+        messages.first().map(String::as_str).unwrap_or("")
+    );
     Ok(())
 }

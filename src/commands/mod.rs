@@ -19,7 +19,7 @@ pub use conformance::conformance;
 pub use device_report::device_report;
 pub use devices::devices;
 pub use instance::instance;
-pub use isa::{isa, probe_family};
+pub use isa::{isa, isa_model, probe_family};
 pub use report::report;
 pub use shaders::shaders;
 pub use sweep::sweep;

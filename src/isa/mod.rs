@@ -6,6 +6,8 @@
 //! [`IsaRow`] per kernel × device; nothing is dispatched.
 
 pub mod counts;
+pub mod mix;
+pub mod vendors;
 
 use crate::bvh::BRANCHINGS;
 use crate::gpu::executable::executables;
@@ -85,6 +87,8 @@ pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<Build> {
 pub enum Target {
     /// RADV's null device of a family.
     Family(String),
+    /// Another vendor's model under its drm-shim, built in a child process ([`vendors`]).
+    Model(String),
     /// A device by index or name (its driver must expose pipeline statistics).
     Device(String),
 }
@@ -93,6 +97,9 @@ pub enum Target {
 #[derive(Clone, Debug)]
 pub struct Config {
     pub targets: Vec<Target>,
+    /// The matrix and layouts the builds come from (a model's child process plans the same).
+    pub matrix: Matrix,
+    pub layouts: Vec<LayoutId>,
     pub builds: Vec<Build>,
     /// Write every kernel's internal representations (NIR, the compiler's IR, disassembly)
     /// under `disasm/<device>/` of the output folder.
@@ -105,12 +112,29 @@ pub struct Summary {
     pub rows: Vec<IsaRow>,
     /// Validation-layer messages, per device label.
     pub validation_messages: Vec<String>,
+    /// What went wrong with a model's process (a driver that crashed), by model.
+    pub notes: Vec<String>,
+}
+
+impl Matrix {
+    /// The name `isa-model --matrix` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Matrix::Quick => "quick",
+            Matrix::Default => "default",
+            Matrix::Full => "full",
+        }
+    }
+    pub fn parse(s: &str) -> Option<Matrix> {
+        [Matrix::Quick, Matrix::Default, Matrix::Full].into_iter().find(|m| m.name() == s)
+    }
 }
 
 /// Opens a target for statistics.
 fn open(t: &Target, validation: bool) -> Result<(Gpu, Option<Family>), GpuError> {
     match t {
         Target::Family(f) => Ok((null::open(f, validation)?, null::family(f))),
+        Target::Model(m) => Err(GpuError::Other(format!("model {m} opens in its own process (isa-model)"))),
         Target::Device(d) => {
             let g = Gpu::new(&ContextOptions {
                 device: Some(d.clone()),
@@ -130,47 +154,119 @@ fn slug(s: &str) -> String {
     t.split('-').filter(|p| !p.is_empty()).collect::<Vec<_>>().join("-")
 }
 
-/// Builds every kernel of `cfg` on every target; `each` sees each row as it is made.
-pub fn run(cfg: &Config, mut each: impl FnMut(&IsaRow)) -> anyhow::Result<Summary> {
+/// Builds every kernel of `cfg` on every target; `each` sees each row as it is made. Models
+/// are built in a child process each (`exe isa-model`).
+pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::Result<Summary> {
     let mut rows = Vec::new();
     let mut messages = Vec::new();
+    let mut notes = Vec::new();
     for t in &cfg.targets {
+        if let Target::Model(name) = t {
+            let m = vendors::model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
+            let dir = vendors::compilers().map_err(anyhow::Error::msg)?;
+            let mut args = vec!["--matrix".to_string(), cfg.matrix.name().to_string()];
+            if !cfg.layouts.is_empty() {
+                args.push("--layouts".into());
+                args.push(cfg.layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
+            }
+            if cfg.validation {
+                args.push("--validation".into());
+            }
+            if let Some(d) = &cfg.disasm {
+                args.push("--disasm".into());
+                args.push(d.join(m.name).display().to_string());
+            }
+            let run = vendors::run_model(exe, &m, &dir, &args, &cfg.builds)?;
+            for r in &run.rows {
+                each(r);
+            }
+            notes.extend(run.note);
+            rows.extend(run.rows);
+            continue;
+        }
         let (g, fam) = open(t, cfg.validation)?;
-        let amd = g.info.driver.to_lowercase().contains("radv") || g.info.driver.to_lowercase().contains("amd");
-        // GFX9 on has scratch_* instructions; an AMD device of unknown generation may not.
-        let flat_scratch = matches!(fam.map(|f| f.generation), Some(g) if !g.starts_with("GCN") || g == "GCN5");
         let label = match t {
             Target::Family(f) => f.clone(),
-            Target::Device(_) => slug(&g.info.name),
+            _ => slug(&g.info.name),
         };
+        let who = Who { family: fam, model: None };
         for b in &cfg.builds {
-            let row =
-                build_one(&g, fam, b, amd, flat_scratch, cfg.disasm.as_deref().map(|d| d.join(&label)).as_deref())?;
+            let row = build_one(&g, &who, b, cfg.disasm.as_deref().map(|d| d.join(&label)).as_deref(), |_| {})?;
             each(&row);
             rows.push(row);
         }
         messages.extend(g.validation_messages().into_iter().map(|m| format!("{}: {m}", g.info.name)));
     }
     crate::report::isa::set_ratios(&mut rows);
-    Ok(Summary { rows, validation_messages: messages })
+    Ok(Summary { rows, validation_messages: messages, notes })
+}
+
+/// Builds `builds` on the device a drm-shim fakes as model `m` (this process was started with
+/// its environment: `halftrace isa-model`), printing each row as one line of JSON as it is
+/// made and, on stderr, [`vendors::MARKER`] and the kernel before building it.
+pub fn run_model_here(
+    m: &vendors::Model,
+    builds: &[Build],
+    validation: bool,
+    disasm: Option<&Path>,
+) -> anyhow::Result<Vec<String>> {
+    use std::io::Write as _;
+    let g = Gpu::new(&ContextOptions { validation, statistics: true, ..Default::default() })?;
+    anyhow::ensure!(
+        g.info.compile_only,
+        "{}: {} is not under a drm-shim here (LD_PRELOAD={})",
+        m.name,
+        g.info.name,
+        std::env::var("LD_PRELOAD").unwrap_or_default()
+    );
+    let who = Who { family: None, model: Some(*m) };
+    let mut out = std::io::stdout().lock();
+    for b in builds {
+        let row = build_one(&g, &who, b, disasm, |k| eprintln!("{}{k}", vendors::MARKER))?;
+        writeln!(out, "{}", serde_json::to_string(&row)?)?;
+        out.flush()?;
+    }
+    Ok(g.validation_messages().into_iter().map(|msg| format!("{}: {msg}", m.name)).collect())
+}
+
+/// What a device is besides its driver's name: an AMD family, or a model under a drm-shim.
+struct Who {
+    family: Option<Family>,
+    model: Option<vendors::Model>,
+}
+
+/// What a device's build of the kernels used, in words.
+fn device_build(g: &Gpu) -> String {
+    let b = g.info.build();
+    format!(
+        "{}, {}, SPIR-V 1.{}",
+        if b.f64 { "fp64" } else { "no fp64 (integer edge fallback)" },
+        if b.storage16 { "16-bit storage" } else { "fp16 nodes from 32-bit words" },
+        b.spirv_minor
+    )
 }
 
 /// One kernel on one device: its row, skipped when the device lacks what it needs, failed
 /// when the driver refuses it.
 fn build_one(
     g: &Gpu,
-    fam: Option<Family>,
+    who: &Who,
     b: &Build,
-    amd: bool,
-    flat_scratch: bool,
     disasm: Option<&Path>,
+    before: impl FnOnce(&str),
 ) -> anyhow::Result<IsaRow> {
     let v = b.variant;
+    let (family, generation, device) = match (who.model, who.family) {
+        (Some(m), _) => (m.name.to_string(), m.generation.to_string(), format!("{} ({})", m.display, m.driver.name())),
+        (None, Some(f)) => (f.name.to_string(), f.generation.to_string(), g.info.name.clone()),
+        (None, None) => (String::new(), String::new(), g.info.name.clone()),
+    };
     let mut row = IsaRow {
-        device: g.info.name.clone(),
-        family: fam.map(|f| f.name.to_string()).unwrap_or_default(),
-        generation: fam.map(|f| f.generation.to_string()).unwrap_or_default(),
+        device,
+        family,
+        generation,
         driver: g.info.driver.clone(),
+        device_build: device_build(g),
         version: env!("CARGO_PKG_VERSION").into(),
         commit: env!("HALFTRACE_COMMIT").into(),
         layout: v.layout.name().into(),
@@ -179,6 +275,7 @@ fn build_one(
         packet: v.packet,
         ..IsaRow::default()
     };
+    row.vendor = crate::report::isa::vendor_of(&row.driver).to_string();
     let imp = b.imp.unwrap_or_else(|| gpu::kernel::choose_impl(g, &v, None));
     row.packet_impl = format!("{imp:?}").to_lowercase();
     let resolved = match gpu::support::resolve(&g.info, v, b.fc) {
@@ -195,6 +292,7 @@ fn build_one(
     let k = KernelId::new(resolved, imp, false);
     row.kernel = k.name();
     row.float_controls = resolved.fc.name().into();
+    before(&row.kernel);
     let t0 = Instant::now();
     let kernel = match Kernel::build(g, &k, &Source::Builtin) {
         Ok(k) => k,
@@ -221,12 +319,18 @@ fn build_one(
     };
     row.subgroup_size = e.subgroup_size;
     row.stats = e.statistics.iter().map(|s| (s.name.clone(), s.value)).collect();
-    row.fill_known();
-    if amd {
+    if row.vendor == "AMD" {
+        // GFX9 on has scratch_* instructions; an AMD device of unknown generation may not.
+        let flat_scratch = matches!(who.family.map(|f| f.generation), Some(g) if !g.starts_with("GCN") || g == "GCN5");
         if let Some((_, asm)) = e.representations.iter().find(|(n, _)| n.to_lowercase().contains("assembly")) {
             row.asm = Some(counts::count(asm, flat_scratch));
         }
+    } else if let Some((isa, text)) =
+        e.representations.iter().find_map(|(n, t)| mix::Isa::of(&row.vendor, n).map(|i| (i, t)))
+    {
+        row.asm = Some(mix::count(isa, text));
     }
+    row.fill_known();
     if let Some(dir) = disasm {
         std::fs::create_dir_all(dir)?;
         for (name, text) in &e.representations {

@@ -123,3 +123,76 @@ fn null_devices_are_refused_by_the_commands_that_run() {
     assert!(!out.join("results.csv").exists(), "a refused sweep wrote rows");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Every other vendor's production compiler through its drm-shim (scripts/install-compilers.sh
+/// builds them): one model per vendor, f32 and f16h in each math mode the device admits at
+/// B = 4. Each model's vendor-neutral columns are filled from its driver's own statistics, and
+/// f16h needs at least f32's registers (or, where the driver reports none, its instructions).
+/// CI installs the compilers and sets HALFTRACE_REQUIRE_COMPILERS=1, so there a missing
+/// install fails; elsewhere the test says it did not run and how to make it run.
+#[test]
+fn isa_builds_on_every_vendors_compiler() {
+    if let Err(why) = halftrace::isa::vendors::compilers() {
+        assert!(std::env::var("HALFTRACE_REQUIRE_COMPILERS").is_err(), "{why}");
+        eprintln!("isa_builds_on_every_vendors_compiler DID NOT RUN: {why}");
+        return;
+    }
+    let out = tmp("vendors");
+    let (ok, stdout, stderr) = cli(&[
+        "isa",
+        "--family",
+        "a740,g610,lnl,ga102,v3d-71",
+        "--quick",
+        "--layouts",
+        "f16h",
+        "--validation",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "isa on the vendors failed:\n{stdout}\n{stderr}");
+    let rows: Vec<IsaRow> = serde_json::from_str(&std::fs::read_to_string(out.join("isa.json")).unwrap()).unwrap();
+    for (model, vendor) in
+        [("a740", "Qualcomm"), ("g610", "Arm"), ("lnl", "Intel"), ("ga102", "NVIDIA"), ("v3d-71", "Broadcom")]
+    {
+        let here: Vec<&IsaRow> = rows.iter().filter(|r| r.family == model).collect();
+        assert_eq!(here.len(), 4, "{model}: one row per kernel (f32, f16h in three maths)");
+        assert!(
+            here.iter().all(|r| !r.status.is_failed()),
+            "{model}: {:?}",
+            here.iter().map(|r| &r.status).collect::<Vec<_>>()
+        );
+        let ok: Vec<&&IsaRow> = here.iter().filter(|r| r.status.is_ok()).collect();
+        assert!(ok.len() >= 2, "{model}: f32 and at least f16h with fp32 math build");
+        for r in &ok {
+            assert_eq!(r.vendor, vendor, "{}", r.kernel);
+            assert!(
+                r.instructions.is_some_and(|v| v > 100.0),
+                "{model} {}: no instruction count {:?}",
+                r.kernel,
+                r.stats
+            );
+            assert!(r.occupancy.is_some() || vendor == "Intel", "{model} {}: no occupancy {:?}", r.kernel, r.stats);
+            assert!(
+                r.registers.is_some() || r.private_bytes.is_some() || r.spills.is_some(),
+                "{model} {}: neither registers nor private memory {:?}",
+                r.kernel,
+                r.stats
+            );
+            assert!(r.asm.is_some() || vendor == "Broadcom", "{model} {}: no disassembly counts", r.kernel);
+        }
+        let f32 = ok.iter().find(|r| r.layout == "f32").unwrap_or_else(|| panic!("{model}: f32 did not build"));
+        for h in ok.iter().filter(|r| r.layout == "f16h") {
+            let (a, b) = match (h.registers, f32.registers) {
+                (Some(a), Some(b)) => (a, b),
+                _ => (h.instructions.unwrap(), f32.instructions.unwrap()),
+            };
+            assert!(a >= b, "{model} {}: {a} registers (or instructions) below f32's {b}", h.kernel);
+        }
+        // Where the device has no fp16 arithmetic, the fp16-math kernels are skipped by name.
+        for r in here.iter().filter(|r| r.status.is_skipped()) {
+            assert!(r.status.to_string().contains("shaderFloat16"), "{model} {}: {}", r.kernel, r.status);
+        }
+    }
+    let md = std::fs::read_to_string(out.join("isa.md")).unwrap();
+    assert!(md.contains("Across vendors"), "isa.md has no table across vendors");
+}

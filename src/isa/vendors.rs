@@ -1,0 +1,344 @@
+//! Every vendor's production compiler without the GPU: Mesa's Vulkan drivers for Qualcomm
+//! Adreno (turnip), Arm Mali (panvk), Intel (anv), NVIDIA (NVK) and Broadcom VideoCore (v3dv),
+//! each opened under its drm-shim — a preloaded library that fakes the kernel driver, so the
+//! driver builds pipelines and reports their statistics while nothing runs. The shims and the
+//! drivers Debian does not ship are built by `scripts/install-compilers.sh` into a cache
+//! ([`compilers`]).
+//!
+//! One driver and one model per process (the shim's model comes from the environment when the
+//! driver opens): each [`Model`] is built in a child process (`halftrace isa-model`) that
+//! prints one row per kernel as it goes, so that the rows a driver wrote before crashing (v3dv
+//! has crashed at teardown) survive, and the crash is reported by model.
+
+use super::Build;
+use crate::report::isa::IsaRow;
+use crate::report::Status;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+/// A driver under a drm-shim: its shim library, ICD manifest and the vendor it compiles for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Driver {
+    Turnip,
+    Panvk,
+    Anv,
+    Nvk,
+    V3dv,
+}
+
+impl Driver {
+    /// The shim's library name under `lib/` of the compilers folder.
+    pub fn shim(self) -> &'static str {
+        match self {
+            Driver::Turnip => "libfreedreno_noop_drm_shim.so",
+            Driver::Panvk => "libpanfrost_noop_drm_shim.so",
+            Driver::Anv => "libintel_noop_drm_shim.so",
+            Driver::Nvk => "libnouveau_noop_drm_shim.so",
+            Driver::V3dv => "libv3d_noop_drm_shim.so",
+        }
+    }
+    /// The ICD manifest under `icd/`.
+    pub fn icd(self) -> &'static str {
+        match self {
+            Driver::Turnip => "freedreno.json",
+            Driver::Panvk => "panfrost.json",
+            Driver::Anv => "intel.json",
+            Driver::Nvk => "nouveau.json",
+            Driver::V3dv => "broadcom.json",
+        }
+    }
+    pub fn vendor(self) -> &'static str {
+        match self {
+            Driver::Turnip => "Qualcomm",
+            Driver::Panvk => "Arm",
+            Driver::Anv => "Intel",
+            Driver::Nvk => "NVIDIA",
+            Driver::V3dv => "Broadcom",
+        }
+    }
+    /// The driver's name as halftrace's docs and tables use it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Driver::Turnip => "turnip",
+            Driver::Panvk => "panvk",
+            Driver::Anv => "anv",
+            Driver::Nvk => "NVK",
+            Driver::V3dv => "v3dv",
+        }
+    }
+}
+
+/// A GPU model a shim fakes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Model {
+    /// The name `--family` takes (`a740`, `g610`, `lnl`, `ga102`, `v3d-71`).
+    pub name: &'static str,
+    /// What the tables call it.
+    pub display: &'static str,
+    /// Its architecture or generation.
+    pub generation: &'static str,
+    pub driver: Driver,
+    /// The shim's environment for this model.
+    pub env: &'static [(&'static str, &'static str)],
+}
+
+const fn m(
+    name: &'static str,
+    display: &'static str,
+    generation: &'static str,
+    driver: Driver,
+    env: &'static [(&'static str, &'static str)],
+) -> Model {
+    Model { name, display, generation, driver, env }
+}
+
+/// Every model `isa` knows besides the AMD families, in vendor order.
+pub const MODELS: &[Model] = &[
+    m("a618", "Adreno 618", "Adreno 6xx", Driver::Turnip, &[("FD_GPU_ID", "618")]),
+    m("a660", "Adreno 660", "Adreno 6xx", Driver::Turnip, &[("FD_GPU_ID", "660")]),
+    m("a740", "Adreno 740", "Adreno 7xx", Driver::Turnip, &[("FD_GPU_ID", "740")]),
+    m("a750", "Adreno 750", "Adreno 7xx", Driver::Turnip, &[("FD_GPU_ID", "750")]),
+    // panvk calls Bifrost v7 untested and opens it only when asked to.
+    m(
+        "g52",
+        "Mali-G52",
+        "Bifrost (v7)",
+        Driver::Panvk,
+        &[("PAN_GPU_ID", "7212"), ("PAN_I_WANT_A_BROKEN_VULKAN_DRIVER", "1")],
+    ),
+    m("g610", "Mali-G610", "Valhall (v10)", Driver::Panvk, &[("PAN_GPU_ID", "a867")]),
+    m("tgl", "Intel Tiger Lake", "Xe-LP (Gen12)", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "tgl")]),
+    m("dg2", "Intel Arc A-series (DG2)", "Xe-HPG", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "dg2")]),
+    m("mtl", "Intel Meteor Lake", "Xe-LPG", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "mtl")]),
+    m("lnl", "Intel Lunar Lake", "Xe2", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "lnl")]),
+    m("bmg", "Intel Arc B-series (Battlemage)", "Xe2", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "bmg")]),
+    m("tu102", "NVIDIA TU102", "Turing", Driver::Nvk, &[("NOUVEAU_CHIPSET", "162")]),
+    m("ga102", "NVIDIA GA102", "Ampere", Driver::Nvk, &[("NOUVEAU_CHIPSET", "172")]),
+    m("ad102", "NVIDIA AD102", "Ada", Driver::Nvk, &[("NOUVEAU_CHIPSET", "192")]),
+    m("v3d-42", "VideoCore VI (V3D 4.2)", "V3D 4.2 (Raspberry Pi 4)", Driver::V3dv, &[("V3D_GPU_ID", "42")]),
+    m("v3d-71", "VideoCore VII (V3D 7.1)", "V3D 7.1 (Raspberry Pi 5)", Driver::V3dv, &[("V3D_GPU_ID", "71")]),
+];
+
+/// The model called `name` (case-insensitive).
+pub fn model(name: &str) -> Option<Model> {
+    MODELS.iter().copied().find(|m| m.name.eq_ignore_ascii_case(name))
+}
+
+/// Where `scripts/install-compilers.sh` put the drivers and shims: `HALFTRACE_COMPILERS`, else
+/// the newest complete `mesa-*` folder under `${HALFTRACE_CACHE:-${XDG_CACHE_HOME:-~/.cache}/
+/// halftrace}/compilers`. The error says how to install them.
+pub fn compilers() -> Result<PathBuf, String> {
+    let complete = |d: &Path| d.join("complete").is_file() && d.join("lib").is_dir() && d.join("icd").is_dir();
+    if let Some(d) = std::env::var_os("HALFTRACE_COMPILERS").map(PathBuf::from) {
+        return if complete(&d) {
+            Ok(d)
+        } else {
+            Err(format!(
+                "HALFTRACE_COMPILERS={}: not a complete compilers folder (scripts/install-compilers.sh makes one)",
+                d.display()
+            ))
+        };
+    }
+    let cache = std::env::var_os("HALFTRACE_CACHE").map(PathBuf::from).or_else(|| {
+        std::env::var_os("XDG_CACHE_HOME")
+            .map(PathBuf::from)
+            .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+            .map(|c| c.join("halftrace"))
+    });
+    let dir = cache.map(|c| c.join("compilers"));
+    let newest = dir.as_ref().and_then(|d| std::fs::read_dir(d).ok()).and_then(|rd| {
+        rd.filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("mesa-")) && complete(p))
+            .max_by_key(|p| p.join("complete").metadata().and_then(|m| m.modified()).ok())
+    });
+    newest.ok_or_else(|| {
+        format!(
+            "the other vendors' compilers are not installed{}: run `bash scripts/install-compilers.sh` (about 20 \
+             minutes, once; AMD's families need nothing)",
+            dir.map(|d| format!(" (nothing complete in {})", d.display())).unwrap_or_default()
+        )
+    })
+}
+
+/// The environment that opens `m`'s driver under its shim.
+pub fn environment(m: &Model, dir: &Path) -> Vec<(String, String)> {
+    let mut env = vec![
+        ("LD_PRELOAD".to_string(), dir.join("lib").join(m.driver.shim()).display().to_string()),
+        ("VK_ICD_FILENAMES".to_string(), dir.join("icd").join(m.driver.icd()).display().to_string()),
+        // The loader's newer spelling would win over VK_ICD_FILENAMES.
+        ("VK_DRIVER_FILES".to_string(), dir.join("icd").join(m.driver.icd()).display().to_string()),
+    ];
+    env.extend(m.env.iter().map(|(k, v)| (k.to_string(), v.to_string())));
+    if m.driver == Driver::Panvk {
+        // The Bifrost/Valhall compiler's own estimate, one line per shader on stderr.
+        env.push(("BIFROST_MESA_DEBUG".into(), "shaderdb".into()));
+    }
+    env
+}
+
+/// The marker a child prints on stderr before building each kernel, so that the driver's
+/// own printout after it (Mali's shaderdb line) is known to be that kernel's.
+pub const MARKER: &str = "halftrace-isa-kernel ";
+
+/// What one model's child process gave: its rows (one per build asked for) and, where the
+/// driver crashed or the child failed, a note naming the model.
+pub struct ModelRun {
+    pub rows: Vec<IsaRow>,
+    pub note: Option<String>,
+}
+
+/// Builds `builds` on `m` in a child process `exe isa-model` with the shim's environment.
+/// Rows the child printed before dying are kept; builds it never reported become failed rows
+/// naming the crash. `args`: the child's arguments after `isa-model --model NAME`.
+pub fn run_model(exe: &Path, m: &Model, dir: &Path, args: &[String], builds: &[Build]) -> anyhow::Result<ModelRun> {
+    let mut child = Command::new(exe)
+        .args(["isa-model", "--model", m.name])
+        .args(args)
+        .envs(environment(m, dir))
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    let mut err = child.stderr.take().expect("piped");
+    let reader = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        let _ = err.read_to_end(&mut s);
+        String::from_utf8_lossy(&s).to_string()
+    });
+    let mut rows: Vec<IsaRow> = Vec::new();
+    let mut bad_lines = 0;
+    for line in BufReader::new(child.stdout.take().expect("piped")).lines() {
+        let line = line?;
+        match serde_json::from_str::<IsaRow>(&line) {
+            Ok(r) => rows.push(r),
+            Err(_) => bad_lines += 1,
+        }
+    }
+    let status = child.wait()?;
+    let stderr = reader.join().unwrap_or_default();
+    attach_estimates(&mut rows, &stderr);
+    let mut note = None;
+    if !status.success() {
+        use std::os::unix::process::ExitStatusExt;
+        let how = match status.signal() {
+            Some(s) => format!("was killed by signal {s}"),
+            None => format!("exited with status {}", status.code().unwrap_or(-1)),
+        };
+        let last = stderr.lines().rev().find(|l| l.starts_with("error:")).unwrap_or("").trim().to_string();
+        let done = rows.len();
+        note = Some(if done >= builds.len() {
+            format!(
+                "{} ({}): the driver's process {how} after writing all {done} rows (at teardown)",
+                m.name, m.display
+            )
+        } else {
+            format!(
+                "{} ({}): the driver's process {how} after {done} of {} rows{}",
+                m.name,
+                m.display,
+                builds.len(),
+                if last.is_empty() { String::new() } else { format!(" ({last})") }
+            )
+        });
+    }
+    if bad_lines > 0 && note.is_none() {
+        note = Some(format!("{}: {bad_lines} line(s) of its output were not rows", m.name));
+    }
+    // Builds the child never reported: failed, naming what happened to the process.
+    if rows.len() < builds.len() {
+        let why = note.clone().unwrap_or_else(|| format!("{}: no row came back", m.name));
+        let template = rows.first().cloned().unwrap_or_else(|| IsaRow {
+            device: m.display.to_string(),
+            family: m.name.to_string(),
+            generation: m.generation.to_string(),
+            vendor: m.driver.vendor().to_string(),
+            driver: m.driver.name().to_string(),
+            ..IsaRow::default()
+        });
+        for b in &builds[rows.len()..] {
+            let v = b.variant;
+            rows.push(IsaRow {
+                kernel: crate::variant::KernelId::new(v, b.imp.unwrap_or(crate::variant::PacketImpl::Single), false)
+                    .name(),
+                layout: v.layout.name().into(),
+                math: v.math.name().into(),
+                branching: v.branching,
+                packet: v.packet,
+                status: Status::Failed(format!("not built: {why}")),
+                stats: Default::default(),
+                asm: None,
+                vs_f32: None,
+                ..template.clone()
+            });
+        }
+    }
+    Ok(ModelRun { rows, note })
+}
+
+/// The Bifrost/Valhall compiler's estimate for each kernel (`BIFROST_MESA_DEBUG=shaderdb`):
+/// the `SHADER-DB` line after the kernel's marker, read into the row's statistics under the
+/// names `shaderdb: <field>` and into its cycles, instructions, spills and occupancy.
+pub fn attach_estimates(rows: &mut [IsaRow], stderr: &str) {
+    let mut current: Option<String> = None;
+    for line in stderr.lines() {
+        if let Some(k) = line.strip_prefix(MARKER) {
+            current = Some(k.trim().to_string());
+        } else if let (Some(k), Some(db)) = (&current, shaderdb(line)) {
+            if let Some(r) = rows.iter_mut().find(|r| &r.kernel == k && r.status.is_ok()) {
+                r.stats.extend(db.into_iter().map(|(n, v)| (format!("shaderdb: {n}"), v)));
+                r.fill_known();
+            }
+        }
+    }
+}
+
+/// The fields of one `SHADER-DB: … shader: 3310 inst, 334.000000 cycles, 1.1 fma, …, 48:233
+/// spills:fills` line (the Bifrost/Valhall compiler's own estimate), by name.
+pub fn shaderdb(line: &str) -> Option<Vec<(String, f64)>> {
+    let (_, rest) = line.split_once("SHADER-DB:")?;
+    let (_, fields) = rest.split_once("shader:")?;
+    let mut out = Vec::new();
+    for f in fields.split(',') {
+        let mut it = f.split_whitespace();
+        let (Some(v), Some(name)) = (it.next(), it.next()) else { continue };
+        if let Some((a, b)) = v.split_once(':') {
+            let names: Vec<&str> = name.split(':').collect();
+            if let ([na, nb], (Ok(x), Ok(y))) = (&names[..], (a.parse::<f64>(), b.parse::<f64>())) {
+                out.push((na.to_string(), x));
+                out.push((nb.to_string(), y));
+            }
+        } else if let Ok(x) = v.parse::<f64>() {
+            out.push((name.to_string(), x));
+        }
+    }
+    (!out.is_empty()).then_some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_a_shaderdb_line() {
+        let l = "SHADER-DB: MESA_SHADER_COMPUTE shader: 5376 inst, 727.000000 cycles, 3.328125 fma, 54.187500 cvt, \
+                 60.500000 sfu, 0.000000 v, 0.000000 t, 727.000000 ls, 2696 quadwords, 1 threads, 43 loops, \
+                 150:503 spills:fills";
+        let f = shaderdb(l).unwrap();
+        let get = |n: &str| f.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+        assert_eq!(get("inst"), Some(5376.0));
+        assert_eq!(get("cycles"), Some(727.0));
+        assert_eq!(get("cvt"), Some(54.1875));
+        assert_eq!(get("threads"), Some(1.0));
+        assert_eq!((get("spills"), get("fills")), (Some(150.0), Some(503.0)));
+        assert!(shaderdb("Unknown DRM_IOCTL_MSM_GET_PARAM 18").is_none());
+    }
+
+    #[test]
+    fn every_model_has_one_name() {
+        for (i, a) in MODELS.iter().enumerate() {
+            assert!(crate::gpu::null::family(a.name).is_none(), "{} is also an AMD family", a.name);
+            assert!(MODELS[i + 1..].iter().all(|b| b.name != a.name), "{} twice", a.name);
+        }
+    }
+}
