@@ -52,9 +52,15 @@ pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
             if d.pipeline_statistics { "yes" } else { "no" }
         );
         if d.compile_only {
+            let what = match crate::gpu::shim() {
+                Some(s) if !d.driver.to_lowercase().contains("radv") => {
+                    format!("a driver under Mesa's drm-shim (lib{s}_noop_drm_shim.so)")
+                }
+                _ => "RADV's null device (RADV_FORCE_FAMILY)".to_string(),
+            };
             outln!(
-                "   COMPILE ONLY: RADV's null device (RADV_FORCE_FAMILY) builds pipelines with AMD's compiler but runs \
-                 nothing; trace, sweep, bench and conformance refuse it — `halftrace isa --device {}` reads its \
+                "   COMPILE ONLY: {what} builds pipelines with the vendor's compiler but runs nothing; trace, sweep, \
+                 bench and conformance refuse it — `halftrace isa --device {}` (or `isa --family <model>`) reads its \
                  compiler's statistics",
                 d.index
             );

@@ -24,7 +24,7 @@ pub mod timer;
 
 pub use bvh::GpuBvh;
 pub use context::{ContextOptions, Gpu, DEFAULT_KERNEL_TIMEOUT_S};
-pub use device::{list_devices, pick, DeviceInfo, MASKABLE};
+pub use device::{list_devices, pick, shim, DeviceInfo, MASKABLE};
 pub use kernel::{Kernel, Source};
 use thiserror::Error;
 
@@ -53,7 +53,7 @@ pub enum GpuError {
     Unsupported(String),
     #[error("the device did not finish a submission within {secs} s (a kernel that never terminates?); it is still busy with it, so nothing more can run on it in this process")]
     Hung { secs: f64 },
-    #[error("'{0}' is a compile-only device (RADV's null device, opened by RADV_FORCE_FAMILY): it builds pipelines but cannot run them; read its compiler's statistics with `halftrace isa --device '{0}'` (or `halftrace isa --family F`), or choose another device with --device")]
+    #[error("'{0}' is a compile-only device (RADV's null device, opened by RADV_FORCE_FAMILY, or a driver under Mesa's drm-shim): it builds pipelines but cannot run them; read its compiler's statistics with `halftrace isa --family F` (an AMD family or another vendor's model, e.g. a740) or `halftrace isa --device '{0}'`, or choose another device with --device")]
     CompileOnly(String),
     #[error("{0}")]
     Other(String),

@@ -170,9 +170,12 @@ pub fn environment(m: &Model, dir: &Path) -> Vec<(String, String)> {
         ("VK_DRIVER_FILES".to_string(), dir.join("icd").join(m.driver.icd()).display().to_string()),
     ];
     env.extend(m.env.iter().map(|(k, v)| (k.to_string(), v.to_string())));
-    if m.driver == Driver::Panvk {
-        // The Bifrost/Valhall compiler's own estimate, one line per shader on stderr.
-        env.push(("BIFROST_MESA_DEBUG".into(), "shaderdb".into()));
+    // The compiler's own one-line summary per shader on stderr: Mali's estimate (its
+    // statistics report only the code size), V3D's spills and temporaries.
+    match m.driver {
+        Driver::Panvk => env.push(("BIFROST_MESA_DEBUG".into(), "shaderdb".into())),
+        Driver::V3dv => env.push(("V3D_DEBUG".into(), "shaderdb".into())),
+        _ => {}
     }
     env
 }
@@ -276,9 +279,10 @@ pub fn run_model(exe: &Path, m: &Model, dir: &Path, args: &[String], builds: &[B
     Ok(ModelRun { rows, note })
 }
 
-/// The Bifrost/Valhall compiler's estimate for each kernel (`BIFROST_MESA_DEBUG=shaderdb`):
-/// the `SHADER-DB` line after the kernel's marker, read into the row's statistics under the
-/// names `shaderdb: <field>` and into its cycles, instructions, spills and occupancy.
+/// Each kernel's compiler summary (`BIFROST_MESA_DEBUG=shaderdb`, `V3D_DEBUG=shaderdb`): the
+/// first `SHADER-DB` line after the kernel's marker (a driver's own internal shaders print
+/// theirs when the device opens, before any marker), read into the row's statistics under
+/// the names `shaderdb: <field>` and from there into its vendor-neutral columns.
 pub fn attach_estimates(rows: &mut [IsaRow], stderr: &str) {
     let mut current: Option<String> = None;
     for line in stderr.lines() {
@@ -289,14 +293,16 @@ pub fn attach_estimates(rows: &mut [IsaRow], stderr: &str) {
                 r.stats.extend(db.into_iter().map(|(n, v)| (format!("shaderdb: {n}"), v)));
                 r.fill_known();
             }
+            current = None;
         }
     }
 }
 
-/// The fields of one `SHADER-DB: … shader: 3310 inst, 334.000000 cycles, 1.1 fma, …, 48:233
-/// spills:fills` line (the Bifrost/Valhall compiler's own estimate), by name.
+/// The fields of one `SHADER-DB… shader: 3310 inst, 334.000000 cycles, 1.1 fma, …, 48:233
+/// spills:fills` line (Mali's estimate; V3D's `…, 64 max-temps, 136:217 spills:fills, …`), by
+/// name.
 pub fn shaderdb(line: &str) -> Option<Vec<(String, f64)>> {
-    let (_, rest) = line.split_once("SHADER-DB:")?;
+    let (_, rest) = line.split_once("SHADER-DB")?;
     let (_, fields) = rest.split_once("shader:")?;
     let mut out = Vec::new();
     for f in fields.split(',') {
@@ -332,6 +338,12 @@ mod tests {
         assert_eq!(get("threads"), Some(1.0));
         assert_eq!((get("spills"), get("fills")), (Some(150.0), Some(503.0)));
         assert!(shaderdb("Unknown DRM_IOCTL_MSM_GET_PARAM 18").is_none());
+        let v3d = "SHADER-DB-0000 - MESA_SHADER_COMPUTE shader: 4789 inst, 2 threads, 18 loops, 1742 uniforms, 64 \
+                   max-temps, 136:217 spills:fills, 0 sfu-stalls, 4789 inst-and-stalls, 415 nops";
+        let f = shaderdb(v3d).unwrap();
+        let get = |n: &str| f.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+        assert_eq!((get("inst"), get("threads"), get("max-temps")), (Some(4789.0), Some(2.0), Some(64.0)));
+        assert_eq!((get("spills"), get("fills")), (Some(136.0), Some(217.0)));
     }
 
     #[test]

@@ -41,7 +41,7 @@ pub const COLUMN_NAMES: &[(&str, [&str; 6])] = &[
             "– (not reported)",
             "Max live registers × 32 B ÷ (4 B × Max dispatch width)",
             "Number of GPRs",
-            "– (not reported)",
+            "max-temps (shaderdb: temporaries live at once)",
         ],
     ),
     (
@@ -63,7 +63,7 @@ pub const COLUMN_NAMES: &[(&str, [&str; 6])] = &[
             "spills + fills (shaderdb)",
             "Spill Count + Fill Count",
             "ld.local + st.local (disassembly)",
-            "– (TMU Spills and Fills repeat Spill Size in Mesa 25.0.7)",
+            "spills + fills (shaderdb; TMU Spills and Fills repeat Spill Size in Mesa 25.0.7)",
         ],
     ),
     (
@@ -100,6 +100,15 @@ pub const COLUMN_NAMES: &[(&str, [&str; 6])] = &[
         ],
     ),
 ];
+
+/// [`COLUMN_NAMES`] as a Markdown table (docs/vendors.md holds it; a test keeps them equal).
+pub fn column_table() -> String {
+    let mut md = format!("| column | {} |\n|---|{}\n", VENDORS.join(" | "), "---|".repeat(VENDORS.len()));
+    for (col, names) in COLUMN_NAMES {
+        md += &format!("| {col} | {} |\n", names.join(" | "));
+    }
+    md
+}
 
 /// Warps an NVIDIA SM holds at `gprs` registers per thread: 64 K registers per SM, allocated
 /// per warp in units of 256 (8 per thread), at most `max_warps` (32 on Turing, 48 on Ampere's
@@ -161,8 +170,10 @@ impl IsaRow {
             "Broadcom" => {
                 // The spill buffer of a QPU thread covers its 16 channels (spills and the
                 // private arrays alike). Mesa 25.0.7's "TMU Spills" and "TMU Fills" repeat
-                // "Spill Size", so no spill count is taken from them.
+                // "Spill Size": the counts come from the compiler's shaderdb line.
+                reg = get("shaderdb: max-temps");
                 private = get("Spill Size").map(|b| b / 16.0);
+                spills = sum(get("shaderdb: spills"), get("shaderdb: fills"));
                 occ = get("Thread Count");
                 unit = "threads/QPU";
                 inst = get("Instruction Count");
@@ -187,6 +198,13 @@ mod tests {
         assert_eq!(nvidia_warps(128.0, 48.0), 16.0);
         assert_eq!(nvidia_warps(141.0, 48.0), 14.0);
         assert_eq!(nvidia_warps(24.0, 32.0), 32.0);
+    }
+
+    #[test]
+    fn docs_hold_the_column_table() {
+        let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/vendors.md")).unwrap();
+        let want = column_table();
+        assert!(doc.contains(&want), "docs/vendors.md must hold the column table as the code has it:\n{want}");
     }
 
     #[test]

@@ -11,7 +11,9 @@ const CSV_COLUMNS: &[&str] = &[
     "device",
     "family",
     "generation",
+    "vendor",
     "driver",
+    "device_build",
     "version",
     "commit",
     "kernel",
@@ -34,6 +36,12 @@ const CSV_COLUMNS: &[&str] = &[
     "instructions",
     "valu",
     "waves_per_simd",
+    "registers",
+    "private_bytes",
+    "spills",
+    "occupancy",
+    "occupancy_unit",
+    "cycles",
     "asm_instructions",
     "asm_valu",
     "asm_packed_f16",
@@ -49,6 +57,9 @@ const CSV_COLUMNS: &[&str] = &[
     "instructions_vs_f32",
     "valu_vs_f32",
     "waves_vs_f32",
+    "registers_vs_f32",
+    "occupancy_vs_f32",
+    "cycles_vs_f32",
 ];
 
 fn cell(x: Option<f64>) -> String {
@@ -78,7 +89,9 @@ pub fn write(dir: &Path, rows: &[IsaRow]) -> anyhow::Result<()> {
             r.device.clone(),
             r.family.clone(),
             r.generation.clone(),
+            r.vendor.clone(),
             r.driver.clone(),
+            r.device_build.clone(),
             r.version.clone(),
             r.commit.clone(),
             r.kernel.clone(),
@@ -104,14 +117,20 @@ pub fn write(dir: &Path, rows: &[IsaRow]) -> anyhow::Result<()> {
                 r.instructions,
                 r.valu,
                 r.waves_per_simd,
+                r.registers,
+                r.private_bytes,
+                r.spills,
+                r.occupancy,
             ]
             .map(cell),
         );
+        rec.push(r.occupancy_unit.clone());
+        rec.push(cell(r.cycles));
         rec.extend([u(a.instructions), u(a.valu), u(a.packed_f16), u(a.scalar_f16), u(a.f32), u(a.conversions)]);
         rec.extend([ucell(r.asm.and_then(|a| a.scratch_loads)), ucell(r.asm.and_then(|a| a.scratch_stores))]);
         rec.push(u(a.undecoded));
         rec.push(cell(r.asm.and_then(|a| a.packed_share())));
-        rec.extend([q.vgprs, q.scratch, q.instructions, q.valu, q.waves].map(cell));
+        rec.extend([q.vgprs, q.scratch, q.instructions, q.valu, q.waves, q.registers, q.occupancy, q.cycles].map(cell));
         rec.extend(names.iter().map(|n| cell(r.stats.get(*n).copied())));
         csv.write_record(&rec)?;
     }
