@@ -198,7 +198,10 @@ fn intel(line: &str) -> Option<Class> {
     let s = if s.starts_with('(') { s.split_once(')').map(|(_, r)| r.trim())? } else { s };
     let open = s.find('(')?;
     let m = s[..open].trim();
-    if m.is_empty() || !m.starts_with(|c: char| c.is_ascii_lowercase()) || m.contains(' ') && !m.starts_with("math") {
+    if m.is_empty()
+        || !m.starts_with(|c: char| c.is_ascii_lowercase())
+        || m.contains(' ') && !(m.starts_with("math") || m.starts_with("sync"))
+    {
         return None;
     }
     let base = m.split(['.', ' ']).next()?;
