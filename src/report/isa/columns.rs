@@ -102,6 +102,7 @@ pub const COLUMN_NAMES: &[(&str, [&str; 6])] = &[
 ];
 
 /// [`COLUMN_NAMES`] as a Markdown table (docs/vendors.md holds it; a test keeps them equal).
+#[cfg(test)]
 pub fn column_table() -> String {
     let mut md = format!("| column | {} |\n|---|{}\n", VENDORS.join(" | "), "---|".repeat(VENDORS.len()));
     for (col, names) in COLUMN_NAMES {
