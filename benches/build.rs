@@ -18,7 +18,7 @@ use std::path::PathBuf;
 fn bench(c: &mut Criterion) {
     let path = std::env::var_os("HALFTRACE_BENCH_SCENE")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/igea.obj.gz"));
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/igea.obj.gz"));
     let scene =
         halftrace::scene::load(&path).unwrap_or_else(|e| panic!("the build benchmark needs {}: {e}", path.display()));
     let name = scene.name.clone();

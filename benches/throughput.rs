@@ -17,7 +17,7 @@ fn main() {
         .skip(1)
         .find(|a| a.ends_with(".obj") || a.ends_with(".obj.gz"))
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/sponza_dabrovic.obj"));
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/sponza_dabrovic.obj.gz"));
     let g = Gpu::new(&ContextOptions::default()).expect("no Vulkan device");
     let mut runner = Runner::new(Some(&g), &[], Default::default()).expect("runner");
     let (scene, _) = runner.scene(&scene_path).expect("scene");

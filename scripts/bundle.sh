@@ -7,14 +7,14 @@
 #   lib/fallback/ the C++ runtime, used only where the machine has none (env.sh checks)
 # Usage, from the project root on Debian/Ubuntu (after `cargo build --release`):
 #   bash scripts/bundle.sh [DIR] [--scenes DIR | --no-scenes] [--tar]
-# DIR defaults to target/gpu-bundle; scenes default to ../shared/scenes when it exists (the
+# DIR defaults to target/gpu-bundle; scenes default to the repository's tests/scenes (the
 # bundled teapot is always there); --tar also writes DIR.tar.gz (Embree alone is 44 MB
 # unpacked) to copy over. On the GPU machine: `bash vk_probe.sh`, then
 # `bash run-report.sh [BUDGET] [OUT]`, or `source env.sh; ./halftrace devices`. See docs/gpus.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=target/gpu-bundle
-scenes=../shared/scenes
+scenes=tests/scenes
 tar=
 while [ $# -gt 0 ]; do
   case "$1" in

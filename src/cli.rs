@@ -387,9 +387,9 @@ pub struct IsaArgs {
 
 #[derive(clap::Args)]
 pub struct BenchArgs {
-    /// Scenes (OBJ, glTF or PLY); repeat the flag. Default: the bundled teapot, and the shared
-    /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) when
-    /// `../shared/scenes` has them.
+    /// Scenes (OBJ, glTF or PLY); repeat the flag. Default: the bundled teapot, and
+    /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) from the test scenes
+    /// (`tests/scenes`, else `../shared/scenes`) when they are there.
     #[arg(long)]
     pub scene: Vec<PathBuf>,
     /// Ray kinds, comma-separated: primary, ao, diffuse, grazing.
@@ -445,6 +445,7 @@ pub struct DeviceReportArgs {
     #[arg(long)]
     pub scene: Vec<PathBuf>,
     /// Also sweep every .obj / .obj.gz scene in this folder, after --scene (default:
+    /// tests/scenes, the repository's test scenes, when run from the repository root, else
     /// ../shared/scenes when it exists; "none" for none).
     #[arg(long)]
     pub scenes_dir: Option<PathBuf>,

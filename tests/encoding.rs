@@ -1,4 +1,4 @@
-//! Encoding invariants on every node of every shared scene and every B: each stored fp16
+//! Encoding invariants on every node of every test scene and every B: each stored fp16
 //! child box contains the true child box (checked exactly, in f64, in the parent frame), every
 //! stored coordinate is finite and within [-16384, 16384], and the frames the traversal
 //! derives are the encoder's.
@@ -74,8 +74,8 @@ fn every_node_of_every_scene_satisfies_the_f16h_invariants() {
 }
 
 /// q8 keeps 8 bytes per child plus 24 per node: at B = 8 its node array is at most 0.4 of
-/// f32's on every shared scene (CWBVH: 80 bytes per 8-wide node), and every layout encodes
-/// every shared scene at every B.
+/// f32's on every test scene (CWBVH: 80 bytes per 8-wide node), and every layout encodes
+/// every test scene at every B.
 #[test]
 fn q8_nodes_take_at_most_four_tenths_of_f32_at_b8() {
     use halftrace::layout::LayoutId;

@@ -12,7 +12,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn teapot() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes/teapot.obj")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/teapot.obj")
 }
 
 /// Runs the CLI, expects failure, returns stderr.

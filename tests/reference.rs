@@ -1,5 +1,5 @@
 //! CPU reference traversal conformance: f32 against brute force, every other layout in every
-//! math mode against f32 on every shared scene, every B and every ray kind including the
+//! math mode against f32 on every test scene, every B and every ray kind including the
 //! grazing set.
 
 mod common;
@@ -12,7 +12,7 @@ use rayon::prelude::*;
 #[test]
 fn f32_traversal_equals_brute_force() {
     for name in ["teapot.obj", "cornell_box.obj", "smallpine.obj"] {
-        let p = prepare(&scenes_dir().join(name));
+        let p = prepare(&scene_path(name));
         for (kind, rays) in ray_sets(&p, 40, 1500) {
             let expected: Vec<Hit> = rays.par_iter().map(|r| p.scene.brute_force(r)).collect();
             assert!(expected.iter().any(|h| h.is_hit()), "{name} {kind}: no ray hits; the test would be vacuous");
@@ -71,7 +71,7 @@ fn every_layout_equals_f32_on_every_scene_b_ray_kind_and_math_mode() {
 
 #[test]
 fn traversal_is_deterministic_and_hits_exist() {
-    let p = prepare(&scenes_dir().join("teapot_in_stadium.obj"));
+    let p = prepare(&scene_path("teapot_in_stadium.obj"));
     let sets = ray_sets(&p, 32, 500);
     let h = encode(&p, layout("f16h"), 8);
     for (kind, rays) in &sets {
@@ -197,7 +197,7 @@ fn conservative_layouts_hold_on_adversarial_scenes_and_rays() {
 fn huge_coordinates_keep_every_hit() {
     use glam::Vec3;
     use halftrace::scene::Scene;
-    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let p = prepare(&scene_path("teapot.obj"));
     let k = 2f32.powi(66);
     let big =
         Scene::from_triangles("teapot_2e66", p.scene.tris.iter().map(|t| t.map(|v: Vec3| v * k)).collect()).unwrap();
@@ -224,7 +224,7 @@ fn huge_coordinates_keep_every_hit() {
     }
 }
 
-/// The host baseline (Embree 3 on the CPU) against the f32 reference on every shared scene
+/// The host baseline (Embree 3 on the CPU) against the f32 reference on every test scene
 /// (the bar of common::baseline_agrees_with_f32; Embree's triangle test is not ours).
 #[test]
 fn embree_baseline_agrees_with_f32_on_every_scene() {
@@ -333,7 +333,7 @@ fn deferred_entries_ignore_the_closest_hit() {
     }
 
     for name in ["teapot_in_stadium.obj", "teapot.obj"] {
-        let p = prepare(&scenes_dir().join(name));
+        let p = prepare(&scene_path(name));
         let rays: Vec<_> = ray_sets(&p, 24, 300).into_iter().flat_map(|(_, r)| r).collect();
         for b in [2usize, 4, 8, 16] {
             let f16h = encode(&p, LayoutId::parse("f16h").unwrap(), b);

@@ -11,9 +11,11 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
     let mut scenes = a.scene.clone();
     if scenes.is_empty() {
         scenes.push(PathBuf::from(crate::sweep::DEFAULT_SCENE));
-        for s in ["../shared/scenes/sponza_dabrovic.obj", "../shared/scenes/igea.obj.gz"] {
-            if std::path::Path::new(s).is_file() {
-                scenes.push(PathBuf::from(s));
+        if let Some(d) = crate::scene::default_scenes_dir() {
+            for s in ["sponza_dabrovic.obj", "sponza_dabrovic.obj.gz", "igea.obj.gz"] {
+                if d.join(s).is_file() {
+                    scenes.push(d.join(s));
+                }
             }
         }
     }

@@ -14,11 +14,11 @@ pub fn device_report(a: &DeviceReportArgs) -> anyhow::Result<()> {
     let dir = match &a.scenes_dir {
         Some(d) if d.as_os_str() == "none" => None,
         Some(d) => Some(d.clone()),
-        None => Some(PathBuf::from("../shared/scenes")).filter(|d| d.is_dir()),
+        None => crate::scene::default_scenes_dir(),
     };
     if let Some(d) = dir {
         let found = crate::scene::obj_files_in(&d).with_context(|| format!("--scenes-dir {}", d.display()))?;
-        // A scene named twice (the bundled teapot is also a shared scene) is swept once.
+        // A scene named twice (the bundled teapot may also be in the folder) is swept once.
         for f in found {
             let same = |s: &PathBuf| {
                 crate::fsx::same_file(s, &f) || crate::scene::scene_name(s) == crate::scene::scene_name(&f)

@@ -122,6 +122,13 @@ impl Scene {
     }
 }
 
+/// Where the extra scenes are when no `--scenes-dir` is given: the repository's test scenes
+/// (`tests/scenes`, run from the repository root), else the project's shared set
+/// (`../shared/scenes`), else none.
+pub fn default_scenes_dir() -> Option<PathBuf> {
+    ["tests/scenes", "../shared/scenes"].into_iter().map(PathBuf::from).find(|d| d.is_dir())
+}
+
 /// The `.obj` and `.obj.gz` scenes in a folder, sorted by path (`--scenes-dir`).
 pub fn obj_files_in(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut found: Vec<PathBuf> = std::fs::read_dir(dir)?

@@ -10,31 +10,43 @@ use halftrace::runner::rays::{make, RaySpec};
 use halftrace::scene::{self, Scene};
 use std::path::PathBuf;
 
-/// `../shared/scenes` beside the repository. Missing scenes fail the test loudly: CI always
-/// has them.
+/// The test scenes in the repository: `tests/scenes/*.obj.gz` (sources and licences in
+/// `tests/scenes/SOURCES.md`) and the bundled `scenes/teapot.obj`. A fresh clone has them all;
+/// nothing here reads `../shared`.
 pub fn scenes_dir() -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes");
-    assert!(d.is_dir(), "shared scenes not found at {} — tests need ../shared/scenes", d.display());
-    d
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/scenes")
 }
 
-/// Every scene file in the shared folder, sorted by name.
+/// The path of test scene `name` (`teapot.obj`, `fandisk.obj`, …): the bundled teapot, or the
+/// compressed copy under `tests/scenes`. A missing scene fails the test loudly.
+pub fn scene_path(name: &str) -> PathBuf {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let p = if name == "teapot.obj" {
+        root.join("scenes/teapot.obj")
+    } else if name.ends_with(".gz") {
+        scenes_dir().join(name)
+    } else {
+        scenes_dir().join(format!("{name}.gz"))
+    };
+    assert!(p.is_file(), "test scene {name} not found at {}", p.display());
+    p
+}
+
+/// Every test scene, sorted by file name.
 pub fn all_scenes() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(scenes_dir())
-        .unwrap()
+        .unwrap_or_else(|e| panic!("test scenes not found at {}: {e}", scenes_dir().display()))
         .map(|e| e.unwrap().path())
-        .filter(|p| {
-            let n = p.to_string_lossy();
-            n.ends_with(".obj") || n.ends_with(".obj.gz")
-        })
+        .filter(|p| p.to_string_lossy().ends_with(".obj.gz"))
         .collect();
-    v.sort();
-    assert!(v.len() >= 10, "expected the shared scene set, found {} files", v.len());
+    v.push(scene_path("teapot.obj"));
+    v.sort_by_key(|p| p.file_name().unwrap().to_owned());
+    assert!(v.len() >= 13, "expected the 13 test scenes, found {} files", v.len());
     v
 }
 
 pub fn load(name: &str) -> Scene {
-    scene::load(&scenes_dir().join(name)).unwrap()
+    scene::load(&scene_path(name)).unwrap()
 }
 
 pub struct Prepared {
@@ -81,7 +93,7 @@ pub fn encode(p: &Prepared, layout: LayoutId, b: usize) -> Encoded {
     Encoded::new(&p.scene, &p.bin, layout, b).unwrap()
 }
 
-/// A baseline (someone else's traversal) against the f32 reference on every shared scene:
+/// A baseline (someone else's traversal) against the f32 reference on every test scene:
 /// same prim, or t within 1e-5 relative where triangles tie or share edges, on at least
 /// 99.99% of primary, ao and diffuse rays. The grazing set (rays through shared vertices and
 /// along edges) is reported, not held to the bar: it measures whether the baseline's triangle

@@ -26,7 +26,7 @@ fn ray_query_baseline_agrees_with_f32_on_every_scene() {
 #[test]
 fn ray_query_baseline_writes_its_outputs() {
     let (img, rays, hits) = (tmp("rq.png"), tmp("rq_rays.npy"), tmp("rq_hits.npy"));
-    let scene = scenes_dir().join("teapot.obj");
+    let scene = scene_path("teapot.obj");
     let (ok, out, err) = cli(&[
         "trace",
         "--scene",
@@ -57,7 +57,7 @@ fn ray_query_baseline_writes_its_outputs() {
 fn a_kernel_that_never_ends_is_reported_hung() {
     let k = tmp("hang.comp");
     std::fs::write(&k, "#version 460\n#include \"interface.glsl\"\n#include \"ray.glsl\"\nvoid main() {\n    uint i = ray_index();\n    if (i >= pc.ray_count) return;\n    float t = ray_f[8u * i];\n    while (t == t) { t += 1.0; hits[i] = Hit(t, 0, 0.0, 0.0); }\n}\n").unwrap();
-    let scene = scenes_dir().join("teapot.obj");
+    let scene = scene_path("teapot.obj");
     let t0 = std::time::Instant::now();
     let (ok, out, err) = cli(&[
         "trace",

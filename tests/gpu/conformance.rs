@@ -2,7 +2,7 @@
 
 use super::*;
 
-/// `halftrace conformance --quick` over every shared scene under the validation layer: every
+/// `halftrace conformance --quick` over every test scene under the validation layer: every
 /// layout, B, P, math mode, float-control mode and packet implementation runs at least once
 /// and equals the CPU reference of its layout (hits bitwise, counters exactly) and the f32
 /// hits. The full cross product is `halftrace conformance` (CI runs it after the tests).
@@ -11,9 +11,7 @@ fn quick_conformance_covers_every_value_on_every_scene() {
     use halftrace::conformance;
     use halftrace::precision::FloatControls;
     use halftrace::report::Status;
-    let mut scenes = all_scenes();
-    scenes.insert(0, repo("scenes/teapot.obj"));
-    let opts = conformance::Options { quick: true, scenes, validation: true, ..Default::default() };
+    let opts = conformance::Options { quick: true, scenes: all_scenes(), validation: true, ..Default::default() };
     let o = conformance::run(&opts, |_| {}).unwrap_or_else(|e| panic!("GPU TESTS CANNOT RUN: {e}"));
     let md = conformance::markdown(&o, true);
     assert!(o.validation.is_empty(), "validation messages:\n{}", o.validation.join("\n"));
@@ -70,7 +68,7 @@ fn quick_conformance_covers_every_value_on_every_scene() {
 #[test]
 fn odd_ray_counts_and_all_miss_batches() {
     let g = gpu();
-    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let p = prepare(&scene_path("teapot.obj"));
     let sets = ray_sets(&p, 40, 10);
     let rays = &sets[0].1;
     for layout in LayoutId::all() {
@@ -96,7 +94,7 @@ fn odd_ray_counts_and_all_miss_batches() {
 #[test]
 fn packet_edge_cases_partial_packets_and_all_misses() {
     let g = gpu();
-    let p = prepare(&scenes_dir().join("stanford-bunny.obj"));
+    let p = prepare(&scene_path("stanford-bunny.obj"));
     let rays = &ray_sets(&p, 40, 10)[0].1;
     let r1000 = &rays[..1000];
     let away: Vec<Ray> = (0..130)

@@ -13,7 +13,7 @@ use super::*;
 fn missing_features_fall_back_to_what_stays_exact() {
     use halftrace::gpu::support;
     use halftrace::precision::{FcChoice, FloatControls};
-    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let p = prepare(&scene_path("teapot.obj"));
     let rays = &ray_sets(&p, 24, 200)[3].1;
     let f16h = layout("f16h");
     let cases: [(&str, Vec<Variant>, Vec<Variant>); 7] = [
@@ -139,7 +139,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
         .args([
             "trace",
             "--scene",
-            scenes_dir().join("teapot.obj").to_str().unwrap(),
+            scene_path("teapot.obj").to_str().unwrap(),
             "--backend",
             "gpu",
             "--layout",
@@ -165,7 +165,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
         .args([
             "trace",
             "--scene",
-            scenes_dir().join("teapot.obj").to_str().unwrap(),
+            scene_path("teapot.obj").to_str().unwrap(),
             "--backend",
             "gpu",
             "--layout",
@@ -190,7 +190,7 @@ fn scenes_beyond_one_storage_buffer_are_read_by_address() {
     use halftrace::variant::Buffers;
     let g = Gpu::new(&ContextOptions { validation: true, max_buffer: Some(16384), ..Default::default() }).unwrap();
     assert!(g.info.buffer_device_address, "lavapipe has bufferDeviceAddress");
-    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let p = prepare(&scene_path("teapot.obj"));
     let sets = ray_sets(&p, 16, 100);
     for layout in LayoutId::all() {
         let enc = encode(&p, layout, 8);
@@ -231,7 +231,7 @@ fn scene_too_big_for_the_device_is_a_clear_error() {
         ..Default::default()
     })
     .unwrap();
-    let p = prepare(&scenes_dir().join("teapot.obj"));
+    let p = prepare(&scene_path("teapot.obj"));
     let enc = encode(&p, layout("f16h"), 4);
     let e = GpuBvh::upload(&g, &enc).err().expect("upload must fail");
     let msg = e.to_string();
@@ -250,7 +250,7 @@ fn scene_too_big_for_the_device_is_a_clear_error() {
 /// address and are validated; a SPIR-V module that binds the triangles is refused, by name.
 #[test]
 fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
-    let sc = scenes_dir().join("teapot.obj");
+    let sc = scene_path("teapot.obj");
     let trace = |env: (&str, &str), extra: &[&str]| {
         let mut a = vec![
             "trace",
@@ -300,7 +300,7 @@ fn trace_reads_a_scene_beyond_one_storage_buffer_by_address() {
 /// scales huge coordinates like the CPU reference; a mismatch fails the trace).
 #[test]
 fn huge_coordinates_trace_on_the_gpu() {
-    let src = std::fs::read_to_string(scenes_dir().join("teapot.obj")).unwrap();
+    let src = std::fs::read_to_string(scene_path("teapot.obj")).unwrap();
     let mut obj = String::new();
     for l in src.lines() {
         if let Some(v) = l.strip_prefix("v ") {

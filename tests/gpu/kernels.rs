@@ -12,7 +12,7 @@ use halftrace::interface::{binding, PushConstants};
 #[test]
 fn shader_reads_every_node_layout_as_rust_writes_it() {
     let g = gpu();
-    let p = prepare(&scenes_dir().join("fandisk.obj"));
+    let p = prepare(&scene_path("fandisk.obj"));
     let src = r#"#version 460
 #include "interface.glsl"
 #include "ray.glsl"

@@ -5,7 +5,7 @@ use halftrace::gpu::shader::{self, Includes};
 
 #[test]
 fn user_kernels_are_checked_then_validated_and_timed() {
-    let scene = scenes_dir().join("teapot.obj");
+    let scene = scene_path("teapot.obj");
     let sc = scene.to_str().unwrap();
     let small = ["--width", "32", "--height", "32", "--repeat", "2"];
     let run = |args: &[&str]| {
@@ -143,7 +143,7 @@ fn user_kernels_are_checked_then_validated_and_timed() {
 /// packet kernel is refused naming the file and why; the user's module is labelled as such.
 #[test]
 fn user_modules_of_another_variant_are_refused() {
-    let scene = scenes_dir().join("teapot.obj");
+    let scene = scene_path("teapot.obj");
     let s = scene.to_str().unwrap();
     let spv = |n: &str| repo(&format!("spirv/{n}.spv")).display().to_string();
     for (module, want) in
@@ -196,7 +196,7 @@ fn invalid_spirv_gets_the_validators_message() {
     words[i + 1] = 1;
     let cut = tmp("cut.spv");
     std::fs::write(&cut, bytemuck::cast_slice::<u32, u8>(&words)).unwrap();
-    let scene = scenes_dir().join("teapot.obj");
+    let scene = scene_path("teapot.obj");
     let (ok, out, err) = cli(&[
         "trace",
         "--scene",
