@@ -13,6 +13,8 @@
 // The exact arithmetic loops over the three axes index several arrays in step, as the GLSL
 // they mirror does; iterators would hide that correspondence.
 #![allow(clippy::needless_range_loop)]
+// `unsafe` lives in the Vulkan layer alone; anywhere else it is a compile error.
+#![deny(unsafe_code)]
 
 pub mod base;
 pub mod baseline;
@@ -25,6 +27,7 @@ pub mod devreport;
 pub mod digest;
 pub mod fp16;
 pub mod fsx;
+#[allow(unsafe_code)]
 pub mod gpu;
 pub mod images;
 pub mod interface;

@@ -1,6 +1,8 @@
 //! The `halftrace` command line: parse ([`halftrace::cli`]), run ([`halftrace::commands`]),
 //! report an error with its causes.
 
+#![deny(unsafe_code)]
+
 use clap::Parser;
 use halftrace::cli::{Cli, Cmd};
 use halftrace::commands;
