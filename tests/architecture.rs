@@ -241,3 +241,106 @@ fn a_planted_cycle_is_found() {
     assert_eq!(first_segments("{base::Ray, layout::{Encoded, LayoutId}, scene}"), ["base", "layout", "scene"]);
     assert_eq!(first_segments("gpu::Gpu;"), ["gpu"]);
 }
+
+/// Edges between the parts of one folder module `dir` (named `name` under `crate::`): a part is
+/// a file or subfolder directly in `dir` (`mod.rs`, the module's interface, aside); part A
+/// imports part B where a file of A writes `crate::name::B`, or `super::B` from a file directly
+/// in `dir`, or `super::super::B` one folder down. Part → part → (file, line) of the first use.
+fn part_edges(dir: &Path, name: &str) -> Edges {
+    let mut files = Vec::new();
+    rust_files(dir, &mut files);
+    files.sort();
+    let part = |f: &Path| {
+        let first = f.strip_prefix(dir).unwrap().components().next().unwrap().as_os_str().to_string_lossy().to_string();
+        first.trim_end_matches(".rs").to_string()
+    };
+    let parts: BTreeSet<String> = files.iter().map(|f| part(f)).filter(|p| p != "mod").collect();
+    let mut out = Edges::new();
+    for f in &files {
+        let from = part(f);
+        if from == "mod" {
+            continue;
+        }
+        let depth = f.strip_prefix(dir).unwrap().components().count();
+        let is_mod = f.file_name().is_some_and(|n| n == "mod.rs");
+        let text = std::fs::read_to_string(f).unwrap();
+        let mut pats = vec![format!("crate::{name}::")];
+        match (depth, is_mod) {
+            (1, _) => pats.push("super::".into()),
+            (2, false) => pats.push("super::super::".into()),
+            (2, true) | (3, false) => pats.push("super::super::".into()),
+            _ => {}
+        }
+        for (n, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            for pat in &pats {
+                for (i, _) in code.match_indices(pat.as_str()) {
+                    let before = code[..i].chars().last();
+                    if before.is_some_and(|c| c.is_alphanumeric() || c == '_' || c == ':') {
+                        continue;
+                    }
+                    for r in first_segments(&code[i + pat.len()..]) {
+                        if parts.contains(&r) && r != from {
+                            out.entry(from.clone()).or_default().entry(r).or_insert((f.clone(), n + 1));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A cycle between the parts of folder module `dir`, spelled with the file and line of each step.
+fn part_cycle(dir: &Path, name: &str, root: &Path) -> Option<String> {
+    let e = part_edges(dir, name);
+    let graph: BTreeMap<String, BTreeSet<String>> =
+        e.iter().map(|(k, v)| (k.clone(), v.keys().cloned().collect())).collect();
+    let c = find_cycle(&graph)?;
+    let steps: Vec<String> = c
+        .windows(2)
+        .map(|w| {
+            let (f, l) = &e[&w[0]][&w[1]];
+            format!("{} → {} ({}:{l})", w[0], w[1], f.strip_prefix(root).unwrap_or(f).display())
+        })
+        .collect();
+    Some(format!("{name}: {}", steps.join(", ")))
+}
+
+/// Inside every folder module the files import each other without a cycle too (the layer
+/// test above sees only top-level modules).
+#[test]
+fn files_of_a_module_import_each_other_without_a_cycle() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let src = root.join("src");
+    let mut found = Vec::new();
+    let mut checked = 0;
+    for m in modules(&src) {
+        let dir = src.join(&m);
+        if dir.is_dir() {
+            checked += 1;
+            found.extend(part_cycle(&dir, &m, &root));
+        }
+    }
+    assert!(found.is_empty(), "files of one module import each other in a cycle:\n  {}", found.join("\n  "));
+    assert!(checked >= 8, "only {checked} folder modules found");
+}
+
+/// The file-level check can fail: two files planted to import each other are caught, by
+/// `super::` and by `crate::` paths, and a third that only imports is not part of the cycle.
+#[test]
+fn a_planted_file_cycle_is_found() {
+    let dir = std::env::temp_dir().join(format!("halftrace-arch-{}", std::process::id()));
+    let m = dir.join("layout");
+    std::fs::create_dir_all(m.join("f16x")).unwrap();
+    std::fs::write(m.join("mod.rs"), "pub mod half;\npub mod frames;\nuse self::half::X;\n").unwrap();
+    std::fs::write(m.join("half.rs"), "use super::frames::Frame; // the frame\npub struct X;\n").unwrap();
+    std::fs::write(m.join("frames.rs"), "// use super::half::X; in a comment does not count\npub struct Frame;\n")
+        .unwrap();
+    std::fs::write(m.join("f16x/hooks.rs"), "use crate::layout::{half::X, frames};\n").unwrap();
+    assert_eq!(part_cycle(&m, "layout", &dir), None);
+    std::fs::write(m.join("frames.rs"), "pub struct Frame;\nfn f() -> crate::layout::half::X { todo!() }\n").unwrap();
+    let c = part_cycle(&m, "layout", &dir).expect("the planted cycle");
+    assert!(c.contains("frames → half (layout/frames.rs:2)") && c.contains("half → frames (layout/half.rs:1)"), "{c}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -21,7 +21,6 @@
 //! Consequently every coordinate a node stores lies in [−16384, 16384], a quarter of fp16's
 //! finite range, leaving room for the slab test's differences and products.
 
-use super::half::{TWO_M20, TWO_M22};
 use super::node16::Node16;
 use super::{encode_child, EncodeError};
 use crate::base::Aabb;
@@ -29,6 +28,11 @@ use crate::bvh::{ChildRef, WideBvh};
 use crate::fp16;
 use crate::interface::{glsl_int, CHILD_EMPTY};
 use half::f16;
+
+/// 2⁻²⁰ and 2⁻²²: the relative error terms of a derived frame's bound (and of the box tests in
+/// [`super::half`], which uses them too).
+pub const TWO_M20: f32 = 1.0 / 1_048_576.0;
+pub const TWO_M22: f32 = 1.0 / 4_194_304.0;
 
 /// Largest magnitude of any stored coordinate.
 pub const COORD_LIMIT: f32 = 16384.0;

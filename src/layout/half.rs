@@ -69,14 +69,14 @@ pub const BIG32: f32 = 1e30;
 /// Geometric bound on |s| without the error term: 16384 + OCAP.
 pub const S_BASE: f32 = 16384.0 + OCAP;
 
+/// 2⁻²⁰ and 2⁻²² are the frames' (the frame derivation bounds its error with them).
+pub use super::frames::{TWO_M20, TWO_M22};
 pub const TWO_M9: f32 = 1.0 / 512.0;
 pub const TWO_M11: f32 = 1.0 / 2048.0;
 pub const TWO_M19: f32 = 1.0 / 524_288.0;
-pub const TWO_M20: f32 = 1.0 / 1_048_576.0;
 pub const TWO_M10: f32 = 1.0 / 1024.0;
 pub const TWO_M18: f32 = 1.0 / 262_144.0;
 pub const TWO_M21: f32 = 1.0 / 2_097_152.0;
-pub const TWO_M22: f32 = 1.0 / 4_194_304.0;
 pub const TWO_M23: f32 = 1.0 / 8_388_608.0;
 pub const TWO_M24: f32 = 1.0 / 16_777_216.0;
 
