@@ -9,12 +9,12 @@
 //! medians of that round; the table gives the median of those per-round ratios and their min
 //! and max. Speed goals live here (and in the closing notes), never in timed unit tests.
 
+use crate::base::Status;
 use crate::baseline::BaselineId;
 use crate::gpu::{ContextOptions, Gpu};
 use crate::layout::LayoutId;
 use crate::precision::Math;
 use crate::rays::{RayKind, RayParams};
-use crate::report::Status;
 use crate::runner::{Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
 use crate::variant::Variant;
 use anyhow::Context;

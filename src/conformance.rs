@@ -7,12 +7,12 @@
 //! move a box test by an ulp), and hits equal to the `f32` reference's. The result is a
 //! table naming any failing variant, ray and both results.
 
+use crate::base::Status;
 use crate::bvh::BRANCHINGS;
 use crate::gpu::{self, support, Gpu, Source};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::rays::{RayKind, RayParams};
-use crate::report::Status;
 use crate::runner::{KernelTarget, Plan, RaySpec, Runner, Target};
 use crate::variant::{PacketImpl, Variant, PACKETS};
 use anyhow::Context;

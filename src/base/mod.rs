@@ -1,7 +1,7 @@
 //! The bottom layer, importing nothing of halftrace's: rays ([`Ray`]), boxes ([`Aabb`]), the
 //! fp32 ray set-up and slab test ([`RayPre`], [`slab32`]), the watertight triangle test
 //! ([`tri`]), hits and counters with the closest-hit rule ([`Hit`], [`Counters`],
-//! [`Closest`]), agreement between results, the random generator ([`Rng`]) and the Rust↔GLSL
+//! [`Closest`]), agreement between results, how a measurement ended ([`Status`]), the random generator ([`Rng`]) and the Rust↔GLSL
 //! struct mechanism ([`glsl`]). Every other module builds on these.
 
 pub mod geom;
@@ -10,6 +10,7 @@ pub mod hit;
 pub mod ray;
 pub mod rng;
 pub mod slab;
+pub mod status;
 pub mod tri;
 
 pub use geom::{max_abs_axis, Aabb};
@@ -20,3 +21,4 @@ pub use hit::{
 pub use ray::{validate, Ray, RayError, DIR_MAX, DIR_MIN};
 pub use rng::Rng;
 pub use slab::{lower32, slab32, upper32, RayPre};
+pub use status::Status;

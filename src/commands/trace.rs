@@ -2,6 +2,7 @@
 //! runner: validated against the CPU reference, timed, and written out on request.
 
 use super::outln;
+use crate::base::Status;
 use crate::base::{agreement, mean_counters, simd_utilisation, Counters, Hit};
 use crate::baseline::BaselineId;
 use crate::cli::{Backend, LayoutArg, TraceArgs};
@@ -9,7 +10,6 @@ use crate::gpu::{self, Gpu, Source};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::rays::{RayKind, RayParams};
-use crate::report::Status;
 use crate::runner::measure::compare;
 use crate::runner::{KernelTarget, Measurement, Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
 use crate::variant::{Buffers, Variant, PACKETS};

@@ -9,6 +9,7 @@ pub mod counts;
 pub mod mix;
 pub mod vendors;
 
+use crate::base::Status;
 use crate::bvh::BRANCHINGS;
 use crate::gpu::executable::executables;
 use crate::gpu::null::{self, Family};
@@ -16,7 +17,6 @@ use crate::gpu::{self, ContextOptions, Gpu, GpuError, Kernel, Source};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::report::isa::IsaRow;
-use crate::report::Status;
 use crate::variant::{KernelId, PacketImpl, Variant, PACKETS};
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -11,8 +11,8 @@
 //! has crashed at teardown) survive, and the crash is reported by model.
 
 use super::Build;
+use crate::base::Status;
 use crate::report::isa::IsaRow;
-use crate::report::Status;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

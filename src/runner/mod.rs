@@ -24,10 +24,10 @@ pub use rays::{RaySet, RaySetId, RaySpec};
 pub use target::{Facts, KernelTarget, Outcome, Target};
 
 use crate::base::Hit;
+use crate::base::Status;
 use crate::baseline::{BaselineDevice, BaselineId};
 use crate::gpu::{self, support, Gpu, GpuError, Kernel, Source};
 use crate::precision::FloatControls;
-use crate::report::Status;
 use crate::variant::{KernelId, PacketImpl, Variant};
 use anyhow::Context;
 use cache::SceneState;

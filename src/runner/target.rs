@@ -2,11 +2,11 @@
 //! tracers that dispatch a kernel or a baseline for [`super::measure`].
 
 use super::measure::{self, Measurement, Plan, Tracer};
+use crate::base::Status;
 use crate::base::{Hit, Ray, RunOutput};
 use crate::baseline::{BaselineId, BaselineScene};
 use crate::gpu::{Gpu, GpuBvh, Kernel, Source};
 use crate::precision::FcChoice;
-use crate::report::Status;
 use crate::variant::{Buffers, KernelId, PacketImpl, Variant};
 
 /// What a measurement traces with.

@@ -5,12 +5,13 @@
 
 use super::jobs::{self, Job};
 use super::Config;
+use crate::base::Status;
 use crate::base::{mean_counters, simd_utilisation, Hit};
 use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
 use crate::outdir::OutDir;
 use crate::rays::{RayKind, RayParams};
-use crate::report::{self, Row, RowId, Status};
+use crate::report::{self, Row, RowId};
 use crate::runner::{Outcome, Plan, RaySetId, RaySpec, Runner, Target};
 use anyhow::Context;
 use std::collections::HashSet;
