@@ -1,0 +1,156 @@
+//! `device-report.json`: what each run and step recorded, and whether a step is finished
+//! (recorded and its files present).
+
+use super::*;
+
+/// The record of a report folder (`device-report.json`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct State {
+    pub device: String,
+    pub driver: String,
+    pub kind: String,
+    pub api_version: String,
+    pub version: String,
+    pub commit: String,
+    pub scenes: Vec<String>,
+    pub width: u32,
+    pub height: u32,
+    /// One entry per run of the command (a resumed report has several).
+    pub runs: Vec<RunRecord>,
+    /// Finished steps by name.
+    pub steps: BTreeMap<String, StepRecord>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct RunRecord {
+    pub started_unix: u64,
+    pub budget_s: f64,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StepRecord {
+    /// `ok`, `failed (exit N)`, `skipped: why`, `partial: …`, `stopped: …`.
+    pub status: String,
+    pub seconds: f64,
+    /// Finished: a resumed report does not run it again.
+    pub done: bool,
+    pub output: String,
+}
+
+pub(super) const STATE: &str = "device-report.json";
+/// The steps, in the order they run.
+pub const STEPS: &[&str] = &["devices", "conformance", "bench", "sweep", "isa"];
+/// The names this command writes in its folder (what `--force` replaces; nothing else there is
+/// touched).
+pub(super) const OWN: &[&str] = &[
+    STATE,
+    "report.md",
+    "devices.txt",
+    "vulkaninfo.txt",
+    "nvidia-smi.txt",
+    "bench.md",
+    "logs",
+    "conformance",
+    "sweep",
+];
+
+/// Checks the folder: new (absent or empty), a report of the same device and settings to
+/// resume, or one to replace; returns the state to continue from.
+pub(super) fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> anyhow::Result<State> {
+    let fresh = State {
+        device: dev.name.clone(),
+        driver: dev.driver.clone(),
+        kind: dev.kind.clone(),
+        api_version: dev.api_version.clone(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        commit: env!("HALFTRACE_COMMIT").into(),
+        scenes: scenes.to_vec(),
+        width: opts.width,
+        height: opts.height,
+        ..Default::default()
+    };
+    let entries = check_held(out, opts)?;
+    if entries.is_empty() {
+        return Ok(fresh);
+    }
+    if opts.force {
+        for e in entries.iter().filter(|e| OWN.contains(&e.as_str())) {
+            let p = out.join(e);
+            let r = if p.is_dir() && !p.is_symlink() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
+            r.with_context(|| format!("--force: removing {}", p.display()))?;
+        }
+        return Ok(fresh);
+    }
+    let path = out.join(STATE);
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("--resume: {} is not a device report (no readable {STATE})", out.display()))?;
+    let old: State = serde_json::from_str(&text).with_context(|| format!("--resume: {}", path.display()))?;
+    for (what, was, now) in [
+        ("device", old.device.clone(), fresh.device.clone()),
+        ("driver", old.driver.clone(), fresh.driver.clone()),
+        ("scenes", old.scenes.join(", "), fresh.scenes.join(", ")),
+        ("image size", format!("{}x{}", old.width, old.height), format!("{}x{}", fresh.width, fresh.height)),
+    ] {
+        anyhow::ensure!(
+            was == now,
+            "--resume: {} is a report with {what} {was}, not {now}; resume with the same settings, or choose another \
+             folder",
+            out.display()
+        );
+    }
+    Ok(old)
+}
+
+/// What the folder holds (its lock aside); refused when that is anything without --resume or
+/// --force.
+pub(super) fn check_held(out: &Path, opts: &Options) -> anyhow::Result<Vec<String>> {
+    let entries = match OutDir::entries(out) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
+    };
+    anyhow::ensure!(
+        entries.is_empty() || opts.resume || opts.force,
+        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
+         replace it, or choose another folder",
+        out.display(),
+        entries.len()
+    );
+    Ok(entries)
+}
+
+/// The files each step writes, relative to the report's folder (the first is the one its row
+/// in report.md links to).
+pub(super) fn outputs(step: &str) -> &'static [&'static str] {
+    match step {
+        "devices" => &["devices.txt"],
+        "conformance" => &["conformance/conformance.md", "conformance/conformance.csv"],
+        "bench" => &["bench.md"],
+        "sweep" => &["sweep/report.md", "sweep/results.csv"],
+        "isa" => &["sweep/isa.md", "sweep/isa.json"],
+        _ => &[],
+    }
+}
+
+/// A file of a step recorded as finished that is not there (deleted since, or never written
+/// by a step that failed): the record is not trusted, the step runs again.
+pub(super) fn missing(state: &State, out: &Path, step: &str) -> Option<&'static str> {
+    state.steps.get(step).filter(|s| s.done && !s.status.starts_with("skipped"))?;
+    outputs(step).iter().copied().find(|f| !out.join(f).is_file())
+}
+
+/// Whether a step is finished: recorded so, with its files there (a resumed report does not
+/// run it again).
+pub(super) fn finished(state: &State, out: &Path, step: &str) -> bool {
+    state.steps.get(step).is_some_and(|s| s.done) && missing(state, out, step).is_none()
+}
+
+pub(super) fn save(out: &Path, state: &State) -> anyhow::Result<()> {
+    crate::fsx::write_atomic(&out.join(STATE), serde_json::to_string_pretty(state)?.as_bytes())
+}
+
+pub(super) fn record(state: &mut State, name: &str, mut r: StepRecord) {
+    r.output = outputs(name)[0].into();
+    state.steps.insert(name.into(), r);
+}
