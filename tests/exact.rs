@@ -18,37 +18,42 @@ use rayon::prelude::*;
 /// Every conservative layout × math × float controls × B × P against `expected` (brute
 /// force); the first difference as a message naming the variant, the ray and both hits.
 fn check_all(p: &Prepared, rays: &[Ray], expected: &[Hit]) -> Result<usize, String> {
-    let mut runs = 0;
-    for l in LayoutId::all().filter(|l| l.info().conservative) {
-        for b in [2, 4, 8, 16] {
-            let enc = encode(p, l, b);
-            let fcs: &[FloatControls] = if l.info().float_controls_off {
-                &[FloatControls::On, FloatControls::Off]
-            } else {
-                &[FloatControls::On]
-            };
-            for &math in l.info().maths {
-                for &fc in fcs {
-                    for pk in PACKETS {
-                        let (got, _) = enc.reference(rays, pk, math, fc);
-                        runs += 1;
-                        if let Some(i) = (0..rays.len()).find(|&i| !got[i].same_bits(&expected[i])) {
-                            return Err(format!(
-                                "{} {l}/{} fc-{} B={b} P={pk}: ray {i} {:?}: brute force {:?}, got {:?}",
-                                p.scene.name,
-                                math.name(),
-                                fc.name(),
-                                rays[i],
-                                expected[i],
-                                got[i]
-                            ));
-                        }
-                    }
+    // Every (layout, B) encoding, then every traversal of it, in parallel; the first failing
+    // one in this order is reported.
+    let encs: Vec<_> = LayoutId::all()
+        .filter(|l| l.info().conservative)
+        .flat_map(|l| [2, 4, 8, 16].map(|b| (l, b)))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|(l, b)| (l, b, encode(p, l, b)))
+        .collect();
+    let mut runs = Vec::new();
+    for (l, b, enc) in &encs {
+        let fcs: &[FloatControls] =
+            if l.info().float_controls_off { &[FloatControls::On, FloatControls::Off] } else { &[FloatControls::On] };
+        for &math in l.info().maths {
+            for &fc in fcs {
+                for pk in PACKETS {
+                    runs.push((*l, *b, enc, math, fc, pk));
                 }
             }
         }
     }
-    Ok(runs)
+    let first = runs.par_iter().find_map_first(|&(l, b, enc, math, fc, pk)| {
+        let (got, _) = enc.reference(rays, pk, math, fc);
+        (0..rays.len()).find(|&i| !got[i].same_bits(&expected[i])).map(|i| {
+            format!(
+                "{} {l}/{} fc-{} B={b} P={pk}: ray {i} {:?}: brute force {:?}, got {:?}",
+                p.scene.name,
+                math.name(),
+                fc.name(),
+                rays[i],
+                expected[i],
+                got[i]
+            )
+        })
+    });
+    first.map_or(Ok(runs.len()), Err)
 }
 
 fn prepared(name: &str, tris: Vec<[Vec3; 3]>) -> Prepared {
@@ -164,17 +169,22 @@ fn at_hit_distances(scene: &Scene, rays: &[Ray]) -> Vec<Ray> {
 fn every_layout_b_and_p_equals_brute_force_on_large_triangle_scenes() {
     let cases = 40u64;
     let t0 = std::time::Instant::now();
-    let (mut rays_total, mut hits_total, mut runs_total) = (0usize, 0usize, 0usize);
-    for case in 0..cases {
-        let (tris, mut rays) = hunt_case(0x5eed_0000 + case);
-        let p = prepared(&format!("hunt-{case}"), tris);
-        let more = at_hit_distances(&p.scene, &rays);
-        rays.extend(more);
-        let expected: Vec<Hit> = rays.par_iter().map(|r| p.scene.brute_force(r)).collect();
-        hits_total += expected.iter().filter(|h| h.is_hit()).count();
-        rays_total += rays.len();
-        runs_total += check_all(&p, &rays, &expected).unwrap_or_else(|e| panic!("case {case}: {e}"));
-    }
+    let per_case: Vec<(usize, usize, usize)> = (0..cases)
+        .into_par_iter()
+        .map(|case| {
+            let (tris, mut rays) = hunt_case(0x5eed_0000 + case);
+            let p = prepared(&format!("hunt-{case}"), tris);
+            let more = at_hit_distances(&p.scene, &rays);
+            rays.extend(more);
+            let expected: Vec<Hit> = rays.iter().map(|r| p.scene.brute_force(r)).collect();
+            let runs = check_all(&p, &rays, &expected).map_err(|e| format!("case {case}: {e}"));
+            runs.map(|runs| (rays.len(), expected.iter().filter(|h| h.is_hit()).count(), runs))
+        })
+        .collect::<Result<_, String>>()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rays_total: usize = per_case.iter().map(|c| c.0).sum();
+    let hits_total: usize = per_case.iter().map(|c| c.1).sum();
+    let runs_total: usize = per_case.iter().map(|c| c.2).sum();
     eprintln!(
         "{cases} scenes, {rays_total} rays ({hits_total} hits), {runs_total} traversals of each ray set: every one \
          equal to brute force ({:.1} s)",
