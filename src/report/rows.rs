@@ -153,7 +153,7 @@ pub fn layouts_in(rows: &[&Row]) -> Vec<&'static str> {
 
 /// The files a sweep writes into its folder (besides per-layout images, [`is_output`]).
 pub const OUTPUTS: &[&str] =
-    &["results.csv", "results.json", "report.md", "device_arith.json", "device_bench.json", "render.png", "shard.json"];
+    &["results.csv", "results.json", "report.md", "headline.md", "device_arith.json", "device_bench.json", "render.png", "shard.json"];
 /// The plots (each as `.png` and `.svg`); `schemes` is the old name of `layouts`.
 pub const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "layouts", "schemes"];
 

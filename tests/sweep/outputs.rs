@@ -26,6 +26,7 @@ fn small_sweep_writes_consistent_outputs() {
         "results.json",
         "device_arith.json",
         "report.md",
+        "headline.md",
         "ratio_vs_b.png",
         "ratio_vs_b.svg",
         "ratio_vs_p.png",
@@ -178,6 +179,11 @@ fn small_sweep_writes_consistent_outputs() {
         let mean = xs.iter().sum::<f64>() / xs.len() as f64;
         assert!(md.contains(&format!("| {p} | {mean:.3} |")), "report.md has no P={p} row with time ratio {mean:.3}");
     }
+    // headline.md (what the README links to) holds report.md's headline tables verbatim.
+    let head = std::fs::read_to_string(out.join("headline.md")).unwrap();
+    let start = md.find("## Headline").expect("report.md has a headline");
+    let table = &md[start..start + md[start..].find("![ratio vs B]").unwrap()];
+    assert!(head.contains(table), "headline.md lacks report.md's headline tables:\n{head}");
 }
 
 #[test]

@@ -9,7 +9,7 @@ mod tables;
 
 pub use columns::{vendor_of, COLUMN_NAMES, VENDORS};
 pub use files::{read, write};
-pub use tables::{plot, render, section};
+pub use tables::{headline, plot, render, section};
 
 use super::rows::{order, Status};
 use crate::layout::LayoutId;

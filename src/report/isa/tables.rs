@@ -302,3 +302,47 @@ pub fn plot(rows: &[IsaRow], out: &Path) -> anyhow::Result<()> {
         &series(&|r| r.private_bytes),
     )
 }
+
+/// The headline's compiler view: one line per device, the kernels at B = 4, P = 1 (float
+/// controls as each device builds them first) as registers per thread / private bytes per
+/// thread / occupancy; "" without rows.
+pub fn headline(rows: &[IsaRow]) -> String {
+    let rows = sorted(rows);
+    let ok: Vec<&IsaRow> = rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && r.branching == 4).collect();
+    let mut devices: Vec<String> = Vec::new();
+    let mut kernels: Vec<(usize, String)> = Vec::new();
+    for r in &ok {
+        if !devices.contains(&r.device_label()) {
+            devices.push(r.device_label());
+        }
+        if r.float_controls != "off" && !kernels.iter().any(|k| k.1 == r.label()) {
+            kernels.push((order(&r.layout), r.label()));
+        }
+    }
+    kernels.sort();
+    if devices.is_empty() || kernels.is_empty() {
+        return String::new();
+    }
+    let mut md = format!(
+        "## Compiler view, B = 4, P = 1: registers per thread / private bytes per thread / occupancy\n\n\
+         Each vendor's production compiler without its GPU (RADV null devices, Mesa's drm-shims; nothing ran). \
+         Occupancy in the vendor's unit (waves per SIMD, waves per core, threads, warps per SM, QPU threads); \
+         – where the driver does not say or the device cannot build the kernel (no shaderFloat16). More in \
+         [isa.md](isa.md).\n\n| device | {} |\n|---|{}\n",
+        kernels.iter().map(|k| k.1.as_str()).collect::<Vec<_>>().join(" | "),
+        "---:|".repeat(kernels.len())
+    );
+    for d in &devices {
+        let cells: Vec<String> = kernels
+            .iter()
+            .map(|(_, label)| {
+                ok.iter()
+                    .find(|r| r.device_label() == *d && r.label() == *label)
+                    .map(|r| format!("{} / {} / {}", num(r.registers), num(r.private_bytes), num(r.occupancy)))
+                    .unwrap_or_else(|| "–".into())
+            })
+            .collect();
+        md += &format!("| {d} | {} |\n", cells.join(" | "));
+    }
+    md + "\n"
+}
