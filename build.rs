@@ -40,14 +40,17 @@ fn main() {
 }
 
 /// Writes `$OUT_DIR/glsl_sources.rs`: `&[(file name, include_str!(path)), …]` for every
-/// `.glsl` and `.comp` file directly in `glsl/` (the layout hooks in `glsl/layout/` come from
-/// the registry), sorted.
+/// `.glsl`, `.comp` and ray-tracing stage (`.rgen`, `.rchit`, `.rmiss`) file directly in
+/// `glsl/` (the layout hooks in `glsl/layout/` come from the registry), sorted.
 fn embed_glsl() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
     let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&dir)
         .expect("glsl/ beside Cargo.toml")
         .map(|e| e.expect("readable glsl/ entry").path())
-        .filter(|p| p.is_file() && p.extension().is_some_and(|e| e == "glsl" || e == "comp"))
+        .filter(|p| {
+            p.is_file()
+                && p.extension().is_some_and(|e| ["glsl", "comp", "rgen", "rchit", "rmiss"].iter().any(|x| e == *x))
+        })
         .collect();
     files.sort();
     let mut s = String::from("&[\n");

@@ -74,7 +74,10 @@ if [ -n "$scenes" ] && [ -d "$scenes" ]; then
 fi
 cat > "$out/env.sh" <<'ENV'
 # Source this on the GPU machine (bash): the bundle's libraries first; its C++ runtime only if
-# the machine has none; NVIDIA's EGL vendor file if the image lacks it. Uses no other tool.
+# the machine has none; the NVIDIA driver's own Vulkan manifest where the container runtime
+# mounted it outside the loader's search (e.g. /usr/local/nvidia/share/vulkan/icd.d) and the
+# loader would find no driver; NVIDIA's EGL vendor file (the driver's, else one written here)
+# if the image lacks it. Uses no other tool.
 _ht_here=${BASH_SOURCE[0]%/*}
 [ "$_ht_here" = "${BASH_SOURCE[0]}" ] && _ht_here=.
 _ht_here=$(cd "$_ht_here" && pwd)
@@ -87,15 +90,50 @@ for _ht_l in "$_ht_here"/lib/fallback/*; do
   done
   [ -z "$_ht_found" ] && _ht_path="$_ht_path:$_ht_here/lib/fallback" && break
 done
+# Where the loader looks for drivers' manifests by itself (XDG config and data folders, /etc).
+_ht_std=
+_ht_ifs=$IFS
+IFS=:
+for _ht_d in "${XDG_CONFIG_HOME:-${HOME:-}/.config}" ${XDG_CONFIG_DIRS:-/etc/xdg} /etc \
+             "${XDG_DATA_HOME:-${HOME:-}/.local/share}" ${XDG_DATA_DIRS:-/usr/local/share:/usr/share}; do
+  for _ht_f in "$_ht_d"/vulkan/icd.d/*.json; do [ -e "$_ht_f" ] && _ht_std=$_ht_f; done
+done
+IFS=$_ht_ifs
+# None there and none named: the driver's own, where container runtimes and driver containers
+# mount it. Its libraries' folders go on the path too (a manifest may name a bare soname).
+_ht_icd=
+if [ -z "$_ht_std" ] && [ -z "${VK_DRIVER_FILES:-}${VK_ICD_FILENAMES:-}${VK_ADD_DRIVER_FILES:-}" ]; then
+  for _ht_f in /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd*.json /usr/local/nvidia/etc/vulkan/icd.d/nvidia_icd*.json \
+               /run/nvidia*/share/vulkan/icd.d/nvidia_icd*.json /run/nvidia*/etc/vulkan/icd.d/nvidia_icd*.json \
+               /run/nvidia*/driver/usr/share/vulkan/icd.d/nvidia_icd*.json \
+               /run/nvidia*/driver/etc/vulkan/icd.d/nvidia_icd*.json /opt/nvidia*/share/vulkan/icd.d/nvidia_icd*.json; do
+    if [ -e "$_ht_f" ]; then _ht_icd=$_ht_f; break; fi
+  done
+fi
+if [ -n "$_ht_icd" ]; then
+  export VK_DRIVER_FILES="$_ht_icd"
+  _ht_r=${_ht_icd%/*/vulkan/icd.d/*}
+  for _ht_d in "$_ht_r/lib64" "$_ht_r/lib/x86_64-linux-gnu" "$_ht_r/lib"; do
+    [ -d "$_ht_d" ] && _ht_path="$_ht_path:$_ht_d"
+  done
+fi
 export LD_LIBRARY_PATH="$_ht_path${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 export PATH="$_ht_here${PATH:+:$PATH}"
 if [ ! -e /usr/share/glvnd/egl_vendor.d/10_nvidia.json ] && [ ! -e /etc/glvnd/egl_vendor.d/10_nvidia.json ] \
    && [ -z "${__EGL_VENDOR_LIBRARY_FILENAMES:-}" ]; then
-  _ht_v="${TMPDIR:-/tmp}/halftrace-10_nvidia.json"
-  printf '{"file_format_version":"1.0.0","ICD":{"library_path":"libEGL_nvidia.so.0"}}\n' > "$_ht_v"
+  _ht_v=
+  for _ht_f in ${_ht_icd:+"${_ht_icd%/vulkan/icd.d/*}/glvnd/egl_vendor.d/10_nvidia.json"} \
+               /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json /usr/local/nvidia/etc/glvnd/egl_vendor.d/10_nvidia.json \
+               /run/nvidia*/share/glvnd/egl_vendor.d/10_nvidia.json /run/nvidia*/driver/usr/share/glvnd/egl_vendor.d/10_nvidia.json; do
+    if [ -e "$_ht_f" ]; then _ht_v=$_ht_f; break; fi
+  done
+  if [ -z "$_ht_v" ]; then
+    _ht_v="${TMPDIR:-/tmp}/halftrace-10_nvidia.json"
+    printf '{"file_format_version":"1.0.0","ICD":{"library_path":"libEGL_nvidia.so.0"}}\n' > "$_ht_v"
+  fi
   export __EGL_VENDOR_LIBRARY_FILENAMES="$_ht_v"
 fi
-unset _ht_here _ht_path _ht_l _ht_n _ht_found _ht_d _ht_v
+unset _ht_here _ht_path _ht_l _ht_n _ht_found _ht_d _ht_v _ht_std _ht_ifs _ht_f _ht_icd _ht_r
 ENV
 cat > "$out/run-report.sh" <<'RUN'
 #!/usr/bin/env bash

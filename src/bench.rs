@@ -1,8 +1,8 @@
 //! `halftrace bench`: the speed ratios a kernel change is judged by, in one run, in minutes.
 //!
 //! On each scene and ray kind it validates every target once (our kernels against the CPU
-//! reference of the same layout and packet size, hits bit for bit; `rq` and `embree` against
-//! the f32 reference, reported as agreement), then times them in `rounds` interleaved rounds
+//! reference of the same layout and packet size, hits bit for bit; `rq`, `rt` and `embree`
+//! against the f32 reference, reported as agreement), then times them in `rounds` interleaved rounds
 //! (every target once per round, each time 1 warm-up and `repeat` timed dispatches, the
 //! round's value their median), so slow drift on a shared machine hits every target alike. A
 //! ratio "a ÷ b" is speed (rays per second) of a over b, computed per round from the two
@@ -210,7 +210,6 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
             }
             // The best of ours (any variant) against the host CPU's Embree.
             let embree = BaselineId::parse("embree").map(Key::Baseline);
-            let rq = BaselineId::parse("rq").map(Key::Baseline);
             let ours: Vec<Key> =
                 times.keys().filter(|(kk, k)| *kk == ki && matches!(k, Key::Variant(_))).map(|(_, k)| *k).collect();
             let best_of = |against: &Key| -> Option<Key> {
@@ -239,14 +238,19 @@ pub fn run(cfg: &BenchConfig) -> anyhow::Result<BenchResult> {
                     );
                 }
             }
-            if let Some(q) = rq.filter(|q| t(q).is_some()) {
-                // f32 at its better B against the driver's ray queries.
+            // f32 at its better B against the driver's traversals: its ray queries, and its
+            // ray-tracing pipeline (no goal set for it yet).
+            for (name, what, goal) in [
+                ("rq", "f32 ÷ rq (driver ray queries)", Some(1.5)),
+                ("rt", "f32 ÷ rt (driver ray-tracing pipeline)", None),
+            ] {
+                let Some(q) = BaselineId::parse(name).map(Key::Baseline).filter(|q| t(q).is_some()) else { continue };
                 let b = [4, 8].into_iter().max_by(|&x, &y| {
                     let m = |b| ratio(&f32_(b, 1), &q).map(|r| r.median).unwrap_or(0.0);
                     m(x).total_cmp(&m(y))
                 });
                 if let Some(b) = b {
-                    push("f32 ÷ rq (driver ray queries)", &f32_(b, 1), &q, Some(1.5));
+                    push(what, &f32_(b, 1), &q, goal);
                 }
             }
         }

@@ -35,8 +35,8 @@ pub enum Cmd {
     /// Sweep scenes × ray kinds × layouts × B × P: validate, time, count, report.
     Sweep(SweepArgs),
     /// The speed ratios a kernel change is judged by (f16h ÷ f32, best reduced layout ÷ f32,
-    /// best ÷ embree, packets ÷ P = 1, f32 ÷ rq), validated, then timed in interleaved rounds:
-    /// medians with min/max.
+    /// best ÷ embree, packets ÷ P = 1, f32 ÷ rq, f32 ÷ rt), validated, then timed in
+    /// interleaved rounds: medians with min/max.
     Bench(BenchArgs),
     /// Re-render report.md and the plots from one or more sweep folders (merging them).
     Report {
@@ -112,7 +112,8 @@ pub struct TraceArgs {
     #[arg(long)]
     pub scene: PathBuf,
     /// Layout (f32, f16h, …) or baseline (rq: the driver's acceleration structure and ray
-    /// queries; embree); `halftrace devices` lists them.
+    /// queries; rt: the same structure and a ray-tracing pipeline; embree); `halftrace devices`
+    /// lists them.
     #[arg(long, default_value = "f16h")]
     pub layout: LayoutArg,
     /// Branching factor: 2, 4, 8 or 16.
@@ -441,7 +442,8 @@ pub struct DeviceReportArgs {
     #[arg(long, default_value = "reports", conflicts_with = "out")]
     pub reports: PathBuf,
     /// Scenes: the first (default: the bundled scene) gets conformance, the bench and the
-    /// default matrix; the others are swept after it while the budget lasts.
+    /// default matrix; the others are swept after it while the budget lasts. On a GPU the first
+    /// is also swept instanced to at least 300k triangles, right after it.
     #[arg(long)]
     pub scene: Vec<PathBuf>,
     /// Also sweep every .obj / .obj.gz scene in this folder, after --scene (default:
@@ -449,11 +451,12 @@ pub struct DeviceReportArgs {
     /// ../shared/scenes when it exists; "none" for none).
     #[arg(long)]
     pub scenes_dir: Option<PathBuf>,
-    /// Image size of the bench's and the sweep's rays.
-    #[arg(long, default_value_t = 256)]
-    pub width: u32,
-    #[arg(long, default_value_t = 256)]
-    pub height: u32,
+    /// Image size of the bench's and the sweep's rays (default 256 × 256 on a CPU device such
+    /// as lavapipe, 1024 × 1024 on a GPU).
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
     /// Finish the report in --out: run only the steps that did not finish (the sweep resumes);
     /// a folder with no report yet gets a new one.
     #[arg(long)]

@@ -6,7 +6,7 @@
 //! tests), [`precision`], [`fp16`], [`fsx`] and [`outdir`] (files and output folders);
 //! [`interface`] (what Rust and GLSL share), [`scene`], [`rays`], [`npy`]; [`bvh`]; [`layout`]
 //! (one folder per precision layout, the CPU traversal); [`variant`]; [`gpu`] (the Vulkan
-//! backend, the only `unsafe`); [`baseline`] (`rq`, `embree`); [`report`]; [`runner`]
+//! backend, the only `unsafe`); [`baseline`] (`rq`, `rt`, `embree`); [`report`]; [`runner`]
 //! (validate, then time — the one way to a result); [`sweep`], [`bench`], [`conformance`],
 //! [`isa`]; [`devreport`]; [`cli`] and [`commands`].
 

@@ -1,11 +1,13 @@
 //! Baselines: someone else's traversal of the same triangles and rays, run beside our layouts
 //! as the answer a user would otherwise get — `rq` (the driver's acceleration structure and
-//! ray queries, [`rq`]) and `embree` (Intel Embree 3 on the host CPU, [`embree`]). They have no
+//! ray queries, [`rq`]), `rt` (the same structure traced by a ray-tracing pipeline, [`rt`]) and
+//! `embree` (Intel Embree 3 on the host CPU, [`embree`]). They have no
 //! B, P, math mode or work counters; their hits are compared with the f32 reference and
 //! reported as agreement. Adding one is a file here and one line in [`BASELINES`].
 
 pub mod embree;
 pub mod rq;
+pub mod rt;
 
 use crate::base::{Ray, RunOutput};
 use crate::gpu::{DeviceInfo, Gpu, GpuError};
@@ -13,7 +15,7 @@ use crate::scene::Scene;
 use thiserror::Error;
 
 /// Every baseline, in report order.
-pub static BASELINES: &[&dyn Baseline] = &[&rq::Rq, &embree::Embree];
+pub static BASELINES: &[&dyn Baseline] = &[&rq::Rq, &rt::Rt, &embree::Embree];
 
 #[derive(Debug, Error)]
 pub enum BaselineError {

@@ -48,7 +48,7 @@ pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
         match l {
             LayoutArg::Layout(id) => layouts.push(*id),
             LayoutArg::Baseline(b) => {
-                anyhow::bail!("--layouts {b}: a baseline; rq and embree are always timed when the device has them")
+                anyhow::bail!("--layouts {b}: a baseline; rq, rt and embree are always timed when the device has them")
             }
         }
     }

@@ -26,13 +26,14 @@ pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
         }
         outln!("{}: {} ({}), Vulkan {}, driver {}", d.index, d.name, d.kind, d.api_version, d.driver);
         outln!(
-            "   shaderFloat16 {}, storageBuffer16BitAccess {}, shaderFloat64 {}, subgroup size {}, ray query {}, max \
-             storage buffer {} MiB",
+            "   shaderFloat16 {}, storageBuffer16BitAccess {}, shaderFloat64 {}, subgroup size {}, ray query {}, \
+             ray-tracing pipeline {}, max storage buffer {} MiB",
             d.shader_float16,
             d.storage_16bit,
             d.shader_float64,
             d.subgroup_size,
             d.ray_query,
+            d.ray_tracing_pipeline,
             d.max_storage_buffer >> 20
         );
         let control = if d.subgroup_size_control {

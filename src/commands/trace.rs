@@ -173,8 +173,9 @@ fn trace_gpu(
     Ok(o.m)
 }
 
-/// `trace --layout <baseline>`: someone else's traversal of the same triangles (rq: the
-/// driver's acceleration structure and ray queries), checked against the f32 reference.
+/// `trace --layout <baseline>`: someone else's traversal of the same triangles (rq, rt: the
+/// driver's acceleration structure and ray queries or a ray-tracing pipeline), checked against
+/// the f32 reference.
 fn trace_baseline(a: &TraceArgs, b: BaselineId) -> anyhow::Result<()> {
     anyhow::ensure!(a.backend != Some(Backend::Cpu), "--layout {b} runs on the GPU only");
     // A baseline has no B, P, math, float controls, counters or kernel of ours: say so rather

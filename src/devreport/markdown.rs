@@ -22,7 +22,14 @@ pub(super) fn conformance_counts(csv: &Path) -> Option<String> {
 }
 
 /// The folder's `report.md`.
-pub(super) fn markdown(state: &State, dev: &DeviceInfo, rows: &[Row], out: &Path, jobs: usize) -> String {
+pub(super) fn markdown(
+    state: &State,
+    dev: &DeviceInfo,
+    rows: &[Row],
+    out: &Path,
+    jobs: usize,
+    big: Option<&str>,
+) -> String {
     let total: f64 = state.runs.iter().map(|r| r.seconds).sum();
     let runs: Vec<String> =
         state.runs.iter().map(|r| format!("{:.0} s of a {:.0} s budget", r.seconds, r.budget_s)).collect();
@@ -43,9 +50,18 @@ pub(super) fn markdown(state: &State, dev: &DeviceInfo, rows: &[Row], out: &Path
         state.runs.len(),
         runs.join("; "),
     );
+    if let Some(b) = big {
+        md.insert_str(md.len() - 1, &format!("- {b}\n"));
+    }
     md += &format!(
-        "fp16 {}, 16-bit storage {}, subgroup size {}, ray queries {}, pipeline statistics {}.\n\n",
-        dev.shader_float16, dev.storage_16bit, dev.subgroup_size, dev.ray_query, dev.pipeline_statistics
+        "fp16 {}, 16-bit storage {}, subgroup size {}, ray queries {}, ray-tracing pipeline {}, pipeline statistics \
+         {}.\n\n",
+        dev.shader_float16,
+        dev.storage_16bit,
+        dev.subgroup_size,
+        dev.ray_query,
+        dev.ray_tracing_pipeline,
+        dev.pipeline_statistics
     );
     md += "## Steps\n\n| step | status | seconds | output |\n|---|---|---:|---|\n";
     for name in STEPS {

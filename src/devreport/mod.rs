@@ -5,6 +5,11 @@
 //! pipeline statistics — into one folder named after the device, with a `report.md` that
 //! names the device and driver and gives the headline ratios.
 //!
+//! Sized by the device's type ([`default_size`], [`big_scene_copies`]): on a CPU
+//! implementation (lavapipe) rays at 256×256 and the given scenes; on a GPU rays at 1024×1024
+//! and, swept right after the first scene, that scene instanced to at least
+//! [`BIG_SCENE_TRIANGLES`] triangles (written into the folder's `scenes/`).
+//!
 //! Each step runs as a child process of this binary (a crash in a driver ends one step, not
 //! the report), its output streamed to `logs/<step>.log`; `device-report.json` records each
 //! finished step, so an interrupted report rerun with `--resume` runs only what did not finish
@@ -48,13 +53,53 @@ pub struct Options {
     /// The scenes: the first gets conformance, the bench and the sweep's default matrix; the
     /// others are swept after it while the budget lasts.
     pub scenes: Vec<PathBuf>,
-    /// Image size of the bench's and the sweep's ray sets.
-    pub width: u32,
-    pub height: u32,
+    /// Image size of the bench's and the sweep's ray sets (default: [`default_size`]).
+    pub width: Option<u32>,
+    pub height: Option<u32>,
     pub resume: bool,
     pub force: bool,
     /// Treat device features as missing in every step (testing).
     pub mask_features: Vec<String>,
+}
+
+/// The rays' image side where none is given: 256 on a CPU implementation (lavapipe: 65k rays
+/// are tens of ms per dispatch there, and the whole report fits a few minutes on two cores);
+/// 1024 on a GPU, where 1M rays keep a dispatch of a device 100–1000× faster than lavapipe at
+/// a millisecond or so, far above its ~10 µs launch and timestamp overhead, while each job's
+/// validation against the CPU reference (1M rays on the host's cores) stays around a second,
+/// so the default 8-minute budget still leaves the sweep most of its time. 2048² would
+/// quadruple the validation for no gain in the timings' resolution.
+pub fn default_size(kind: &str) -> u32 {
+    if kind == "cpu" {
+        256
+    } else {
+        1024
+    }
+}
+
+/// The fewest triangles of a scene a GPU's sweep should hold: past the last-level cache of a
+/// large GPU (an H200's 50 MB holds every shared scene's f32 BVH but igea's, the largest at
+/// 269k triangles), where node bytes — what the reduced-precision layouts save — decide speed.
+pub const BIG_SCENE_TRIANGLES: usize = 300_000;
+
+/// Copies of a scene of `n` triangles that reach [`BIG_SCENE_TRIANGLES`] (`None`: it does
+/// already). The teapot's 6,320 take 48: 303,360 triangles.
+pub fn big_scene_copies(n: usize) -> Option<usize> {
+    (n < BIG_SCENE_TRIANGLES).then(|| BIG_SCENE_TRIANGLES.div_ceil(n.max(1)))
+}
+
+/// The instanced scene a GPU's report adds after the first scene (path, source scene, copies),
+/// or `None` on a CPU device or where the first scene is big enough.
+fn big_scene(
+    dev: &DeviceInfo,
+    out: &Path,
+    first: &Path,
+) -> anyhow::Result<Option<(PathBuf, crate::scene::Scene, usize)>> {
+    if dev.kind == "cpu" {
+        return Ok(None);
+    }
+    let scene = crate::scene::load(first).with_context(|| format!("loading {} to instance it", first.display()))?;
+    Ok(big_scene_copies(scene.len()).map(|c| (out.join("scenes").join(format!("{}-x{c}.glb", scene.name)), scene, c)))
 }
 
 /// A folder name from a device name: lower case letters, digits and single dashes.
@@ -110,7 +155,6 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         anyhow::ensure!(s.is_file(), "--scene {}: not a readable file", s.display());
     }
     crate::units::check_seconds("--budget", opts.budget_s).map_err(anyhow::Error::msg)?;
-    crate::rays::check_image_size(opts.width, opts.height).map_err(anyhow::Error::msg)?;
     // A folder named by --out is claimed (and refused when it is no folder, another run's, or
     // holds files without --resume or --force) before Vulkan is opened; the default one is
     // known only once the device is.
@@ -124,14 +168,35 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     };
     let start = Instant::now();
     let dev = choose_device(opts.device.as_deref())?;
+    let (width, height) =
+        (opts.width.unwrap_or(default_size(&dev.kind)), opts.height.unwrap_or(default_size(&dev.kind)));
+    crate::rays::check_image_size(width, height).map_err(anyhow::Error::msg)?;
     let out = opts.out.clone().unwrap_or_else(|| opts.reports.join(slug(&dev.name)));
     // Held to the end; each step's child locks the subfolder it writes (conformance/, sweep/).
     let _lock = match named {
         Some(l) => l,
         None => OutDir::claim(&out, "the report folder")?,
     };
-    let scenes: Vec<String> = opts.scenes.iter().map(|p| p.display().to_string()).collect();
-    let mut state = prepare(&out, opts, &dev, &scenes)?;
+    let big = big_scene(&dev, &out, &opts.scenes[0])?;
+    let mut scene_paths = opts.scenes.clone();
+    let mut big_note = None;
+    if let Some((path, scene, copies)) = &big {
+        scene_paths.insert(1, path.clone());
+        big_note = Some(format!(
+            "{}: {} instanced ×{copies} ({} triangles; `halftrace instance`), swept on a GPU to be past its caches",
+            crate::scene::scene_name(path),
+            scene.name,
+            scene.len() * copies
+        ));
+    }
+    let scenes: Vec<String> = scene_paths.iter().map(|p| p.display().to_string()).collect();
+    let mut state = prepare(&out, opts, &dev, &scenes, (width, height))?;
+    if let Some((path, scene, copies)) = big.filter(|(p, _, _)| !p.is_file()) {
+        say(&format!("instancing {} ×{copies} into {}", scene.name, path.display()));
+        std::fs::create_dir_all(out.join("scenes"))
+            .with_context(|| format!("creating {}", out.join("scenes").display()))?;
+        crate::fsx::write_atomic(&path, &crate::scene::instance::instanced_glb(&scene, copies, 1))?;
+    }
     for step in STEPS {
         if let Some(f) = missing(&state, &out, step) {
             say(&format!("{step} is recorded as finished but {f} is missing: it runs again"));
@@ -150,7 +215,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     }
     let first = scenes[0].clone();
     let size = |v: &mut Vec<String>| {
-        v.extend(["--width".into(), opts.width.to_string(), "--height".into(), opts.height.to_string()]);
+        v.extend(["--width".into(), width.to_string(), "--height".into(), height.to_string()]);
     };
     let runner = Steps { exe, out: &out };
 
@@ -219,8 +284,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     // The sweep gets what the budget has left, less a share for isa and the report; at least
     // one job runs (every report has a row).
     let isa_runs = dev.pipeline_statistics;
-    let cfg =
-        sweep::Config { scenes: opts.scenes.clone(), width: opts.width, height: opts.height, ..Default::default() };
+    let cfg = sweep::Config { scenes: scene_paths.clone(), width, height, ..Default::default() };
     let jobs = sweep::jobs::list(&cfg).len();
     if !finished(&state, &out, "sweep") {
         let reserve = if isa_runs { (opts.budget_s * 0.1).max(20.0) } else { 2.0 };
@@ -295,7 +359,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     }
     save(&out, &state)?;
     let rows = report::read_rows(&out.join("sweep")).unwrap_or_default();
-    let md = markdown(&state, &dev, &rows, &out, jobs);
+    let md = markdown(&state, &dev, &rows, &out, jobs, big_note.as_deref());
     crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
     Ok(Summary { out, state, seconds, sweep_rows: rows.len(), sweep_jobs: jobs })
 }

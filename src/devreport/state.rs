@@ -53,11 +53,18 @@ pub(super) const OWN: &[&str] = &[
     "logs",
     "conformance",
     "sweep",
+    "scenes",
 ];
 
 /// Checks the folder: new (absent or empty), a report of the same device and settings to
 /// resume, or one to replace; returns the state to continue from.
-pub(super) fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[String]) -> anyhow::Result<State> {
+pub(super) fn prepare(
+    out: &Path,
+    opts: &Options,
+    dev: &DeviceInfo,
+    scenes: &[String],
+    (width, height): (u32, u32),
+) -> anyhow::Result<State> {
     let fresh = State {
         device: dev.name.clone(),
         driver: dev.driver.clone(),
@@ -66,8 +73,8 @@ pub(super) fn prepare(out: &Path, opts: &Options, dev: &DeviceInfo, scenes: &[St
         version: env!("CARGO_PKG_VERSION").into(),
         commit: env!("HALFTRACE_COMMIT").into(),
         scenes: scenes.to_vec(),
-        width: opts.width,
-        height: opts.height,
+        width,
+        height,
         ..Default::default()
     };
     let entries = check_held(out, opts)?;

@@ -1,6 +1,7 @@
 //! The driver's own acceleration structures (VK_KHR_acceleration_structure, prefer fast
 //! trace) and the ray-query kernel that traces them (`rayQueryEXT`): the Vulkan side of the
-//! `rq` baseline. The BLAS holds the scene's triangles in `prim` order, non-indexed, so the
+//! `rq` baseline; the `rt` baseline traces the same structures with a ray-tracing pipeline
+//! ([`super::rt`]). The BLAS holds the scene's triangles in `prim` order, non-indexed, so the
 //! primitive index the query reports is the public `prim` id; one TLAS instance with the
 //! identity transform.
 
@@ -19,7 +20,7 @@ pub struct AccelScene<'g> {
     gpu: &'g Gpu,
     loader: ash::khr::acceleration_structure::Device,
     blas: vk::AccelerationStructureKHR,
-    tlas: vk::AccelerationStructureKHR,
+    pub(super) tlas: vk::AccelerationStructureKHR,
     _bufs: Vec<Buffer<'g>>,
     /// BLAS + TLAS bytes, from the driver's size query.
     pub bytes: u64,
@@ -33,10 +34,10 @@ fn aligned(b: &Buffer, align: u64) -> vk::DeviceAddress {
 
 impl<'g> AccelScene<'g> {
     pub fn build(gpu: &'g Gpu, scene: &Scene) -> Result<AccelScene<'g>, GpuError> {
-        if !gpu.info.ray_query {
+        if !gpu.info.ray_query && !gpu.info.ray_tracing_pipeline {
             return Err(GpuError::MissingFeature {
                 device: gpu.info.name.clone(),
-                feature: "VK_KHR_ray_query / VK_KHR_acceleration_structure".into(),
+                feature: "VK_KHR_acceleration_structure with ray queries or a ray-tracing pipeline to trace it".into(),
             });
         }
         let loader = ash::khr::acceleration_structure::Device::new(&gpu.instance, &gpu.device);
@@ -58,7 +59,7 @@ impl<'g> AccelScene<'g> {
         let input = vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR
             | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
         let verts: Vec<f32> = scene.tris.iter().flat_map(|t| t.iter().flat_map(|v| [v.x, v.y, v.z])).collect();
-        let vbuf = Buffer::upload_with(gpu, "rq vertices", bytemuck::cast_slice(&verts), input)?;
+        let vbuf = Buffer::upload_with(gpu, "accel vertices", bytemuck::cast_slice(&verts), input)?;
         let n = scene.tris.len() as u32;
         let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
             .vertex_format(vk::Format::R32G32B32_SFLOAT)
@@ -93,7 +94,7 @@ impl<'g> AccelScene<'g> {
                 std::mem::size_of::<vk::AccelerationStructureInstanceKHR>(),
             )
         };
-        let ibuf = Buffer::upload_with(gpu, "rq instance", inst_bytes, input)?;
+        let ibuf = Buffer::upload_with(gpu, "accel instance", inst_bytes, input)?;
         let inst_data = vk::AccelerationStructureGeometryInstancesDataKHR::default()
             .array_of_pointers(false)
             .data(vk::DeviceOrHostAddressConstKHR { device_address: ibuf.address() });
@@ -137,7 +138,7 @@ impl<'g> AccelScene<'g> {
         };
         let storage = Buffer::new(
             gpu,
-            &format!("rq {name}"),
+            &format!("accel {name}"),
             sizes.acceleration_structure_size,
             vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
             MemoryLocation::GpuOnly,
@@ -151,7 +152,7 @@ impl<'g> AccelScene<'g> {
         self._bufs.push(storage);
         let scratch = Buffer::new(
             gpu,
-            &format!("rq {name} scratch"),
+            &format!("accel {name} scratch"),
             sizes.build_scratch_size + align,
             vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
             MemoryLocation::GpuOnly,
@@ -173,10 +174,17 @@ impl<'g> AccelScene<'g> {
             let mb = [vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR)
                 .dst_access_mask(vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR)];
+            // The readers: the TLAS build, ray queries, and ray-tracing shaders (a stage that
+            // exists only where the feature was enabled).
+            let mut readers =
+                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR | vk::PipelineStageFlags::COMPUTE_SHADER;
+            if gpu.info.ray_tracing_pipeline {
+                readers |= vk::PipelineStageFlags::RAY_TRACING_SHADER_KHR;
+            }
             gpu.device.cmd_pipeline_barrier(
                 cmd,
                 vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
-                vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR | vk::PipelineStageFlags::COMPUTE_SHADER,
+                readers,
                 vk::DependencyFlags::empty(),
                 &mb,
                 &[],

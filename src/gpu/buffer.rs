@@ -27,6 +27,19 @@ impl<'g> Buffer<'g> {
         usage: vk::BufferUsageFlags,
         location: MemoryLocation,
     ) -> Result<Buffer<'g>, GpuError> {
+        Buffer::new_aligned(gpu, name, size, usage, location, 16)
+    }
+
+    /// [`Buffer::new`] whose start (and so device address) is a multiple of `align` bytes, a
+    /// power of two (at least 16).
+    fn new_aligned(
+        gpu: &'g Gpu,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+        align: u64,
+    ) -> Result<Buffer<'g>, GpuError> {
         let size = size.max(16);
         if usage.contains(vk::BufferUsageFlags::STORAGE_BUFFER) && size > gpu.info.max_storage_buffer {
             return Err(GpuError::TooBig {
@@ -56,7 +69,7 @@ impl<'g> Buffer<'g> {
         .vk("vkCreateBuffer")?;
         let mut req = unsafe { d.get_buffer_memory_requirements(raw) };
         // Kernels that read a buffer by address assume 16-byte alignment (buffer_reference_align).
-        req.alignment = req.alignment.max(16);
+        req.alignment = req.alignment.max(align.max(16));
         let alloc = gpu.allocator().lock().unwrap().allocate(&AllocationCreateDesc {
             name,
             requirements: req,
@@ -141,6 +154,21 @@ impl<'g> Buffer<'g> {
             off += n;
         }
         Ok(dst)
+    }
+
+    /// A host-visible buffer with `usage` holding `data`, its start a multiple of `align` bytes
+    /// (a power of two): small tables the device reads by address at an alignment of its own,
+    /// such as a shader binding table.
+    pub fn host_aligned(
+        gpu: &'g Gpu,
+        name: &str,
+        data: &[u8],
+        usage: vk::BufferUsageFlags,
+        align: u64,
+    ) -> Result<Buffer<'g>, GpuError> {
+        let mut b = Buffer::new_aligned(gpu, name, data.len() as u64, usage, MemoryLocation::CpuToGpu, align)?;
+        b.mapped_mut()?[..data.len()].copy_from_slice(data);
+        Ok(b)
     }
 
     /// The bytes of a host-visible buffer, writable.

@@ -173,7 +173,7 @@ impl Gpu {
     ) -> Result<Logical, GpuError> {
         let prio = [1.0f32];
         let qinfo = [vk::DeviceQueueCreateInfo::default().queue_family_index(qfi).queue_priorities(&prio)];
-        let (rq, bda) = (info.ray_query, info.buffer_device_address);
+        let (rq, rt, bda) = (info.ray_query, info.ray_tracing_pipeline, info.buffer_device_address);
         let v12_ok = info.spirv_minor >= 5;
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
@@ -186,16 +186,22 @@ impl Gpu {
         let mut sscf = vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true);
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
+        let mut rtf = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default().ray_tracing_pipeline(true);
         let mut pef =
             vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default().pipeline_executable_info(true);
         let base = vk::PhysicalDeviceFeatures::default().shader_float64(info.shader_float64);
         let mut exts: Vec<*const std::ffi::c_char> = Vec::new();
-        if rq {
+        if rq || rt {
             exts.extend([
                 ash::khr::acceleration_structure::NAME.as_ptr(),
-                ash::khr::ray_query::NAME.as_ptr(),
                 ash::khr::deferred_host_operations::NAME.as_ptr(),
             ]);
+        }
+        if rq {
+            exts.push(ash::khr::ray_query::NAME.as_ptr());
+        }
+        if rt {
+            exts.push(ash::khr::ray_tracing_pipeline::NAME.as_ptr());
         }
         if info.subgroup_size_control {
             exts.push(ash::ext::subgroup_size_control::NAME.as_ptr());
@@ -232,8 +238,14 @@ impl Gpu {
                 dinfo = dinfo.push_next(&mut bdaf);
             }
         }
+        if rq || rt {
+            dinfo = dinfo.push_next(&mut asf);
+        }
         if rq {
-            dinfo = dinfo.push_next(&mut asf).push_next(&mut rqf);
+            dinfo = dinfo.push_next(&mut rqf);
+        }
+        if rt {
+            dinfo = dinfo.push_next(&mut rtf);
         }
         if info.subgroup_size_control {
             dinfo = dinfo.push_next(&mut sscf);

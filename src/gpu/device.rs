@@ -22,6 +22,10 @@ pub struct DeviceInfo {
     /// shuffle relative, clustered, quad: bits 0..7).
     pub subgroup_ops: u32,
     pub ray_query: bool,
+    /// `VK_KHR_ray_tracing_pipeline` and `VK_KHR_acceleration_structure` with their
+    /// `rayTracingPipeline` and `accelerationStructure` features, and `bufferDeviceAddress`
+    /// (the shader binding table is read by address): the `rt` baseline runs.
+    pub ray_tracing_pipeline: bool,
     /// `bufferDeviceAddress`: kernels may read buffers through 64-bit addresses, which is how
     /// a scene whose buffers exceed `maxStorageBufferRange` is still traced.
     pub buffer_device_address: bool,
@@ -95,9 +99,11 @@ impl DeviceInfo {
             "storageBuffer16BitAccess" => self.storage_16bit = false,
             "shaderFloat64" => self.shader_float64 = false,
             "rayQuery" => self.ray_query = false,
+            "rayTracingPipeline" => self.ray_tracing_pipeline = false,
             "bufferDeviceAddress" => {
                 self.buffer_device_address = false;
                 self.ray_query = false;
+                self.ray_tracing_pipeline = false;
             }
             "subgroupClustered" => self.subgroup_ops &= !(1 << 6),
             "subgroupArithmetic" => self.subgroup_ops &= !((1 << 2) | (1 << 6)),
@@ -124,6 +130,7 @@ pub const MASKABLE: &[&str] = &[
     "storageBuffer16BitAccess",
     "shaderFloat64",
     "rayQuery",
+    "rayTracingPipeline",
     "bufferDeviceAddress",
     "subgroupSizeControl",
     "subgroupClustered",
@@ -151,16 +158,26 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
         let mut bdaf = vk::PhysicalDeviceBufferDeviceAddressFeatures::default();
         let mut asf = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
         let mut rqf = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
-        let rq_exts = minor >= 2
-            && has0(ash::khr::ray_query::NAME)
+        let mut rtf = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default();
+        // Acceleration structures (and so ray queries and ray-tracing pipelines) are asked
+        // about only on Vulkan 1.2 devices, where their SPIR-V 1.4+ shaders can run.
+        let as_exts = minor >= 2
             && has0(ash::khr::acceleration_structure::NAME)
             && has0(ash::khr::deferred_host_operations::NAME);
+        let rq_exts = as_exts && has0(ash::khr::ray_query::NAME);
+        let rt_exts = as_exts && has0(ash::khr::ray_tracing_pipeline::NAME);
         let (f64ok, shader_float16, storage_16bit, bda) = {
             let mut f2 = vk::PhysicalDeviceFeatures2::default();
             if minor >= 2 {
                 f2 = f2.push_next(&mut v11).push_next(&mut v12);
+                if as_exts {
+                    f2 = f2.push_next(&mut asf);
+                }
                 if rq_exts {
-                    f2 = f2.push_next(&mut asf).push_next(&mut rqf);
+                    f2 = f2.push_next(&mut rqf);
+                }
+                if rt_exts {
+                    f2 = f2.push_next(&mut rtf);
                 }
             } else {
                 if minor >= 1 || has0(ash::khr::_16bit_storage::NAME) {
@@ -190,7 +207,9 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
                 )
             }
         };
-        let rq_ok = rq_exts && asf.acceleration_structure == vk::TRUE && rqf.ray_query == vk::TRUE && bda;
+        let as_ok = asf.acceleration_structure == vk::TRUE && bda;
+        let rq_ok = rq_exts && as_ok && rqf.ray_query == vk::TRUE;
+        let rt_ok = rt_exts && as_ok && rtf.ray_tracing_pipeline == vk::TRUE;
         let mut sub = vk::PhysicalDeviceSubgroupProperties::default();
         let mut drv = vk::PhysicalDeviceDriverProperties::default();
         let mut p11 = vk::PhysicalDeviceMaintenance3Properties::default();
@@ -260,6 +279,7 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             subgroup_size: sub.subgroup_size,
             subgroup_ops: sub.supported_operations.as_raw(),
             ray_query: rq_ok,
+            ray_tracing_pipeline: rt_ok,
             buffer_device_address: bda,
             max_storage_buffer: props.limits.max_storage_buffer_range as u64,
             max_allocation: p11.max_memory_allocation_size,

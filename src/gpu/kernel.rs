@@ -5,7 +5,7 @@
 use super::buffer::Buffer;
 use super::bvh::GpuBvh;
 use super::pipeline::ComputePipeline;
-use super::timer::Timer;
+use super::timer::timed;
 use super::{shader, Gpu, GpuError};
 use crate::base::{Counters, Hit, Ray, RunOutput};
 use crate::interface::{binding, PushConstants, PRIM_OVERFLOW};
@@ -176,18 +176,7 @@ pub(crate) fn dispatch_timed(
     warmup: usize,
     repeat: usize,
 ) -> Result<Vec<f64>, GpuError> {
-    let timer = Timer::new(gpu)?;
-    let mut times = Vec::with_capacity(repeat);
-    for i in 0..(warmup + repeat).max(1) {
-        gpu.submit_and_wait(|cmd| {
-            timer.record(cmd, || pipe.dispatch(cmd, push, groups));
-            pipe.barrier(cmd);
-        })?;
-        if i >= warmup {
-            times.push(timer.elapsed_ms()?);
-        }
-    }
-    Ok(times)
+    timed(gpu, warmup, repeat, |cmd| pipe.dispatch(cmd, push, groups), |cmd| pipe.barrier(cmd))
 }
 
 /// The subgroup size a kernel's pipeline is pinned to: for the subgroup packet implementation,

@@ -4,8 +4,9 @@
 //! [`buffer`], [`shader`] (GLSL → SPIR-V, SPIR-V reading and patching, user-module checks),
 //! [`pipeline`] (the Vulkan compute pipeline object), [`timer`] (timestamp queries),
 //! [`bvh`] (a BVH resident on the device), [`kernel`] (a traversal kernel and its dispatch),
-//! [`support`] (what a device runs of each variant), [`error`] (what can go wrong, [`GpuError`]), [`accel`] (the driver's acceleration
-//! structures and ray queries) and [`arith`] (raw fp16/fp32 arithmetic rates).
+//! [`support`] (what a device runs of each variant), [`error`] (what can go wrong,
+//! [`GpuError`]), [`accel`] (the driver's acceleration structures and ray queries), [`rt`] (the
+//! driver's ray-tracing pipeline over them) and [`arith`] (raw fp16/fp32 arithmetic rates).
 
 pub mod accel;
 pub mod arith;
@@ -19,6 +20,7 @@ pub(crate) mod instance;
 pub mod kernel;
 pub mod null;
 pub mod pipeline;
+pub mod rt;
 pub mod shader;
 pub mod support;
 pub mod timer;

@@ -1,4 +1,5 @@
-//! Timestamp queries around a dispatch.
+//! Timestamp queries around a dispatch, and the timed repetition every traversal is measured
+//! by (kernels, ray queries, ray-tracing pipelines alike).
 
 use super::{Gpu, GpuError, VkResultExt};
 use ash::vk;
@@ -54,4 +55,28 @@ impl Drop for Timer<'_> {
         }
         unsafe { self.gpu.device.destroy_query_pool(self.pool, None) };
     }
+}
+
+/// Records `warmup + repeat` (at least one) submissions of `work`, each with timestamps around
+/// it and `after` (a barrier making its writes visible) behind them; returns the times of the
+/// last `repeat`, ms.
+pub(crate) fn timed(
+    gpu: &Gpu,
+    warmup: usize,
+    repeat: usize,
+    work: impl Fn(vk::CommandBuffer),
+    after: impl Fn(vk::CommandBuffer),
+) -> Result<Vec<f64>, GpuError> {
+    let timer = Timer::new(gpu)?;
+    let mut times = Vec::with_capacity(repeat);
+    for i in 0..(warmup + repeat).max(1) {
+        gpu.submit_and_wait(|cmd| {
+            timer.record(cmd, || work(cmd));
+            after(cmd);
+        })?;
+        if i >= warmup {
+            times.push(timer.elapsed_ms()?);
+        }
+    }
+    Ok(times)
 }

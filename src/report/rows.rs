@@ -65,7 +65,7 @@ pub struct Row {
     pub rays: String,
     pub ray_count: usize,
     pub layout: String,
-    /// f16h math mode (f16, f32, mixed); `f32` for the f32 layout, `n/a` for rq.
+    /// f16h math mode (f16, f32, mixed); `f32` for the f32 layout, `n/a` for a baseline.
     pub math: String,
     pub branching: usize,
     pub packet: usize,
@@ -97,9 +97,9 @@ pub struct Row {
     pub reanchors_per_ray: f64,
     pub packet_nodes_per_packet: f64,
     pub simd_utilisation: f64,
-    /// Node bytes of our BVH; for `rq`, the driver's acceleration-structure bytes.
+    /// Node bytes of our BVH; for `rq` and `rt`, the driver's acceleration-structure bytes.
     pub bvh_bytes: u64,
-    /// BVH build (binary SAH + collapse + encode) or, for `rq`, the driver's build, ms.
+    /// BVH build (binary SAH + collapse + encode) or, for `rq` and `rt`, the driver's build, ms.
     pub build_ms: f64,
     pub bytes_per_node: u64,
     pub triangle_bytes: u64,
@@ -152,8 +152,16 @@ pub fn layouts_in(rows: &[&Row]) -> Vec<&'static str> {
 }
 
 /// The files a sweep writes into its folder (besides per-layout images, [`is_output`]).
-pub const OUTPUTS: &[&str] =
-    &["results.csv", "results.json", "report.md", "headline.md", "device_arith.json", "device_bench.json", "render.png", "shard.json"];
+pub const OUTPUTS: &[&str] = &[
+    "results.csv",
+    "results.json",
+    "report.md",
+    "headline.md",
+    "device_arith.json",
+    "device_bench.json",
+    "render.png",
+    "shard.json",
+];
 /// The plots (each as `.png` and `.svg`); `schemes` is the old name of `layouts`.
 pub const PLOTS: &[&str] = &["ratio_vs_b", "ratio_vs_p", "mrays", "memory", "layouts", "schemes"];
 

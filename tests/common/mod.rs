@@ -99,9 +99,20 @@ pub fn encode(p: &Prepared, layout: LayoutId, b: usize) -> Encoded {
 /// along edges) is reported, not held to the bar: it measures whether the baseline's triangle
 /// test is watertight like ours. Each run is timed once after `warmup` untimed ones.
 pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::baseline::BaselineDevice, warmup: usize) {
+    baseline_agrees_with_f32_on(name, dev, warmup, &all_scenes());
+}
+
+/// [`baseline_agrees_with_f32`] on `scenes`. Where a ray disagrees it says how: a false miss
+/// (f32 hits, the baseline misses), a false hit, or another triangle hit at another t.
+pub fn baseline_agrees_with_f32_on(
+    name: &str,
+    dev: &dyn halftrace::baseline::BaselineDevice,
+    warmup: usize,
+    scenes: &[PathBuf],
+) {
     let (mut worst, mut grazing) = (1.0f64, (0usize, 0usize));
-    for path in all_scenes() {
-        let p = prepare(&path);
+    for path in scenes {
+        let p = prepare(path);
         let bs = dev.scene(&p.scene).unwrap();
         assert!(bs.bytes() > 0 && bs.build_ms() > 0.0, "{name}: no size or build time");
         let f = encode(&p, LayoutId::f32(), 4);
@@ -112,13 +123,17 @@ pub fn baseline_agrees_with_f32(name: &str, dev: &dyn halftrace::baseline::Basel
                 (rays.len(), 1),
                 "{name}: one hit per ray, one time per timed run"
             );
-            let a = halftrace::base::agreement(&out.hits, &f.reference_default(&rays).0);
+            let want = f.reference_default(&rays).0;
+            let a = halftrace::base::agreement(&out.hits, &want);
+            let false_hits = out.hits.iter().zip(&want).filter(|(g, w)| g.is_hit() && !w.is_hit()).count();
             eprintln!(
-                "{} {kind}: {name} agrees with f32 on {:.4}% of {} rays ({} false misses)",
+                "{} {kind}: {name} agrees with f32 on {:.4}% of {} rays ({} false misses, {false_hits} false hits, {} \
+                 other triangles)",
                 p.scene.name,
                 100.0 * a.rate(),
                 a.total,
-                a.false_misses
+                a.false_misses,
+                a.total - a.agree - a.false_misses - false_hits
             );
             if kind == "grazing" {
                 grazing.0 += a.agree;

@@ -1,4 +1,4 @@
-//! Baselines (`rq`), a kernel that never ends, and `halftrace bench`.
+//! Baselines (`rq`, `rt`), a kernel that never ends, and `halftrace bench`.
 
 use super::*;
 
@@ -20,6 +20,104 @@ fn ray_query_baseline_agrees_with_f32_on_every_scene() {
     baseline_agrees_with_f32("rq", dev.as_ref(), 0);
     drop(dev);
     clean(&g);
+}
+
+/// The driver's ray-tracing pipeline (baseline `rt`: the acceleration structure rq traces,
+/// `traceRayEXT` from a ray-generation shader) against the f32 reference, held to rq's bar on
+/// four scenes that stress a triangle test (the bundled teapot; the Cornell box's axis-aligned
+/// walls; the pine's thin overlapping cards; the stadium's five orders of magnitude), and ray
+/// for ray against rq (reported: the same driver, so the same triangle test, but a driver may
+/// trace the two differently).
+#[test]
+fn ray_tracing_pipeline_baseline_agrees_with_f32() {
+    let g = gpu();
+    let id = |n: &str| halftrace::baseline::BaselineId::parse(n).unwrap_or_else(|| panic!("{n} is a baseline")).imp();
+    let (rt, rq) = (id("rt"), id("rq"));
+    assert!(
+        rt.unavailable(&g.info).is_none(),
+        "{} has no ray-tracing pipelines; lavapipe from Mesa >= 25 has them (scripts/install-deps.sh)",
+        g.info.name
+    );
+    let dev = rt.prepare(&g).unwrap();
+    let scenes: Vec<PathBuf> = ["teapot.obj", "cornell_box.obj", "smallpine.obj", "teapot_in_stadium.obj"]
+        .iter()
+        .map(|s| scene_path(s))
+        .collect();
+    baseline_agrees_with_f32_on("rt", dev.as_ref(), 0, &scenes);
+    let q = rq.prepare(&g).unwrap();
+    let p = prepare(&scenes[0]);
+    let (a, b) = (dev.scene(&p.scene).unwrap(), q.scene(&p.scene).unwrap());
+    for (kind, rays) in ray_sets(&p, 32, 500) {
+        let (x, y) = (a.run(&rays, 0, 1).unwrap().hits, b.run(&rays, 0, 1).unwrap().hits);
+        let same = x.iter().zip(&y).filter(|(x, y)| x.same_bits(y)).count();
+        eprintln!("teapot {kind}: rt's hits equal rq's, bit for bit, on {same} of {} rays", rays.len());
+    }
+    drop((a, b, dev, q));
+    clean(&g);
+}
+
+/// `--mask-feature rayTracingPipeline` hides `rt` (one skipped line, naming why) and nothing
+/// else; the device still opens, with the validation layer silent.
+#[test]
+fn masking_the_ray_tracing_pipeline_skips_rt() {
+    let opts =
+        ContextOptions { mask_features: vec!["rayTracingPipeline".into()], validation: true, ..Default::default() };
+    let g = Gpu::new(&opts).unwrap();
+    let b = |n: &str| halftrace::baseline::BaselineId::parse(n).unwrap().imp();
+    assert!(b("rt").unavailable(&g.info).is_some_and(|why| why.contains("VK_KHR_ray_tracing_pipeline")));
+    assert!(b("rq").unavailable(&g.info).is_none(), "rq still runs");
+    clean(&g);
+    let (ok, out, err) = cli(&["devices", "--device", "0", "--mask-feature", "rayTracingPipeline"]);
+    assert!(ok, "{err}");
+    let line = out.lines().find(|l| l.trim_start().starts_with("rt ")).unwrap_or_else(|| panic!("no rt line:\n{out}"));
+    assert!(line.contains("skipped: ") && line.contains("rayTracingPipeline"), "{line}");
+    let (ok, out, _) = cli(&["devices", "--device", "0"]);
+    assert!(ok && out.lines().any(|l| l.trim_start().starts_with("rt ") && l.trim_end().ends_with("runs")), "{out}");
+}
+
+/// A small sweep with both driver baselines: one `rt` row per ray kind, validated against f32
+/// (agreement recorded), and the report's and the device headline's comparisons with it.
+#[test]
+fn ray_tracing_pipeline_rows_in_a_sweep() {
+    let out = tmp("rt-sweep");
+    let _ = std::fs::remove_dir_all(&out);
+    let scene = repo("scenes/teapot.obj");
+    let (ok, _, err) = cli(&[
+        "sweep",
+        "--quiet",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--layouts",
+        "f32,rq,rt",
+        "--branchings",
+        "4",
+        "--packets",
+        "1",
+        "--layout-branchings",
+        "4",
+        "--rays",
+        "primary,ao",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--repeat",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let rows = halftrace::report::read_rows(&out).unwrap();
+    let rt: Vec<_> = rows.iter().filter(|r| r.layout == "rt").collect();
+    assert_eq!(rt.len(), 2, "{rows:?}");
+    for r in &rt {
+        assert!(r.status.is_ok() && r.kernel == "trav_rt", "{r:?}");
+        assert!(r.mrays_median > 0.0 && r.bvh_bytes > 0, "{r:?}");
+    }
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("## Against `rt`") && md.contains("÷ rt"), "no comparison with rt in report.md");
+    let head = halftrace::report::tables::device_headline(&rows);
+    assert!(head.contains("f32 (B = 4) ÷ `rt`") && head.contains("f32 (B = 4) ÷ `rq`"), "{head}");
 }
 
 /// The baseline writes the image, rays and hits it is asked for, like every layout.

@@ -104,15 +104,27 @@ pub fn compile_user(path: &Path, k: &KernelId, dev: DeviceBuild) -> Result<Vec<u
     Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
 }
 
-/// Compiles a shared kernel without a layout (`trav_rq.comp`, `arith.comp`), with defines.
+/// Compiles a shared kernel without a layout (`trav_rq.comp`, `arith.comp`, the ray-tracing
+/// stages `trav_rt.rgen`, `.rchit`, `.rmiss`), with defines.
 pub fn compile_plain(name: &str, file: &str, defines: &[(String, String)]) -> Result<Vec<u32>, GpuError> {
     let src = source(file)
         .ok_or_else(|| GpuError::Compile { variant: name.into(), log: format!("missing source {file}") })?;
     compile_source(name, file, src, defines, &Includes::plain(), 5)
 }
 
-/// Compiles GLSL compute source with defines into SPIR-V 1.`spirv_minor` (5: for Vulkan 1.2;
-/// 3: Vulkan 1.1; 0: Vulkan 1.0); `#include`s resolve through `inc`.
+/// The shader stage of a source file, by its extension.
+fn stage(file: &str) -> shaderc::ShaderKind {
+    match Path::new(file).extension().and_then(|e| e.to_str()) {
+        Some("rgen") => shaderc::ShaderKind::RayGeneration,
+        Some("rchit") => shaderc::ShaderKind::ClosestHit,
+        Some("rmiss") => shaderc::ShaderKind::Miss,
+        _ => shaderc::ShaderKind::Compute,
+    }
+}
+
+/// Compiles GLSL source with defines into SPIR-V 1.`spirv_minor` (5: for Vulkan 1.2; 3: Vulkan
+/// 1.1; 0: Vulkan 1.0); `#include`s resolve through `inc`. The stage is the file's extension's
+/// (glslang's: `.rgen`, `.rchit`, `.rmiss`), compute for anything else.
 pub fn compile_source(
     name: &str,
     file: &str,
@@ -139,7 +151,7 @@ pub fn compile_source(
         inc.resolve(req).map(|content| shaderc::ResolvedInclude { resolved_name: req.to_string(), content })
     });
     let art = compiler
-        .compile_into_spirv(src, shaderc::ShaderKind::Compute, file, "main", Some(&opts))
+        .compile_into_spirv(src, stage(file), file, "main", Some(&opts))
         .map_err(|e| compile_err(e.to_string()))?;
     Ok(art.as_binary().to_vec())
 }

@@ -41,7 +41,7 @@ pub fn every_row(rows: &[Row]) -> String {
         "## Every variant\n\n",
         "Float controls `on`: the kernel declares round-to-nearest-even and inf/NaN preservation and matches its ",
         "CPU reference bit for bit; `off`: a build whose hits stay exact without them (used on devices that lack ",
-        "them, or forced with `--float-controls off`). For baselines (`rq`, `embree`), B, P and the work counters ",
+        "them, or forced with `--float-controls off`). For baselines (`rq`, `rt`, `embree`), B, P and the work counters ",
         "do not apply, and for user kernels that do not count, the work counters are not measured (both shown as ",
         "–); a baseline's bytes are its own acceleration structures. ≠ f32 counts rays that hit where f32 misses or ",
         "the reverse, or hit another triangle at a t more than 1e-5 (relative) away.\n\n",
