@@ -2,7 +2,9 @@
 # Proves a bundle (scripts/bundle.sh) runs where nothing is installed: builds a root holding
 # only glibc, bash and a Vulkan driver (lavapipe and its own libraries, the stand-in for a GPU
 # driver the container runtime mounts), copies the bundle in, and runs `halftrace devices`
-# and `halftrace device-report` there with an empty environment (env -i). No Vulkan loader,
+# and `halftrace device-report` there with an empty environment (env -i), then `devices` again
+# with the driver's manifest only at NVIDIA's container path (/usr/local/nvidia/share/vulkan/
+# icd.d/nvidia_icd.json), which env.sh must find. No Vulkan loader,
 # no glvnd, no Embree, no TBB, no validation layer exist in that root but the bundle's.
 # Needs root (chroot). Usage: sudo bash scripts/check-bundle.sh [BUNDLE] [BUDGET]
 # (BUNDLE default target/gpu-bundle, BUDGET default 1s: one sweep job). Prints what it ran.
@@ -48,6 +50,14 @@ echo "== env -i: source env.sh; halftrace devices"
 run 'cd /bundle && source ./env.sh && echo "LD_LIBRARY_PATH=$LD_LIBRARY_PATH" && halftrace devices'
 echo "== env -i: bash run-report.sh $budget /tmp/out --width 16 --height 16"
 run "cd /bundle && bash run-report.sh $budget /tmp/out --width 16 --height 16"
+echo "== the driver's own manifest where a container runtime mounts NVIDIA's: lavapipe's manifest moved"
+echo "   to /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json, none where the loader looks by itself"
+mkdir -p "$root/usr/local/nvidia/share/vulkan/icd.d"
+mv "$root/usr/share/vulkan/icd.d/lvp_icd.json" "$root/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json"
+run 'cd /bundle && source ./env.sh && echo "VK_DRIVER_FILES=$VK_DRIVER_FILES" && halftrace devices' | tee "$root/tmp/fake.txt"
+grep -q '^VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json$' "$root/tmp/fake.txt" &&
+  grep -q llvmpipe "$root/tmp/fake.txt" || { echo "check-bundle: env.sh did not find the driver's manifest" >&2; exit 1; }
+mv "$root/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json" "$root/usr/share/vulkan/icd.d/lvp_icd.json"
 echo "== what it wrote (the report's first lines)"
 ls "$root"/tmp/out/reports/*/
 head -20 "$root"/tmp/out/reports/*/report.md
