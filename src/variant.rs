@@ -177,7 +177,25 @@ impl Variant {
         v
     }
 
-    /// Preprocessor definitions of this variant's kernel on a device offering `dev`.
+    /// Preprocessor definitions of this variant's kernel on a device offering `dev` — every
+    /// define a kernel is built with, listed here once (`glsl/trav.comp` points here):
+    ///
+    /// - `B`, `P`: branching factor and packet size; `WG`: the workgroup size;
+    ///   `STACK_SIZE`: the stack's entries ([`stack_entries`]).
+    /// - `MATH_F16`, `MATH_F32` or `MATH_MIXED`: the math mode of the box tests.
+    /// - `DEFER_ENTRIES` with `GROUPS` ([`stack_groups`]): the stack of one group per visit
+    ///   (`glsl/stack_groups.glsl`) instead of an entry per child (`stack_entries.glsl`).
+    /// - `PACKET_SUBGROUP` or `PACKET_HYBRID`: a packet's reductions in a subgroup, or a
+    ///   subgroup then shared memory; neither: shared memory (`glsl/packet.glsl`).
+    /// - `STATS`: the kernel writes the work counters.
+    /// - `HAS_F64`: the device has fp64 (the triangle test's exact edge functions use it).
+    /// - `HALF_WORDS`: no 16-bit storage; fp16 values are read from 32-bit words.
+    /// - `FC_OFF`: the build without float controls (exact without RTE and inf/NaN
+    ///   preservation).
+    /// - `ADDRESSED`: buffers by device address instead of bindings.
+    ///
+    /// A layout's hooks may add their own (`TEST_PAIRS`: `glsl/children.glsl` tests two
+    /// children at once); the generated `interface.glsl` spells the Rust constants.
     pub fn defines(&self, imp: PacketImpl, stats: bool, dev: DeviceBuild) -> Vec<(String, String)> {
         let mut d = vec![
             ("B".to_string(), self.branching.to_string()),
