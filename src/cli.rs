@@ -348,7 +348,7 @@ pub struct IsaArgs {
     /// GPU families and models, comma-separated. AMD through RADV's null devices (e.g.
     /// navi31,navi21,vega10); other vendors through Mesa's drm-shims, once
     /// scripts/install-compilers.sh has built them: a618,a660,a740,a750 (Qualcomm Adreno),
-    /// g52,g610 (Arm Mali), tgl,dg2,mtl,lnl,bmg (Intel), tu102,ga102,ad102 (NVIDIA),
+    /// g52,g610 (Arm Mali), tgl,dg2,mtl,lnl,bmg (Intel), tu102,ga102 (NVIDIA),
     /// v3d-42,v3d-71 (Broadcom). `vendors`: every model of the other vendors; `all`: every AMD
     /// family the installed RADV knows and every model. Default, without --device: polaris10,
     /// vega10, navi10, navi21, navi31, gfx1201 (GCN4 to RDNA4).

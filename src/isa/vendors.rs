@@ -115,7 +115,6 @@ pub const MODELS: &[Model] = &[
     m("bmg", "Intel Arc B-series (Battlemage)", "Xe2", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "bmg")]),
     m("tu102", "NVIDIA TU102", "Turing", Driver::Nvk, &[("NOUVEAU_CHIPSET", "162")]),
     m("ga102", "NVIDIA GA102", "Ampere", Driver::Nvk, &[("NOUVEAU_CHIPSET", "172")]),
-    m("ad102", "NVIDIA AD102", "Ada", Driver::Nvk, &[("NOUVEAU_CHIPSET", "192")]),
     m("v3d-42", "VideoCore VI (V3D 4.2)", "V3D 4.2 (Raspberry Pi 4)", Driver::V3dv, &[("V3D_GPU_ID", "42")]),
     m("v3d-71", "VideoCore VII (V3D 7.1)", "V3D 7.1 (Raspberry Pi 5)", Driver::V3dv, &[("V3D_GPU_ID", "71")]),
 ];

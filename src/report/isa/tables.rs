@@ -309,14 +309,17 @@ pub fn plot(rows: &[IsaRow], out: &Path) -> anyhow::Result<()> {
 pub fn headline(rows: &[IsaRow]) -> String {
     let rows = sorted(rows);
     let ok: Vec<&IsaRow> = rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && r.branching == 4).collect();
+    // A kernel's label without the float-control mode: a device without float controls (Mali,
+    // VideoCore) shows its build without them, marked.
+    let base = |r: &IsaRow| r.label().trim_end_matches(" fc off").to_string();
     let mut devices: Vec<String> = Vec::new();
     let mut kernels: Vec<(usize, String)> = Vec::new();
     for r in &ok {
         if !devices.contains(&r.device_label()) {
             devices.push(r.device_label());
         }
-        if r.float_controls != "off" && !kernels.iter().any(|k| k.1 == r.label()) {
-            kernels.push((order(&r.layout), r.label()));
+        if !kernels.iter().any(|k| k.1 == base(r)) {
+            kernels.push((order(&r.layout), base(r)));
         }
     }
     kernels.sort();
@@ -327,8 +330,8 @@ pub fn headline(rows: &[IsaRow]) -> String {
         "## Compiler view, B = 4, P = 1: registers per thread / private bytes per thread / occupancy\n\n\
          Each vendor's production compiler without its GPU (RADV null devices, Mesa's drm-shims; nothing ran). \
          Occupancy in the vendor's unit (waves per SIMD, waves per core, threads, warps per SM, QPU threads); \
-         – where the driver does not say or the device cannot build the kernel (no shaderFloat16). More in \
-         [isa.md](isa.md).\n\n| device | {} |\n|---|{}\n",
+         – where the driver does not say or the device cannot build the kernel (no shaderFloat16); † the build \
+         without float controls (the device has none). More in [isa.md](isa.md).\n\n| device | {} |\n|---|{}\n",
         kernels.iter().map(|k| k.1.as_str()).collect::<Vec<_>>().join(" | "),
         "---:|".repeat(kernels.len())
     );
@@ -336,9 +339,17 @@ pub fn headline(rows: &[IsaRow]) -> String {
         let cells: Vec<String> = kernels
             .iter()
             .map(|(_, label)| {
-                ok.iter()
-                    .find(|r| r.device_label() == *d && r.label() == *label)
+                let of = |fc: &str| {
+                    ok.iter().find(|r| {
+                        r.device_label() == *d && base(r) == *label && (r.float_controls == "off") == (fc == "off")
+                    })
+                };
+                of("on")
                     .map(|r| format!("{} / {} / {}", num(r.registers), num(r.private_bytes), num(r.occupancy)))
+                    .or_else(|| {
+                        of("off")
+                            .map(|r| format!("{} / {} / {}†", num(r.registers), num(r.private_bytes), num(r.occupancy)))
+                    })
                     .unwrap_or_else(|| "–".into())
             })
             .collect();
