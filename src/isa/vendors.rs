@@ -13,6 +13,7 @@
 use super::Build;
 use crate::base::Status;
 use crate::report::isa::IsaRow;
+use anyhow::Context as _;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -219,6 +220,14 @@ pub fn run_model(exe: &Path, m: &Model, dir: &Path, args: &[String], builds: &[B
     }
     let status = child.wait()?;
     let stderr = reader.join().unwrap_or_default();
+    // The driver's own printout (IR3_SHADER_DEBUG, INTEL_DEBUG, NAK_DEBUG, …) kept for
+    // checking the statistics against: HALFTRACE_DRIVER_STDERR=DIR writes DIR/<model>.txt.
+    if let Some(d) = std::env::var_os("HALFTRACE_DRIVER_STDERR").map(std::path::PathBuf::from) {
+        let p = d.join(format!("{}.txt", m.name));
+        std::fs::create_dir_all(&d)
+            .and_then(|_| std::fs::write(&p, &stderr))
+            .with_context(|| format!("HALFTRACE_DRIVER_STDERR: writing {}", p.display()))?;
+    }
     attach_estimates(&mut rows, &stderr);
     let mut note = None;
     if !status.success() {
