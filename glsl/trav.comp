@@ -32,8 +32,9 @@
 #include "layout.glsl"
 #include "packet.glsl"
 
-// What a ray's traversal counts (the Counters it writes, with the packet's two).
-struct Counts { uint nodes; uint box_tests; uint tri_tests; uint reanchors; };
+// What a ray's traversal counts (the Counters it writes, with the packet's two). `visits`, not
+// `nodes`: with ADDRESSED, ray.glsl defines `nodes` as a macro.
+struct Counts { uint visits; uint box_tests; uint tri_tests; uint reanchors; };
 
 #include "children.glsl"
 #ifdef DEFER_ENTRIES
@@ -46,7 +47,7 @@ struct Counts { uint nodes; uint box_tests; uint tri_tests; uint reanchors; };
 void write_counters(uint i, Counts c, uint pnodes, uint asum) {
 #ifdef STATS
     bool first = packet_lane() == 0u;
-    counters[i] = Counters(c.nodes, c.box_tests, c.tri_tests, c.reanchors, first ? pnodes : 0u, first ? asum : 0u);
+    counters[i] = Counters(c.visits, c.box_tests, c.tri_tests, c.reanchors, first ? pnodes : 0u, first ? asum : 0u);
 #endif
 }
 
@@ -86,7 +87,7 @@ void main() {
             if (nact != 0u) {
                 pnodes++;
                 asum += nact;
-                if (act) c.nodes++;
+                if (act) c.visits++;
                 // Leaves in slot order, by the rays that hit them (any order gives the same
                 // closest hit, ties going to the lower prim, and the same counters); inner
                 // children nearest first, through the stack.
