@@ -195,20 +195,26 @@ impl<'g> ComputePipeline<'g> {
 
     /// A barrier making shader writes visible to transfers and later dispatches.
     pub fn barrier(&self, cmd: vk::CommandBuffer) {
-        let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(
-            vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-        )];
-        unsafe {
-            self.gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::DependencyFlags::empty(),
-                &mb,
-                &[],
-                &[],
-            );
-        }
+        shader_write_barrier(self.gpu, cmd, vk::PipelineStageFlags::COMPUTE_SHADER);
+    }
+}
+
+/// A barrier making the writes of shaders in `stage` (compute, ray tracing) visible to
+/// transfers and to later work in the same stage.
+pub(crate) fn shader_write_barrier(gpu: &Gpu, cmd: vk::CommandBuffer, stage: vk::PipelineStageFlags) {
+    let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(
+        vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+    )];
+    unsafe {
+        gpu.device.cmd_pipeline_barrier(
+            cmd,
+            stage,
+            vk::PipelineStageFlags::TRANSFER | stage,
+            vk::DependencyFlags::empty(),
+            &mb,
+            &[],
+            &[],
+        );
     }
 }
 

@@ -245,20 +245,7 @@ impl<'g> RtPipeline<'g> {
     /// A barrier making the ray-generation stage's writes visible to transfers and later
     /// launches.
     fn barrier(&self, cmd: vk::CommandBuffer) {
-        let mb = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(
-            vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-        )];
-        unsafe {
-            self.gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::RAY_TRACING_SHADER_KHR,
-                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::RAY_TRACING_SHADER_KHR,
-                vk::DependencyFlags::empty(),
-                &mb,
-                &[],
-                &[],
-            );
-        }
+        super::pipeline::shader_write_barrier(self.gpu, cmd, vk::PipelineStageFlags::RAY_TRACING_SHADER_KHR);
     }
 }
 
