@@ -8,13 +8,12 @@
 //! table naming any failing variant, ray and both results.
 
 use crate::base::Status;
-use crate::bvh::BRANCHINGS;
-use crate::gpu::{self, support, Gpu, Source};
+use crate::gpu::{self, support, Gpu};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::rays::{RayKind, RayParams};
-use crate::runner::{KernelTarget, Plan, RaySpec, Runner, Target};
-use crate::variant::{PacketImpl, Variant, PACKETS};
+use crate::runner::{Plan, RaySpec, Runner, Target};
+use crate::variant::{self, KernelId, KernelSpec, Matrix, PacketImpl, Variant};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -63,26 +62,22 @@ impl Outcome {
     }
 }
 
-/// The kernels to check on a device, in run order. Full: every layout × math × float-control
-/// build the layout has × B × P, each packet size in every implementation the device can run.
-/// Quick: per layout, every B at P = 1 in the default math, every other math once, every P at
-/// B = 4 (the math modes in turn), shared memory and the device's own implementation at every
-/// P the subgroup holds (subgroup, or hybrid without clustered operations), and the
-/// build without float controls in every math mode at P = 1 and in a packet where the layout
-/// has one. On a device without the float controls a kernel declares, its build without them
-/// is checked in its place where the layout has one (so a device like SwiftShader checks f32 at
-/// every B and P, not only the two builds without float controls of the quick set).
-pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
-    let mut out: Vec<(Variant, PacketImpl)> = Vec::new();
-    // Every implementation the device can run at P; in the quick set, packets a subgroup
-    // holds check shared memory and subgroups, larger ones the device's default (hybrid
-    // where it has subgroup arithmetic), so each implementation is covered once per layout.
-    let imps = |p: usize| -> Vec<PacketImpl> {
+/// The kernels to check on a device, in run order (each exactly: float controls and packet
+/// implementation as given): [`Matrix::Full`] or, quick, [`Matrix::Cover`], each packet size in
+/// the implementations the device can run. In the quick set, packets a subgroup holds check
+/// shared memory and the device's own implementation (subgroup, or hybrid without clustered
+/// operations), larger ones the device's default, so each implementation is covered once per
+/// layout. Float controls on are asked for as auto: on a device without the float controls a
+/// kernel declares, its build without them is checked in its place where the layout has one
+/// (so a device like SwiftShader checks f32 at every B and P, not only the two builds without
+/// float controls of the quick set).
+pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<KernelSpec> {
+    let imps = |p: usize| -> Vec<Option<PacketImpl>> {
         let plan = support::packet_plan(info, p).0;
         let hybrid = support::has_subgroup_arithmetic(info);
         // A subgroup holds the packet, but the device lacks clustered operations: hybrid.
         let held = support::subgroup_holds(info, p);
-        match plan {
+        let imps = match plan {
             PacketImpl::Single => vec![PacketImpl::Single],
             PacketImpl::Subgroup if quick => vec![PacketImpl::Shared, PacketImpl::Subgroup],
             PacketImpl::Subgroup if hybrid => vec![PacketImpl::Shared, PacketImpl::Subgroup, PacketImpl::Hybrid],
@@ -91,59 +86,26 @@ pub fn plan(info: &gpu::DeviceInfo, quick: bool) -> Vec<(Variant, PacketImpl)> {
             PacketImpl::Hybrid if quick => vec![PacketImpl::Hybrid],
             PacketImpl::Hybrid => vec![PacketImpl::Shared, PacketImpl::Hybrid],
             PacketImpl::Shared => vec![PacketImpl::Shared],
-        }
-    };
-    for layout in LayoutId::all() {
-        let maths = layout.info().maths;
-        let fcs: Vec<FloatControls> = if layout.info().float_controls_off {
-            vec![FloatControls::On, FloatControls::Off]
-        } else {
-            vec![FloatControls::On]
         };
-        if quick {
-            for b in BRANCHINGS {
-                out.push((Variant::new(layout, b, 1), PacketImpl::Single));
-            }
-            for (i, &m) in maths.iter().enumerate().skip(1) {
-                out.push((Variant::new(layout, BRANCHINGS[i % BRANCHINGS.len()], 1).with_math(m), PacketImpl::Single));
-            }
-            for (j, p) in PACKETS.into_iter().filter(|&p| p > 1).enumerate() {
-                let v = Variant::new(layout, 4, p).with_math(maths[j % maths.len()]);
-                out.extend(imps(p).into_iter().map(|imp| (v, imp)));
-            }
-            if fcs.contains(&FloatControls::Off) {
-                for (i, &m) in maths.iter().enumerate() {
-                    out.push((
-                        Variant::new(layout, BRANCHINGS[(i + 1) % BRANCHINGS.len()], 1)
-                            .with_math(m)
-                            .with_fc(FloatControls::Off),
-                        PacketImpl::Single,
-                    ));
-                }
-                let v = Variant::new(layout, 8, 8).with_math(maths[maths.len() - 1]).with_fc(FloatControls::Off);
-                out.extend(imps(8).into_iter().map(|imp| (v, imp)));
-            }
-        } else {
-            for &m in maths {
-                for &fc in &fcs {
-                    for b in BRANCHINGS {
-                        for p in PACKETS {
-                            let v = Variant::new(layout, b, p).with_math(m).with_fc(fc);
-                            out.extend(imps(p).into_iter().map(|imp| (v, imp)));
-                        }
-                    }
-                }
-            }
-        }
-    }
+        imps.into_iter().map(Some).collect()
+    };
+    let m = if quick { Matrix::Cover } else { Matrix::Full };
     let mut seen = std::collections::HashSet::new();
-    out.into_iter()
-        .map(|(v, imp)| match v.fc {
-            // Auto: the build with float controls where the device runs it, else the one without.
-            FloatControls::On => (support::resolve(info, v, FcChoice::Auto).unwrap_or(v), imp),
-            FloatControls::Off => (v, imp),
+    variant::matrix(m, &imps)
+        .into_iter()
+        .map(|k| {
+            let imp = k.imp.unwrap_or(PacketImpl::Single);
+            let v = match k.fc {
+                // On or auto: the build with float controls where the device runs it, else
+                // the one without.
+                FcChoice::On | FcChoice::Auto => {
+                    support::resolve(info, k.variant, FcChoice::Auto).unwrap_or(k.variant.with_fc(FloatControls::On))
+                }
+                FcChoice::Off => k.variant.with_fc(FloatControls::Off),
+            };
+            KernelSpec::exact(v, imp)
         })
-        .filter(|k| seen.insert(*k))
+        .filter(|k| seen.insert(k.clone()))
         .collect()
 }
 
@@ -160,11 +122,7 @@ fn ray_specs(quick: bool) -> Vec<RaySpec> {
 /// The kernel target of a check: its variant with its float controls as given, in its packet
 /// implementation.
 fn target(c: &Check) -> Target {
-    let fc = match c.variant.fc {
-        FloatControls::On => FcChoice::On,
-        FloatControls::Off => FcChoice::Off,
-    };
-    Target::Kernel(KernelTarget { variant: c.variant, fc, imp: Some(c.imp), source: Source::Builtin })
+    Target::Kernel(KernelSpec::exact(c.variant, c.imp))
 }
 
 /// Runs the checks; `progress` gets a line as each scene finishes.
@@ -179,8 +137,10 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
     })?;
     let mut checks: Vec<Check> = plan(&g.info, opts.quick)
         .into_iter()
-        .map(|(variant, imp)| {
-            let status = support::check(&g.info, &variant).err().map_or(Status::Ok, Status::Skipped);
+        .map(|k| {
+            let (variant, imp) = (k.variant, k.imp.expect("planned exactly"));
+            let status =
+                support::admit(&g.info, &KernelId::new(variant, imp, false)).err().map_or(Status::Ok, Status::Skipped);
             Check { variant, imp, status, rays: 0, counter_diffs: 0, secs: 0.0 }
         })
         .collect();

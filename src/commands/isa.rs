@@ -112,7 +112,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         }
     });
     let matrix = match (a.quick, a.full) {
-        (true, _) => Matrix::Quick,
+        (true, _) => Matrix::Layouts,
         (_, true) => Matrix::Full,
         _ => Matrix::Default,
     };
@@ -196,8 +196,8 @@ pub fn probe_family() -> anyhow::Result<()> {
 /// process has, one JSON row per line on stdout (read by `isa`, `isa::vendors::run_model`).
 pub fn isa_model(a: &crate::cli::IsaModelArgs) -> anyhow::Result<()> {
     let m = isa::vendors::model(&a.model).ok_or_else(|| anyhow::anyhow!("--model {}: no such model", a.model))?;
-    let matrix =
-        Matrix::parse(&a.matrix).ok_or_else(|| anyhow::anyhow!("--matrix {}: quick, default or full", a.matrix))?;
+    let matrix = Matrix::parse(&a.matrix)
+        .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default or full", a.matrix))?;
     let messages = isa::run_model_here(&m, &isa::plan(matrix, &a.layouts), a.validation, a.disasm.as_deref())?;
     anyhow::ensure!(
         messages.is_empty(),

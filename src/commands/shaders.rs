@@ -2,15 +2,15 @@
 
 use super::outln;
 use crate::gpu::shader;
-use crate::variant::{spirv_matrix, DeviceBuild, KernelId};
+use crate::variant::{spirv_kernels, DeviceBuild};
 use anyhow::Context;
 use std::path::Path;
 
 pub fn shaders(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    for (v, imp) in spirv_matrix() {
+    for k in spirv_kernels() {
         for stats in [false, true] {
-            let k = KernelId::new(v, imp, stats);
+            let k = k.with_stats(stats);
             let code = shader::compile(&k, DeviceBuild::FULL)?;
             let p = dir.join(format!("{k}.spv"));
             std::fs::write(&p, bytemuck::cast_slice(&code)).with_context(|| format!("writing {}", p.display()))?;

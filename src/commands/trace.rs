@@ -6,13 +6,13 @@ use crate::base::Status;
 use crate::base::{agreement, mean_counters, simd_utilisation, Counters, Hit};
 use crate::baseline::BaselineId;
 use crate::cli::{Backend, LayoutArg, TraceArgs};
-use crate::gpu::{self, Gpu, Source};
+use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::rays::{RayKind, RayParams};
 use crate::runner::measure::compare;
-use crate::runner::{KernelTarget, Measurement, Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
-use crate::variant::{Buffers, Variant, PACKETS};
+use crate::runner::{Measurement, Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
+use crate::variant::{Buffers, KernelSpec, Source, Variant, PACKETS};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -132,15 +132,12 @@ fn trace_gpu(
     let n = runner.rays(set).rays.len();
     outln!("device {} ({}), driver {}", g.info.name, g.info.kind, g.info.driver);
     let source = a.kernel.as_deref().map(Source::user).unwrap_or(Source::Builtin);
-    let k = KernelTarget { variant, fc: a.float_controls, imp: a.packet_impl, source: source.clone() };
-    let resolved = runner.resolve(&k)?.map_err(anyhow::Error::msg)?;
-    let (name, _) = runner.name(&k);
+    let k = KernelSpec { variant, fc: a.float_controls, imp: a.packet_impl, source: source.clone() };
+    let d = runner.decide(&k).expect("a device is open").map_err(anyhow::Error::msg)?;
+    let (name, fc) = (d.id.name(), d.id.variant.fc.name());
     match &a.kernel {
-        Some(f) => {
-            let fc = resolved.fc.name();
-            outln!("kernel {} (the user's, in place of {name}; float controls {fc})", f.display())
-        }
-        None => outln!("kernel {name} (float controls {})", resolved.fc.name()),
+        Some(f) => outln!("kernel {} (the user's, in place of {name}; float controls {fc})", f.display()),
+        None => outln!("kernel {name} (float controls {fc})"),
     }
     let plan = Plan { warmup: a.warmup, repeat: a.repeat, count: a.stats };
     let o = runner.measure(&Target::Kernel(k), set, plan)?;

@@ -5,36 +5,14 @@
 use super::buffer::Buffer;
 use super::bvh::GpuBvh;
 use super::pipeline::ComputePipeline;
+use super::support::Decision;
 use super::timer::timed;
 use super::{shader, Gpu, GpuError};
 use crate::base::{Counters, Hit, Ray, RunOutput};
 use crate::interface::{binding, PushConstants, PRIM_OVERFLOW};
-use crate::variant::{KernelId, PacketImpl, Variant};
+use crate::variant::{KernelId, Source};
 use ash::vk;
 use gpu_allocator::MemoryLocation;
-use std::path::{Path, PathBuf};
-
-/// Where a kernel's module comes from.
-#[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub enum Source {
-    /// Compiled from `glsl/trav.comp` with the variant's layout hooks.
-    Builtin,
-    /// A user's GLSL compute file, compiled with the built-in kernel's defines and includes.
-    Glsl(PathBuf),
-    /// A user's SPIR-V module.
-    Spirv(PathBuf),
-}
-
-impl Source {
-    /// A user file: `.spv` is SPIR-V, anything else GLSL.
-    pub fn user(path: &Path) -> Source {
-        if path.extension().is_some_and(|e| e == "spv") {
-            Source::Spirv(path.into())
-        } else {
-            Source::Glsl(path.into())
-        }
-    }
-}
 
 /// A traversal kernel ready to dispatch.
 pub struct Kernel<'g> {
@@ -59,13 +37,12 @@ impl<'g> Kernel<'g> {
         }
     }
 
-    /// Builds the pipeline of kernel `k` from `source`. A user's module is checked against the
+    /// Builds the pipeline of a kernel the device has admitted (`d`, from
+    /// [`super::support::decide`] or [`super::support::admit`]) from `source`. A user's module is checked against the
     /// kernel's interface (entry point, workgroup, bindings, push constants, specialization
     /// constants, capabilities) before any pipeline is created.
-    pub fn build(gpu: &'g Gpu, k: &KernelId, source: &Source) -> Result<Kernel<'g>, GpuError> {
-        super::support::check(&gpu.info, &k.variant).map_err(GpuError::Unsupported)?;
-        let pin = subgroup_pin(gpu, k)?;
-        let dev = gpu.info.build();
+    pub fn build(gpu: &'g Gpu, d: &Decision, source: &Source) -> Result<Kernel<'g>, GpuError> {
+        let (k, pin, dev) = (&d.id, d.pin, d.build);
         let code = match source {
             Source::Builtin => shader::compile(k, dev)?,
             Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, k, dev)?, k, gpu)?,
@@ -95,17 +72,17 @@ impl<'g> Kernel<'g> {
     /// The counting kernel of a user's module (`k` counting): its GLSL compiled with `STATS`,
     /// when that build writes counters; `None` for a SPIR-V module or a kernel that does not
     /// count.
-    pub fn user_counting(gpu: &'g Gpu, k: &KernelId, source: &Source) -> Result<Option<Kernel<'g>>, GpuError> {
+    pub fn user_counting(gpu: &'g Gpu, d: &Decision, source: &Source) -> Result<Option<Kernel<'g>>, GpuError> {
         let Source::Glsl(p) = source else { return Ok(None) };
-        let k = k.with_stats(true);
-        let code = shader::compile_user(p, &k, gpu.info.build())?;
+        let k = d.id.with_stats(true);
+        let code = shader::compile_user(p, &k, d.build)?;
         let itf =
             shader::parse_interface(&code).map_err(|msg| GpuError::Spirv { path: p.display().to_string(), msg })?;
         if !itf.bindings.contains(&(0, binding::COUNTERS)) {
             return Ok(None);
         }
         let code = shader::check_user(p, &code, &k, gpu)?;
-        Self::with_code(gpu, &k, source, &code, subgroup_pin(gpu, &k)?).map(Some)
+        Self::with_code(gpu, &k, source, &code, d.pin).map(Some)
     }
 
     /// Dispatches the kernel over `rays`: `warmup` untimed dispatches, then `repeat` timed
@@ -177,45 +154,4 @@ pub(crate) fn dispatch_timed(
     repeat: usize,
 ) -> Result<Vec<f64>, GpuError> {
     timed(gpu, warmup, repeat, |cmd| pipe.dispatch(cmd, push, groups), |cmd| pipe.barrier(cmd))
-}
-
-/// The subgroup size a kernel's pipeline is pinned to: for the subgroup packet implementation,
-/// the size planned for its P where the device allows pinning; otherwise none, and then the
-/// reported size must hold the packet.
-fn subgroup_pin(gpu: &Gpu, k: &KernelId) -> Result<Option<u32>, GpuError> {
-    let (v, imp) = (&k.variant, k.imp);
-    if imp == PacketImpl::Hybrid && !super::support::has_subgroup_arithmetic(&gpu.info) {
-        return Err(GpuError::Unsupported(format!(
-            "{}: hybrid packets need subgroup arithmetic in compute shaders (device: {})",
-            k.name(),
-            gpu.info.name
-        )));
-    }
-    if imp != PacketImpl::Subgroup {
-        return Ok(None);
-    }
-    if !super::support::has_subgroup_clustered(&gpu.info) {
-        return Err(GpuError::Unsupported(format!(
-            "{}: subgroup packets need clustered subgroup operations in compute shaders, which {} lacks \
-             (the hybrid packets run there)",
-            k.name(),
-            gpu.info.name
-        )));
-    }
-    let pin = super::support::packet_plan(&gpu.info, v.packet).1;
-    if pin.is_none() && v.packet > gpu.info.subgroup_size as usize {
-        return Err(GpuError::Unsupported(format!(
-            "{}: packets of {} need a subgroup of at least {} (device: {})",
-            k.name(),
-            v.packet,
-            v.packet,
-            gpu.info.subgroup_size
-        )));
-    }
-    Ok(pin)
-}
-
-/// The packet implementation this device uses for a variant (`force` overrides it).
-pub fn choose_impl(gpu: &Gpu, v: &Variant, force: Option<PacketImpl>) -> PacketImpl {
-    force.unwrap_or_else(|| super::support::packet_plan(&gpu.info, v.packet).0)
 }

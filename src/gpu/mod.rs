@@ -30,4 +30,4 @@ pub use context::{ContextOptions, Gpu, DEFAULT_KERNEL_TIMEOUT_S};
 pub use device::{list_devices, pick, shim, DeviceInfo, MASKABLE};
 pub use error::GpuError;
 pub(crate) use error::VkResultExt;
-pub use kernel::{Kernel, Source};
+pub use kernel::Kernel;

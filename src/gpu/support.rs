@@ -5,7 +5,7 @@
 use super::DeviceInfo;
 use crate::layout::{LayoutId, Needs};
 use crate::precision::{FcChoice, FloatControls, Math};
-use crate::variant::{PacketImpl, Variant};
+use crate::variant::{Buffers, DeviceBuild, KernelId, KernelSpec, PacketImpl, Variant};
 
 /// A float-control execution mode a kernel declares: (SPIR-V execution mode, float width).
 pub type FloatMode = (u32, u32);
@@ -88,6 +88,90 @@ pub fn resolve(info: &DeviceInfo, v: Variant, choice: FcChoice) -> Result<Varian
             }
         }
     }
+}
+
+/// What a device makes of a kernel to build, decided once ([`decide`]): the kernel it builds,
+/// the subgroup size its pipeline is pinned to and what the build takes from the device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Decision {
+    /// The variant with its float controls resolved and its buffers, in the packet
+    /// implementation the device runs; timed as decided ([`Decision::with_stats`] gives
+    /// the counting build).
+    pub id: KernelId,
+    /// The subgroup size the pipeline is pinned to (`None`: the driver's).
+    pub pin: Option<u32>,
+    /// fp64, 16-bit storage and the SPIR-V version of the device's build.
+    pub build: DeviceBuild,
+}
+
+impl Decision {
+    /// The same decision for the timed (`false`) or counting (`true`) build.
+    pub fn with_stats(self, stats: bool) -> Decision {
+        Decision { id: self.id.with_stats(stats), ..self }
+    }
+
+    /// The same decision for a scene read through `buffers` (set when the scene is uploaded):
+    /// by address needs `bufferDeviceAddress`.
+    pub fn reading(self, info: &DeviceInfo, buffers: Buffers) -> Result<Decision, String> {
+        if buffers == self.id.variant.buffers {
+            return Ok(self);
+        }
+        admit(info, &KernelId { variant: self.id.variant.with_buffers(buffers), ..self.id })
+    }
+}
+
+/// The device's one decision for a kernel: its float controls under `k.fc` ([`resolve`]), the
+/// packet implementation (the one asked for at P > 1, else the device's [`packet_plan`]), then
+/// [`admit`]. `Err`: why the device cannot run it, in one line.
+pub fn decide(info: &DeviceInfo, k: &KernelSpec) -> Result<Decision, String> {
+    let v = resolve(info, k.variant, k.fc)?;
+    let imp = k.imp.filter(|_| v.packet > 1).unwrap_or_else(|| packet_plan(info, v.packet).0);
+    admit(info, &KernelId::new(v, imp, false))
+}
+
+/// Whether the device runs kernel `k` exactly as given (its features: [`check`]; its packet
+/// implementation: subgroup operations and a subgroup that holds the packet), with the
+/// subgroup size to pin.
+pub fn admit(info: &DeviceInfo, k: &KernelId) -> Result<Decision, String> {
+    check(info, &k.variant)?;
+    let pin = subgroup_pin(info, k)?;
+    Ok(Decision { id: k.with_stats(false), pin, build: info.build() })
+}
+
+/// The subgroup size a kernel's pipeline is pinned to: for the subgroup packet implementation,
+/// the size planned for its P where the device allows pinning; otherwise none, and then the
+/// reported size must hold the packet.
+fn subgroup_pin(info: &DeviceInfo, k: &KernelId) -> Result<Option<u32>, String> {
+    let (v, imp) = (&k.variant, k.imp);
+    if imp == PacketImpl::Hybrid && !has_subgroup_arithmetic(info) {
+        return Err(format!(
+            "{}: hybrid packets need subgroup arithmetic in compute shaders (device: {})",
+            k.name(),
+            info.name
+        ));
+    }
+    if imp != PacketImpl::Subgroup {
+        return Ok(None);
+    }
+    if !has_subgroup_clustered(info) {
+        return Err(format!(
+            "{}: subgroup packets need clustered subgroup operations in compute shaders, which {} lacks \
+             (the hybrid packets run there)",
+            k.name(),
+            info.name
+        ));
+    }
+    let pin = packet_plan(info, v.packet).1;
+    if pin.is_none() && v.packet > info.subgroup_size as usize {
+        return Err(format!(
+            "{}: packets of {} need a subgroup of at least {} (device: {})",
+            k.name(),
+            v.packet,
+            v.packet,
+            info.subgroup_size
+        ));
+    }
+    Ok(pin)
 }
 
 /// The subgroup size a packet kernel of `p` rays is built for: the smallest power of two ≥ p the

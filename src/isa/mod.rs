@@ -10,76 +10,23 @@ pub mod mix;
 pub mod vendors;
 
 use crate::base::Status;
-use crate::bvh::BRANCHINGS;
 use crate::gpu::executable::executables;
 use crate::gpu::null::{self, Family};
-use crate::gpu::{self, ContextOptions, Gpu, GpuError, Kernel, Source};
+use crate::gpu::{support, ContextOptions, Gpu, GpuError, Kernel};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::report::isa::IsaRow;
-use crate::variant::{KernelId, PacketImpl, Variant, PACKETS};
+pub use crate::variant::Matrix;
+use crate::variant::{self, KernelId, KernelSpec, Source};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Which kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Matrix {
-    /// Every layout and math at B = 4, P = 1.
-    Quick,
-    /// The default sweep's matrix ([`Variant::matrix`]), each P in the device's implementation.
-    Default,
-    /// Every layout, math, B and P; every packet implementation of each P > 1; float controls
-    /// on, and off where the layout has such a build.
-    Full,
-}
-
-/// One kernel to build: the variant (float controls resolved per device when `fc` is auto)
-/// and the packet implementation (`None`: the device's choice).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Build {
-    pub variant: Variant,
-    pub fc: FcChoice,
-    pub imp: Option<PacketImpl>,
-}
-
-/// The kernels of `m` for `layouts` (empty: every layout).
-pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<Build> {
+/// The kernels of `m` for `layouts` (empty: every layout; f32, the reference, always): the
+/// device's packet implementation, except [`Matrix::Full`], which builds every one.
+pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<KernelSpec> {
     let keep = |l: LayoutId| layouts.is_empty() || layouts.contains(&l) || l == LayoutId::f32();
-    let auto = |v: Variant| Build { variant: v, fc: FcChoice::Auto, imp: None };
-    let mut out = Vec::new();
-    match m {
-        Matrix::Quick => {
-            for l in LayoutId::all().filter(|&l| keep(l)) {
-                for &math in l.info().maths {
-                    out.push(auto(Variant::new(l, 4, 1).with_math(math)));
-                }
-            }
-        }
-        Matrix::Default => out.extend(Variant::matrix().into_iter().filter(|v| keep(v.layout)).map(auto)),
-        Matrix::Full => {
-            for l in LayoutId::all().filter(|&l| keep(l)) {
-                let fcs: &[FcChoice] =
-                    if l.info().float_controls_off { &[FcChoice::On, FcChoice::Off] } else { &[FcChoice::On] };
-                for &math in l.info().maths {
-                    for b in BRANCHINGS {
-                        for p in PACKETS {
-                            let imps: &[Option<PacketImpl>] = if p == 1 {
-                                &[Some(PacketImpl::Single)]
-                            } else {
-                                &[Some(PacketImpl::Subgroup), Some(PacketImpl::Shared), Some(PacketImpl::Hybrid)]
-                            };
-                            for &fc in fcs {
-                                for &imp in imps {
-                                    out.push(Build { variant: Variant::new(l, b, p).with_math(math), fc, imp });
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-    out
+    let imps = if m == Matrix::Full { variant::every_impl } else { variant::device_impl };
+    variant::matrix(m, &imps).into_iter().filter(|k| keep(k.variant.layout)).collect()
 }
 
 /// Where kernels are built.
@@ -100,7 +47,7 @@ pub struct Config {
     /// The matrix and layouts the builds come from (a model's child process plans the same).
     pub matrix: Matrix,
     pub layouts: Vec<LayoutId>,
-    pub builds: Vec<Build>,
+    pub builds: Vec<KernelSpec>,
     /// Write every kernel's internal representations (NIR, the compiler's IR, disassembly)
     /// under `disasm/<device>/` of the output folder.
     pub disasm: Option<PathBuf>,
@@ -114,20 +61,6 @@ pub struct Summary {
     pub validation_messages: Vec<String>,
     /// What went wrong with a model's process (a driver that crashed), by model.
     pub notes: Vec<String>,
-}
-
-impl Matrix {
-    /// The name `isa-model --matrix` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            Matrix::Quick => "quick",
-            Matrix::Default => "default",
-            Matrix::Full => "full",
-        }
-    }
-    pub fn parse(s: &str) -> Option<Matrix> {
-        [Matrix::Quick, Matrix::Default, Matrix::Full].into_iter().find(|m| m.name() == s)
-    }
 }
 
 /// Opens a target for statistics.
@@ -162,21 +95,7 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
     let mut notes = Vec::new();
     for t in &cfg.targets {
         if let Target::Model(name) = t {
-            let m = vendors::model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
-            let dir = vendors::compilers().map_err(anyhow::Error::msg)?;
-            let mut args = vec!["--matrix".to_string(), cfg.matrix.name().to_string()];
-            if !cfg.layouts.is_empty() {
-                args.push("--layouts".into());
-                args.push(cfg.layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
-            }
-            if cfg.validation {
-                args.push("--validation".into());
-            }
-            if let Some(d) = &cfg.disasm {
-                args.push("--disasm".into());
-                args.push(d.join(m.name).display().to_string());
-            }
-            let run = vendors::run_model(exe, &m, &dir, &args, &cfg.builds)?;
+            let run = run_model(cfg, exe, name)?;
             for r in &run.rows {
                 each(r);
             }
@@ -201,12 +120,31 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
     Ok(Summary { rows, validation_messages: messages, notes })
 }
 
+/// The rows of model `name`, built in its own process.
+fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<vendors::ModelRun> {
+    let m = vendors::model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
+    let dir = vendors::compilers().map_err(anyhow::Error::msg)?;
+    let mut args = vec!["--matrix".to_string(), cfg.matrix.name().to_string()];
+    if !cfg.layouts.is_empty() {
+        args.push("--layouts".into());
+        args.push(cfg.layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
+    }
+    if cfg.validation {
+        args.push("--validation".into());
+    }
+    if let Some(d) = &cfg.disasm {
+        args.push("--disasm".into());
+        args.push(d.join(m.name).display().to_string());
+    }
+    vendors::run_model(exe, &m, &dir, &args, &cfg.builds)
+}
+
 /// Builds `builds` on the device a drm-shim fakes as model `m` (this process was started with
 /// its environment: `halftrace isa-model`), printing each row as one line of JSON as it is
 /// made and, on stderr, [`vendors::MARKER`] and the kernel before building it.
 pub fn run_model_here(
     m: &vendors::Model,
-    builds: &[Build],
+    builds: &[KernelSpec],
     validation: bool,
     disasm: Option<&Path>,
 ) -> anyhow::Result<Vec<String>> {
@@ -251,7 +189,7 @@ fn device_build(g: &Gpu) -> String {
 fn build_one(
     g: &Gpu,
     who: &Who,
-    b: &Build,
+    b: &KernelSpec,
     disasm: Option<&Path>,
     before: impl FnOnce(&str),
 ) -> anyhow::Result<IsaRow> {
@@ -276,10 +214,10 @@ fn build_one(
         ..IsaRow::default()
     };
     row.vendor = crate::report::isa::vendor_of(&row.driver).to_string();
-    let imp = b.imp.unwrap_or_else(|| gpu::kernel::choose_impl(g, &v, None));
+    let imp = b.imp.filter(|_| v.packet > 1).unwrap_or_else(|| support::packet_plan(&g.info, v.packet).0);
     row.packet_impl = format!("{imp:?}").to_lowercase();
-    let resolved = match gpu::support::resolve(&g.info, v, b.fc) {
-        Ok(r) => r,
+    let d = match support::decide(&g.info, b) {
+        Ok(d) => d,
         Err(why) => {
             // Named as asked: --full asks for both float-control modes of a layout.
             let asked = v.with_fc(if b.fc == FcChoice::Off { FloatControls::Off } else { FloatControls::On });
@@ -289,12 +227,12 @@ fn build_one(
             return Ok(row);
         }
     };
-    let k = KernelId::new(resolved, imp, false);
+    let k = d.id;
     row.kernel = k.name();
-    row.float_controls = resolved.fc.name().into();
+    row.float_controls = k.variant.fc.name().into();
     before(&row.kernel);
     let t0 = Instant::now();
-    let kernel = match Kernel::build(g, &k, &Source::Builtin) {
+    let kernel = match Kernel::build(g, &d, &Source::Builtin) {
         Ok(k) => k,
         Err(GpuError::Unsupported(why)) => {
             row.status = Status::Skipped(why);

@@ -10,9 +10,9 @@
 //! prints one row per kernel as it goes, so that the rows a driver wrote before crashing (v3dv
 //! has crashed at teardown) survive, and the crash is reported by model.
 
-use super::Build;
 use crate::base::Status;
 use crate::report::isa::IsaRow;
+use crate::variant::KernelSpec;
 use anyhow::Context as _;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -194,7 +194,13 @@ pub struct ModelRun {
 /// Builds `builds` on `m` in a child process `exe isa-model` with the shim's environment.
 /// Rows the child printed before dying are kept; builds it never reported become failed rows
 /// naming the crash. `args`: the child's arguments after `isa-model --model NAME`.
-pub fn run_model(exe: &Path, m: &Model, dir: &Path, args: &[String], builds: &[Build]) -> anyhow::Result<ModelRun> {
+pub fn run_model(
+    exe: &Path,
+    m: &Model,
+    dir: &Path,
+    args: &[String],
+    builds: &[KernelSpec],
+) -> anyhow::Result<ModelRun> {
     let mut child = Command::new(exe)
         .args(["isa-model", "--model", m.name])
         .args(args)

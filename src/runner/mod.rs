@@ -21,17 +21,19 @@ pub mod target;
 
 pub use measure::{Measurement, Plan, Timing, Tracer};
 pub use rays::{RaySet, RaySetId, RaySpec};
-pub use target::{Facts, KernelTarget, Outcome, Target};
+pub use target::{Facts, Outcome, Target};
 
 use crate::base::Hit;
 use crate::base::Status;
 use crate::baseline::{BaselineDevice, BaselineId};
-use crate::gpu::{self, support, Gpu, GpuError, Kernel, Source};
+use crate::gpu::support::{self, Decision};
+use crate::gpu::{Gpu, GpuError, Kernel};
 use crate::precision::FloatControls;
-use crate::variant::{KernelId, PacketImpl, Variant};
+use crate::variant::{KernelId, KernelSpec, Source};
 use anyhow::Context;
 use cache::SceneState;
 use measure::FC_OFF_COUNTER_BOUND;
+use std::cell::RefCell;
 use std::collections::HashMap;
 use target::{retime, status, BaselineTracer, KernelTracer};
 
@@ -60,6 +62,8 @@ pub struct Runner<'g> {
     opts: Options,
     /// Kernels per id and source; `None`: a user module that writes no counters.
     kernels: HashMap<(KernelId, Source), Option<Kernel<'g>>>,
+    /// The device's decision for each kernel asked for (`support::decide`), made once.
+    decisions: RefCell<HashMap<KernelSpec, Result<Decision, String>>>,
     /// Baselines prepared on the device, or why the device cannot run them.
     baselines: HashMap<BaselineId, Result<Box<dyn BaselineDevice<'g> + 'g>, String>>,
     scene: Option<SceneState<'g>>,
@@ -70,7 +74,15 @@ pub struct Runner<'g> {
 impl<'g> Runner<'g> {
     /// A runner on `gpu` (`None`: CPU references only), with `baselines` prepared on it.
     pub fn new(gpu: Option<&'g Gpu>, baselines: &[BaselineId], opts: Options) -> anyhow::Result<Runner<'g>> {
-        let mut r = Runner { gpu, opts, kernels: HashMap::new(), baselines: HashMap::new(), scene: None, loads: 0 };
+        let mut r = Runner {
+            gpu,
+            opts,
+            kernels: HashMap::new(),
+            decisions: RefCell::default(),
+            baselines: HashMap::new(),
+            scene: None,
+            loads: 0,
+        };
         if let Some(g) = gpu {
             for &b in baselines {
                 let dev = match b.imp().unavailable(&g.info) {
@@ -88,31 +100,34 @@ impl<'g> Runner<'g> {
         self.gpu.ok_or_else(|| anyhow::anyhow!("no Vulkan device open (CPU reference only)"))
     }
 
-    /// The name a kernel target's results go under (the built-in kernel's name in the packet
+    /// The device's decision for kernel `k` (made once per runner): what it builds, or why
+    /// it cannot run it. `None` without a device.
+    pub fn decide(&self, k: &KernelSpec) -> Option<Result<Decision, String>> {
+        let g = self.gpu?;
+        let mut d = self.decisions.borrow_mut();
+        Some(d.entry(k.clone()).or_insert_with(|| support::decide(&g.info, k)).clone())
+    }
+
+    /// The name a kernel's results go under (the built-in kernel's name in the packet
     /// implementation the device uses, reading the scene bound) and the float controls the
     /// device builds it with (`None`: the device cannot run it).
-    pub fn name(&self, k: &KernelTarget) -> (String, Option<FloatControls>) {
-        let Some(g) = self.gpu else { return (k.variant.name(false), None) };
-        match support::resolve(&g.info, k.variant, k.fc) {
-            Ok(v) => (v.kernel_name(imp_of(g, &v, k.imp), false), Some(v.fc)),
-            Err(_) => (k.variant.name(false), None),
+    pub fn name(&self, k: &KernelSpec) -> (String, Option<FloatControls>) {
+        match self.decide(k) {
+            Some(Ok(d)) => (d.id.name(), Some(d.id.variant.fc)),
+            _ => (k.variant.name(false), None),
         }
     }
 
-    /// Measures `target` on ray set `set` as `plan` says: the device's build of it is resolved
-    /// (a variant the device cannot run, or a baseline it lacks, is skipped with the reason),
-    /// validated (with `Options::retime`, once per target and ray set), then timed.
+    /// Measures `target` on ray set `set` as `plan` says: the device's decision for it is
+    /// made (a variant the device cannot run, or a baseline it lacks, is skipped with the
+    /// reason), then it is validated (with `Options::retime`, once per target and ray set),
+    /// then timed.
     pub fn measure(&mut self, target: &Target, set: RaySetId, plan: Plan) -> anyhow::Result<Outcome> {
         self.index(set);
         match target {
             Target::Kernel(k) => self.measure_kernel(k, set, plan),
             Target::Baseline(b) => self.measure_baseline(*b, set, plan),
         }
-    }
-
-    /// The kernel the device runs for `k` (float controls resolved), or why it cannot.
-    pub fn resolve(&self, k: &KernelTarget) -> anyhow::Result<Result<Variant, String>> {
-        Ok(support::resolve(&self.gpu()?.info, k.variant, k.fc))
     }
 
     /// The hits `key` was validated with, when it was validated with counters if `count`.
@@ -130,7 +145,7 @@ impl<'g> Runner<'g> {
         }
     }
 
-    fn measure_kernel(&mut self, k: &KernelTarget, set: RaySetId, plan: Plan) -> anyhow::Result<Outcome> {
+    fn measure_kernel(&mut self, k: &KernelSpec, set: RaySetId, plan: Plan) -> anyhow::Result<Outcome> {
         let gpu = self.gpu()?;
         let skipped = |name: String, why: String| Outcome {
             status: Status::Skipped(why),
@@ -139,11 +154,11 @@ impl<'g> Runner<'g> {
             m: Measurement::none(),
             facts: Facts::default(),
         };
-        let v = match support::resolve(&gpu.info, k.variant, k.fc) {
-            Ok(v) => v,
+        let d = match self.decide(k).expect("a device is open") {
+            Ok(d) => d,
             Err(why) => return Ok(skipped(k.variant.name(false), why)),
         };
-        let (name, _) = self.name(k);
+        let (v, name) = (d.id.variant, d.id.name());
         // The f32 hits, then the reference, then the upload: in frugal mode each step frees
         // what the one before needed.
         self.ensure_f32_hits(set)?;
@@ -152,10 +167,13 @@ impl<'g> Runner<'g> {
         self.upload(v.layout, v.branching).with_context(|| name.clone())?;
         let facts = self.state().encodings[&(v.layout, v.branching)].facts;
         // A scene beyond one storage buffer is read by address; the name stays the variant's.
-        let v = v.with_buffers(facts.buffers);
-        let id = KernelId::new(v, imp_of(gpu, &v, k.imp), false);
+        let d = match d.reading(&gpu.info, facts.buffers) {
+            Ok(d) => d,
+            Err(why) => return Ok(skipped(name, why)),
+        };
+        let (v, id) = (d.id.variant, d.id);
         for stats in [false, true].into_iter().take(if plan.count { 2 } else { 1 }) {
-            match self.kernel(&id.with_stats(stats), &k.source) {
+            match self.kernel(&d, stats, &k.source) {
                 Ok(()) => {}
                 Err(GpuError::Unsupported(why)) => return Ok(skipped(name, why)),
                 Err(e) => return Err(anyhow::Error::new(e).context(name)),
@@ -192,16 +210,17 @@ impl<'g> Runner<'g> {
         Ok(Outcome { status: status(&m), kernel: Some(id), name, m, facts })
     }
 
-    /// Builds (once) kernel `id` from `source`; a user's counting kernel may not exist.
-    fn kernel(&mut self, id: &KernelId, source: &Source) -> Result<(), GpuError> {
-        let key = (*id, source.clone());
+    /// Builds (once) the kernel of decision `d`, timed or counting (`stats`), from `source`;
+    /// a user's counting kernel may not exist.
+    fn kernel(&mut self, d: &Decision, stats: bool, source: &Source) -> Result<(), GpuError> {
+        let key = (d.id.with_stats(stats), source.clone());
         if self.kernels.contains_key(&key) {
             return Ok(());
         }
         let gpu = self.gpu.expect("kernels need a device");
-        let k = match (source, id.stats) {
-            (Source::Builtin, _) | (_, false) => Some(Kernel::build(gpu, id, source)?),
-            (_, true) => Kernel::user_counting(gpu, id, source)?,
+        let k = match (source, stats) {
+            (Source::Builtin, _) | (_, false) => Some(Kernel::build(gpu, &d.with_stats(stats), source)?),
+            (_, true) => Kernel::user_counting(gpu, d, source)?,
         };
         self.kernels.insert(key, k);
         Ok(())
@@ -247,10 +266,4 @@ impl<'g> Runner<'g> {
         self.remember(key, &m, false);
         Ok(Outcome { status: status(&m), kernel: None, name, m, facts })
     }
-}
-
-/// The packet implementation a kernel target runs with: the one asked for (packets only),
-/// else the device's choice.
-fn imp_of(gpu: &Gpu, v: &Variant, asked: Option<PacketImpl>) -> PacketImpl {
-    gpu::kernel::choose_impl(gpu, v, asked.filter(|_| v.packet > 1))
 }

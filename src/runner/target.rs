@@ -5,33 +5,22 @@ use super::measure::{self, Measurement, Plan, Tracer};
 use crate::base::Status;
 use crate::base::{Hit, Ray, RunOutput};
 use crate::baseline::{BaselineId, BaselineScene};
-use crate::gpu::{Gpu, GpuBvh, Kernel, Source};
-use crate::precision::FcChoice;
-use crate::variant::{Buffers, KernelId, PacketImpl, Variant};
+use crate::gpu::{Gpu, GpuBvh, Kernel};
+use crate::variant::{Buffers, KernelId, KernelSpec, Variant};
 
 /// What a measurement traces with.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub enum Target {
     /// A kernel of a variant: the built-in one, or a user's module standing in for it.
-    Kernel(KernelTarget),
+    Kernel(KernelSpec),
     /// Someone else's traversal (`rq`, `embree`).
     Baseline(BaselineId),
-}
-
-/// A kernel target: the variant (its float controls are chosen by `fc` on the device), the
-/// packet implementation (`None`: the device's choice) and where the module comes from.
-#[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub struct KernelTarget {
-    pub variant: Variant,
-    pub fc: FcChoice,
-    pub imp: Option<PacketImpl>,
-    pub source: Source,
 }
 
 impl Target {
     /// The built-in kernel of `v`, float controls on where the device has them.
     pub fn builtin(v: Variant) -> Target {
-        Target::Kernel(KernelTarget { variant: v, fc: FcChoice::Auto, imp: None, source: Source::Builtin })
+        Target::Kernel(KernelSpec::builtin(v))
     }
 }
 

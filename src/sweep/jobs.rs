@@ -1,11 +1,11 @@
 //! The sweep as data: the job list, generated in one place from a [`Config`].
 
 use super::Config;
-use crate::gpu::Source;
 use crate::layout::LayoutId;
 use crate::precision::Math;
 use crate::rays::RayKind;
-use crate::runner::{KernelTarget, Target};
+use crate::runner::Target;
+use crate::variant::{KernelSpec, Source};
 use std::collections::HashMap;
 
 /// One row of the results: a scene (index into `Config::scenes`), a ray set (index into
@@ -44,7 +44,7 @@ pub fn list(cfg: &Config) -> Vec<Job> {
     let mut jobs = Vec::new();
     for scene in 0..cfg.scenes.len() {
         for v in cfg.variants() {
-            let target = Target::Kernel(KernelTarget { variant: v, fc, imp: None, source: Source::Builtin });
+            let target = Target::Kernel(KernelSpec::builtin(v).with_fc(fc));
             jobs.extend(swept.iter().map(|&rays| Job { scene, rays, target: target.clone(), user: None }));
         }
         for b in cfg.baselines() {
@@ -56,7 +56,7 @@ pub fn list(cfg: &Config) -> Vec<Job> {
                 None => swept.clone(),
             };
             let variant = spec.variant().expect("checked by Config::check");
-            let target = Target::Kernel(KernelTarget { variant, fc, imp: None, source: Source::user(&spec.file) });
+            let target = Target::Kernel(KernelSpec::builtin(variant).with_fc(fc).with_source(Source::user(&spec.file)));
             jobs.extend(rays.into_iter().map(|rays| Job { scene, rays, target: target.clone(), user: Some(i) }));
         }
     }

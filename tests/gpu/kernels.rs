@@ -106,15 +106,16 @@ fn instructions(words: &[u32]) -> Vec<(u32, Vec<u32>)> {
 fn spirv_folder_is_fresh_valid_and_really_fp16() {
     let dir = repo("spirv");
     let mut n = 0;
-    let expected = halftrace::variant::spirv_matrix();
-    for (v, imp) in &expected {
+    let expected = halftrace::variant::spirv_kernels();
+    for k in &expected {
         for stats in [false, true] {
-            let name = v.kernel_name(*imp, stats);
+            let k = k.with_stats(stats);
+            let name = k.name();
+            let v = &k.variant;
             let p = dir.join(format!("{name}.spv"));
             let on_disk = std::fs::read(&p)
                 .unwrap_or_else(|e| panic!("{}: {e}; run `halftrace shaders --emit spirv/`", p.display()));
-            let fresh =
-                shader::compile(&KernelId::new(*v, *imp, stats), halftrace::variant::DeviceBuild::FULL).unwrap();
+            let fresh = shader::compile(&k, halftrace::variant::DeviceBuild::FULL).unwrap();
             assert!(
                 on_disk == bytemuck::cast_slice::<u32, u8>(&fresh),
                 "{} is stale against glsl/; run `halftrace shaders --emit spirv/`",

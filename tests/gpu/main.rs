@@ -16,10 +16,10 @@ mod user;
 pub use common::*;
 pub use halftrace::base::Ray;
 pub use halftrace::bvh::BRANCHINGS;
-pub use halftrace::gpu::{ContextOptions, Gpu, GpuBvh, GpuError, Kernel, Source};
+pub use halftrace::gpu::{ContextOptions, Gpu, GpuBvh, GpuError, Kernel};
 pub use halftrace::layout::LayoutId;
 pub use halftrace::precision::Math;
-pub use halftrace::variant::{KernelId, PacketImpl, Variant, PACKETS};
+pub use halftrace::variant::{KernelId, PacketImpl, Source, Variant, PACKETS};
 pub use std::path::PathBuf;
 pub use std::process::Command;
 
@@ -44,7 +44,8 @@ pub fn clean(g: &Gpu) {
 
 pub fn builtin<'g>(g: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Kernel<'g> {
     let k = KernelId::new(*v, imp, stats);
-    Kernel::build(g, &k, &Source::Builtin).unwrap_or_else(|e| panic!("{k}: {e}"))
+    let d = halftrace::gpu::support::admit(&g.info, &k).unwrap_or_else(|e| panic!("{k}: {e}"));
+    Kernel::build(g, &d.with_stats(stats), &Source::Builtin).unwrap_or_else(|e| panic!("{k}: {e}"))
 }
 
 pub fn tmp(name: &str) -> PathBuf {

@@ -1,10 +1,14 @@
 //! The variant matrix as data: layout × branching × packet size × math. Artifact names spell
 //! the values (`trav_f16h_m16_b8_p1`).
 
-use crate::bvh::BRANCHINGS;
 use crate::interface;
 use crate::layout::LayoutId;
 use crate::precision::{FloatControls, Math};
+
+mod kernel;
+mod matrix;
+pub use kernel::{KernelId, KernelSpec, Source};
+pub use matrix::{default_variants, device_impl, every_impl, matrix, series, spirv_kernels, Matrix, Series};
 
 /// Packet sizes the harness supports.
 pub const PACKETS: [usize; 6] = [1, 4, 8, 16, 32, 64];
@@ -153,30 +157,6 @@ impl Variant {
         }
     }
 
-    /// The default matrix: the poster's two series — B ∈ {2, 4, 8, 16} at P = 1 and P ∈ {4, 8, 16,
-    /// 32, 64} at B = 4 — for the [`SERIES_LAYOUTS`], and every other layout at
-    /// [`LAYOUT_BRANCHINGS`] with P = 1; every layout in every math mode.
-    pub fn matrix() -> Vec<Variant> {
-        let mut v = Vec::new();
-        for layout in LayoutId::all() {
-            for &math in layout.info().maths {
-                if SERIES_LAYOUTS.contains(&layout.name()) {
-                    for b in BRANCHINGS {
-                        v.push(Variant::new(layout, b, 1).with_math(math));
-                    }
-                    for p in PACKETS.into_iter().filter(|&p| p > 1) {
-                        v.push(Variant::new(layout, 4, p).with_math(math));
-                    }
-                } else {
-                    for b in LAYOUT_BRANCHINGS {
-                        v.push(Variant::new(layout, b, 1).with_math(math));
-                    }
-                }
-            }
-        }
-        v
-    }
-
     /// Preprocessor definitions of this variant's kernel on a device offering `dev` — every
     /// define a kernel is built with, listed here once (`glsl/trav.comp` points here):
     ///
@@ -264,55 +244,10 @@ impl Variant {
     }
 }
 
-/// One kernel: a variant in one packet implementation, timed or counting (`stats`). What the
-/// runner keys its pipelines by and what a kernel's name spells.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct KernelId {
-    pub variant: Variant,
-    pub imp: PacketImpl,
-    pub stats: bool,
-}
-
-impl KernelId {
-    pub fn new(variant: Variant, imp: PacketImpl, stats: bool) -> KernelId {
-        KernelId { variant, imp, stats }
-    }
-
-    /// The same kernel, timed (`false`) or counting (`true`).
-    pub fn with_stats(self, stats: bool) -> KernelId {
-        KernelId { stats, ..self }
-    }
-
-    /// `trav_{layout}[_{math}]_b{B}_p{P}…` ([`Variant::kernel_name`]).
-    pub fn name(&self) -> String {
-        self.variant.kernel_name(self.imp, self.stats)
-    }
-}
-
-impl std::fmt::Display for KernelId {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.name())
-    }
-}
-
 impl std::fmt::Display for Variant {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.name(false))
     }
-}
-
-/// The kernels kept in `spirv/`: every variant of the default matrix in its portable
-/// implementation, plus the subgroup and hybrid implementations of every packet variant.
-pub fn spirv_matrix() -> Vec<(Variant, PacketImpl)> {
-    let mut out = Vec::new();
-    for v in Variant::matrix() {
-        out.push((v, v.portable_impl()));
-        if v.packet > 1 {
-            out.push((v, PacketImpl::Subgroup));
-            out.push((v, PacketImpl::Hybrid));
-        }
-    }
-    out
 }
 
 #[cfg(test)]
