@@ -146,6 +146,10 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
         .collect();
     progress(&format!("{} kernels on {}", checks.len(), g.info.name));
     let mut runner = Runner::new(Some(&g), &[], Default::default())?;
+    let admitted: Vec<KernelSpec> =
+        checks.iter().filter(|c| c.status.is_ok()).map(|c| KernelSpec::exact(c.variant, c.imp)).collect();
+    runner.prebuild(&admitted);
+    progress(&format!("{} kernels built ({:.0} s)", admitted.len(), t0.elapsed().as_secs_f64()));
     let mut scene_names = Vec::new();
     for path in &opts.scenes {
         let name = runner.scene(path)?.0.name.clone();

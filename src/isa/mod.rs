@@ -87,15 +87,28 @@ fn slug(s: &str) -> String {
     t.split('-').filter(|p| !p.is_empty()).collect::<Vec<_>>().join("-")
 }
 
-/// Builds every kernel of `cfg` on every target; `each` sees each row as it is made. Models
-/// are built in a child process each (`exe isa-model`).
+/// Builds every kernel of `cfg` on every target; `each` sees each row as it is made (a
+/// model's rows when its process is done). Models are built in a child process each (`exe
+/// isa-model`), as many at once as there are cores (each compiler runs on one).
 pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::Result<Summary> {
+    use rayon::prelude::*;
     let mut rows = Vec::new();
     let mut messages = Vec::new();
     let mut notes = Vec::new();
+    let models: Vec<&String> = cfg
+        .targets
+        .iter()
+        .filter_map(|t| match t {
+            Target::Model(name) => Some(name),
+            _ => None,
+        })
+        .collect();
+    let mut runs: Vec<Option<vendors::ModelRun>> =
+        models.par_iter().map(|name| run_model(cfg, exe, name).map(Some)).collect::<anyhow::Result<_>>()?;
+    let mut next_run = runs.iter_mut();
     for t in &cfg.targets {
-        if let Target::Model(name) = t {
-            let run = run_model(cfg, exe, name)?;
+        if let Target::Model(_) = t {
+            let run = next_run.next().and_then(Option::take).expect("one run per model");
             for r in &run.rows {
                 each(r);
             }

@@ -210,6 +210,32 @@ impl<'g> Runner<'g> {
         Ok(Outcome { status: status(&m), kernel: Some(id), name, m, facts })
     }
 
+    /// Builds the built-in kernels of `ks` that the device admits and this runner has not built
+    /// yet, timed and counting, on every core at once (pipelines are independent; a compiler
+    /// such as lavapipe's builds one on one core), so that measuring them later finds them
+    /// built. A kernel that fails to build is left out: measuring it builds it again and
+    /// reports why.
+    pub fn prebuild(&mut self, ks: &[KernelSpec]) {
+        use rayon::prelude::*;
+        let Some(gpu) = self.gpu else { return };
+        let mut todo = Vec::new();
+        for k in ks.iter().filter(|k| k.source == Source::Builtin) {
+            let Some(Ok(d)) = self.decide(k) else { continue };
+            for stats in [false, true] {
+                if !self.kernels.contains_key(&(d.id.with_stats(stats), Source::Builtin)) {
+                    todo.push(d.with_stats(stats));
+                }
+            }
+        }
+        todo.sort_by_key(|d| d.id);
+        todo.dedup();
+        let built: Vec<(KernelId, Kernel<'g>)> =
+            todo.par_iter().filter_map(|d| Kernel::build(gpu, d, &Source::Builtin).ok().map(|k| (d.id, k))).collect();
+        for (id, k) in built {
+            self.kernels.insert((id, Source::Builtin), Some(k));
+        }
+    }
+
     /// Builds (once) the kernel of decision `d`, timed or counting (`stats`), from `source`;
     /// a user's counting kernel may not exist.
     fn kernel(&mut self, d: &Decision, stats: bool, source: &Source) -> Result<(), GpuError> {
