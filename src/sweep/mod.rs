@@ -7,7 +7,7 @@ pub mod config;
 pub mod executor;
 pub mod jobs;
 
-pub use config::{check_scenes, Config, KernelSpec, DEFAULT_SCENE};
+pub use config::{check_scenes, Config, KernelSpec, Sweep, UserKernel, DEFAULT_SCENE};
 pub use executor::{prepare_out, run, OutMode, Summary};
 pub use jobs::{Job, Shard};
 
