@@ -267,54 +267,6 @@ impl Config {
             config_hash: format!("{:016x}", crate::digest::fnv1a(format!("{whole:?}").as_bytes())),
         })
     }
-
-    /// The layouts named, in registry order.
-    pub fn layout_ids(&self) -> Vec<LayoutId> {
-        LayoutId::all().filter(|l| self.layouts.iter().any(|n| LayoutId::parse(n) == Ok(*l))).collect()
-    }
-
-    /// The baselines named, in their list's order.
-    pub fn baselines(&self) -> Vec<BaselineId> {
-        BaselineId::all().filter(|b| self.layouts.iter().any(|n| n == b.name())).collect()
-    }
-
-    /// The math modes swept for a layout: those named that it has (in its order), else its
-    /// default.
-    pub fn maths_of(&self, layout: LayoutId) -> Vec<Math> {
-        let named: Vec<Math> = self.maths.iter().filter_map(|m| m.parse().ok()).collect();
-        let m: Vec<Math> = layout.info().maths.iter().copied().filter(|m| named.contains(m)).collect();
-        if m.is_empty() {
-            vec![layout.default_math()]
-        } else {
-            m
-        }
-    }
-
-    /// The variants: every layout × its maths × `layout_branchings` at P = 1, and for the
-    /// `series` layouts also the B series at P = 1 and the P series at `packet_branching`;
-    /// sorted (so each layout and B is contiguous).
-    pub fn variants(&self) -> Vec<Variant> {
-        let mut v = Vec::new();
-        for layout in self.layout_ids() {
-            let series = self.series.iter().any(|s| s == layout.name());
-            for math in self.maths_of(layout) {
-                for &b in &self.layout_branchings {
-                    v.push(Variant::new(layout, b, 1).with_math(math));
-                }
-                if series {
-                    for &b in &self.branchings {
-                        v.push(Variant::new(layout, b, 1).with_math(math));
-                    }
-                    for &p in &self.packets {
-                        v.push(Variant::new(layout, self.packet_branching, p).with_math(math));
-                    }
-                }
-            }
-        }
-        v.sort();
-        v.dedup();
-        v
-    }
 }
 
 /// The ray kinds read so far, so that two spellings of one file (`a/r.npy`, `a//r.npy`) are
