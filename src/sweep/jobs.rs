@@ -251,7 +251,7 @@ pub fn last_uses(jobs: &[Job]) -> HashMap<(usize, LayoutId, usize), usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sweep::Config;
+    use crate::sweep::{Config, KernelSpec};
 
     #[test]
     fn shards_partition_the_jobs_keep_encodings_together_and_balance() {
@@ -357,5 +357,75 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The job list of a sweep with every kind of job — layouts (one by its former name), a
+    /// baseline, a rays file, user kernels with and without their own ray kinds, two scenes —
+    /// in the order, with the names, targets, shards and `setup` hashes the list had when jobs
+    /// were indices into the configuration (before jobs carried their own scene, rays and
+    /// setup): `--resume` matches rows written then. The first scene and the rays file do not
+    /// exist, so their stamps (path, size 0, time 0) and hashes are the same on every machine;
+    /// the second scene's setup depends on its file's time and is left out.
+    #[test]
+    fn jobs_keep_their_order_names_shards_and_setup() {
+        let k = std::env::temp_dir().join(format!("halftrace-jobs-kernel-{}.comp", std::process::id()));
+        std::fs::write(&k, b"// a kernel\n").unwrap();
+        let user = |name: &str, layout: &str| KernelSpec {
+            name: name.into(),
+            layout: layout.into(),
+            file: k.clone(),
+            branching: None,
+            packet: None,
+            math: None,
+            rays: None,
+        };
+        let cfg = Config {
+            scenes: vec!["a.obj".into(), "scenes/teapot.obj".into()],
+            rays: vec!["primary".into(), "ao".into(), "r.npy".into()],
+            layouts: vec!["f32".into(), "f16h".into(), "rq".into(), "f16h-seed".into()],
+            series: vec!["f16h".into()],
+            branchings: vec![2, 4],
+            layout_branchings: vec![8],
+            packets: vec![1, 4],
+            maths: vec!["f32".into(), "mixed".into()],
+            width: 32,
+            height: 16,
+            seed: 7,
+            kernel: vec![
+                KernelSpec {
+                    branching: Some(8),
+                    packet: Some(4),
+                    math: Some("f32".into()),
+                    rays: Some(vec!["grazing".into(), "ao".into()]),
+                    ..user("mine", "f16h")
+                },
+                user("other", "f32"),
+            ],
+            ..Default::default()
+        };
+        let jobs = list(&cfg.check().unwrap());
+        std::fs::remove_file(&k).unwrap();
+        let bytes = [1000, 5_000_000];
+        let shards: Vec<Vec<Job>> =
+            (1..=4).flat_map(|n| (1..=n).map(move |k| Shard { k, n })).map(|s| shard(&jobs, s, &bytes)).collect();
+        let mut text = String::new();
+        for (i, j) in jobs.iter().enumerate() {
+            let (name, source) = match &j.target {
+                Target::Kernel(k) => {
+                    (k.variant.name(false), if k.source == Source::Builtin { "builtin" } else { "user" })
+                }
+                Target::Baseline(b) => (b.name().to_string(), "-"),
+            };
+            let setup = if j.scene.index == 0 { j.setup.as_str() } else { "-" };
+            // The shard of each of 1..=4 shares.
+            let mut of = Vec::new();
+            let mut first = 0;
+            for n in 1..=4 {
+                of.push((1..=n).find(|&k| shards[first + k - 1].contains(j)).unwrap());
+                first += n;
+            }
+            text += &format!("{i} {} {} {name} {source} {:?} {setup} {of:?}\n", j.scene.name, j.rays.kind, j.user);
+        }
+        assert_eq!(format!("{:016x}", fnv1a(text.as_bytes())), "d3c3488851b2fd82", "the job list changed:\n{text}");
     }
 }
