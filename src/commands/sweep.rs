@@ -4,11 +4,11 @@
 use super::outln;
 use crate::cli::SweepArgs;
 use crate::outdir::OutDir;
-use crate::sweep::{self, Config, OutMode, Shard};
+use crate::sweep::{self, Config, OutMode, Shard, Sweep};
 use std::time::Instant;
 
-/// The sweep's configuration: the file's (or the defaults), each flag given over it.
-fn config(a: &SweepArgs) -> anyhow::Result<Config> {
+/// The sweep's configuration: the file's (or the defaults), each flag given over it, checked.
+fn config(a: &SweepArgs) -> anyhow::Result<Sweep> {
     let mut c = match &a.config {
         Some(p) => Config::load(p)?,
         None => Config::default(),
@@ -38,12 +38,12 @@ fn config(a: &SweepArgs) -> anyhow::Result<Config> {
     c.device = a.device.clone().unwrap_or(c.device);
     c.float_controls = a.float_controls.unwrap_or(c.float_controls);
     c.budget = a.budget;
-    c.check()?;
-    c.shard = match &a.shard {
+    let mut s = c.check()?;
+    s.shard = match &a.shard {
         Some(s) => Some(s.parse().map_err(anyhow::Error::msg)?),
         None => Shard::from_slurm(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?,
     };
-    Ok(c)
+    Ok(s)
 }
 
 pub fn sweep(a: &SweepArgs) -> anyhow::Result<()> {

@@ -285,7 +285,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     // one job runs (every report has a row).
     let isa_runs = dev.pipeline_statistics;
     let cfg = sweep::Config { scenes: scene_paths.clone(), width, height, ..Default::default() };
-    let jobs = sweep::jobs::list(&cfg).len();
+    let jobs = sweep::jobs::list(&cfg.check().context("the sweep's configuration")?).len();
     if !finished(&state, &out, "sweep") {
         let reserve = if isa_runs { (opts.budget_s * 0.1).max(20.0) } else { 2.0 };
         let left = deadline.saturating_duration_since(Instant::now()).as_secs_f64() - reserve;

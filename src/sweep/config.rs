@@ -6,7 +6,8 @@ use crate::baseline::BaselineId;
 use crate::bvh;
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, Math};
-use crate::rays::RayKind;
+use crate::rays::{RayKind, RayParams};
+use crate::runner::Plan;
 use crate::variant::{Variant, LAYOUT_BRANCHINGS, PACKETS, SERIES_LAYOUTS};
 use anyhow::Context;
 use serde::Deserialize;
@@ -49,7 +50,7 @@ pub struct Config {
     /// the layout has such a build), on, or off.
     pub float_controls: FcChoice,
     /// User kernels (`[[kernel]]` tables), each run as its own rows.
-    pub kernel: Vec<KernelSpec>,
+    pub kernel: Vec<KernelTable>,
     /// Run only this share of the job list (`--shard K/N` or a Slurm array task; not a file
     /// key: the same config serves every shard).
     #[serde(skip)]
@@ -65,7 +66,7 @@ pub struct Config {
 /// kernel of one variant, validated against that layout's CPU reference before it is timed.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct KernelSpec {
+pub struct KernelTable {
     /// The `kernel` column of its rows.
     pub name: String,
     pub layout: String,
@@ -81,7 +82,7 @@ pub struct KernelSpec {
     pub rays: Option<Vec<String>>,
 }
 
-impl KernelSpec {
+impl KernelTable {
     /// The variant whose built-in kernel this one stands in for.
     pub fn variant(&self) -> anyhow::Result<Variant> {
         let what = || format!("[[kernel]] '{}'", self.name);
@@ -174,22 +175,28 @@ impl Config {
         Ok(c)
     }
 
-    /// Checks every value names something that exists.
-    pub fn check(&self) -> anyhow::Result<()> {
+    /// Checks every value names something that exists, and returns them parsed: the sweep as
+    /// typed values, read once here (nothing after it parses a string of the configuration).
+    pub fn check(&self) -> anyhow::Result<Sweep> {
         anyhow::ensure!(!self.scenes.is_empty(), "scenes: at least one scene is needed");
         anyhow::ensure!(!self.rays.is_empty(), "rays: at least one ray kind is needed");
         anyhow::ensure!(!self.layouts.is_empty(), "layouts: at least one layout or baseline is needed");
         check_scenes("scenes", &self.scenes)?;
+        let mut kinds = Kinds::default();
+        let mut rays = Vec::new();
         for r in &self.rays {
-            r.parse::<RayKind>()?;
+            rays.push(kinds.spelled(r.parse::<RayKind>()?));
         }
+        let (mut layouts, mut baselines) = (Vec::new(), Vec::new());
         for l in &self.layouts {
-            if BaselineId::parse(l).is_none() {
-                l.parse::<LayoutId>().context("layouts")?;
+            match BaselineId::parse(l) {
+                Some(b) => baselines.push(b),
+                None => layouts.push(l.parse::<LayoutId>().context("layouts")?),
             }
         }
+        let mut series = Vec::new();
         for l in &self.series {
-            l.parse::<LayoutId>().context("series")?;
+            series.push(l.parse::<LayoutId>().context("series")?);
         }
         for &b in self.branchings.iter().chain(&self.layout_branchings).chain([&self.packet_branching]) {
             bvh::check_branching(b).context("branchings")?;
@@ -197,13 +204,15 @@ impl Config {
         for &p in &self.packets {
             anyhow::ensure!(PACKETS.contains(&p), "packets: {p} is not one of 1, 4, 8, 16, 32, 64");
         }
+        let mut maths = Vec::new();
         for m in &self.maths {
-            m.parse::<Math>().map_err(anyhow::Error::msg).context("maths")?;
+            maths.push(m.parse::<Math>().map_err(anyhow::Error::msg).context("maths")?);
         }
         anyhow::ensure!(self.repeat >= 1, "repeat must be at least 1");
         crate::units::check_seconds("kernel_timeout", self.kernel_timeout).map_err(anyhow::Error::msg)?;
         anyhow::ensure!(self.width > 0 && self.height > 0, "width and height must be positive");
         crate::rays::check_image_size(self.width, self.height).map_err(anyhow::Error::msg)?;
+        let mut kernels = Vec::new();
         for (i, k) in self.kernel.iter().enumerate() {
             anyhow::ensure!(
                 !k.name.trim().is_empty() && !k.name.chars().any(char::is_control) && !k.name.contains('|'),
@@ -216,35 +225,129 @@ impl Config {
                 "[[kernel]] '{}': trav_… and the baselines' kernel names are the built-in kernels'; name it otherwise",
                 k.name
             );
-            k.variant()?;
-            for r in k.rays.iter().flatten() {
-                r.parse::<RayKind>().with_context(|| format!("[[kernel]] '{}'", k.name))?;
-            }
+            let variant = k.variant()?;
+            let rays = match &k.rays {
+                Some(names) => {
+                    let mut rays = Vec::new();
+                    for r in names {
+                        rays.push(kinds.spelled(r.parse().with_context(|| format!("[[kernel]] '{}'", k.name))?));
+                    }
+                    Some(rays)
+                }
+                None => None,
+            };
             anyhow::ensure!(k.file.is_file(), "[[kernel]] '{}': {} is not a readable file", k.name, k.file.display());
             anyhow::ensure!(
                 !self.kernel[..i].iter().any(|o| o.name == k.name),
                 "[[kernel]] '{}' is named twice",
                 k.name
             );
+            kernels.push(UserKernel { name: k.name.clone(), variant, file: k.file.clone(), rays });
         }
-        Ok(())
+        let whole = Config { shard: None, budget: None, ..self.clone() };
+        Ok(Sweep {
+            scenes: self.scenes.clone(),
+            rays,
+            layouts: LayoutId::all().filter(|l| layouts.contains(l)).collect(),
+            baselines: BaselineId::all().filter(|b| baselines.contains(b)).collect(),
+            series,
+            branchings: self.branchings.clone(),
+            layout_branchings: self.layout_branchings.clone(),
+            packets: self.packets.clone(),
+            packet_branching: self.packet_branching,
+            maths,
+            params: RayParams { width: self.width, height: self.height, seed: self.seed, ..Default::default() },
+            plan: Plan { warmup: self.warmup, repeat: self.repeat, count: true },
+            device: (!self.device.is_empty()).then(|| self.device.clone()),
+            kernel_timeout: self.kernel_timeout,
+            float_controls: self.float_controls,
+            kernels,
+            shard: self.shard,
+            budget: self.budget,
+            config_hash: format!("{:016x}", crate::digest::fnv1a(format!("{whole:?}").as_bytes())),
+        })
     }
+}
 
+/// The ray kinds read so far, so that two spellings of one file (`a/r.npy`, `a//r.npy`) are
+/// one kind under its first spelling: rows name a ray set so.
+#[derive(Default)]
+struct Kinds(Vec<RayKind>);
+
+impl Kinds {
+    fn spelled(&mut self, k: RayKind) -> RayKind {
+        match self.0.iter().find(|x| **x == k) {
+            Some(first) => first.clone(),
+            None => {
+                self.0.push(k.clone());
+                k
+            }
+        }
+    }
+}
+
+/// A checked sweep ([`Config::check`]): every value of its configuration parsed into what it
+/// names. The job list ([`super::jobs::list`]) is made from it.
+#[derive(Clone, Debug)]
+pub struct Sweep {
+    pub scenes: Vec<PathBuf>,
+    /// The ray kinds every target is swept over, as configured.
+    pub rays: Vec<RayKind>,
     /// The layouts named, in registry order.
-    pub fn layout_ids(&self) -> Vec<LayoutId> {
-        LayoutId::all().filter(|l| self.layouts.iter().any(|n| LayoutId::parse(n) == Ok(*l))).collect()
-    }
-
+    pub layouts: Vec<LayoutId>,
     /// The baselines named, in their list's order.
-    pub fn baselines(&self) -> Vec<BaselineId> {
-        BaselineId::all().filter(|b| self.layouts.iter().any(|n| n == b.name())).collect()
+    pub baselines: Vec<BaselineId>,
+    /// The layouts that get the B and P series.
+    pub series: Vec<LayoutId>,
+    pub branchings: Vec<usize>,
+    pub layout_branchings: Vec<usize>,
+    pub packets: Vec<usize>,
+    pub packet_branching: usize,
+    /// The math modes named.
+    pub maths: Vec<Math>,
+    /// Image size and seed of every generated ray set.
+    pub params: RayParams,
+    /// How every job is measured: warm-up and timed dispatches, with the counting pass.
+    pub plan: Plan,
+    /// Vulkan device index or name substring (`None`: the default device).
+    pub device: Option<String>,
+    pub kernel_timeout: f64,
+    pub float_controls: FcChoice,
+    pub kernels: Vec<UserKernel>,
+    pub shard: Option<Shard>,
+    pub budget: Option<f64>,
+    /// A hash of the configuration without its shard and budget: which sweep a shard is of.
+    pub config_hash: String,
+}
+
+/// A checked `[[kernel]]` table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UserKernel {
+    /// The `kernel` column of its rows.
+    pub name: String,
+    /// The variant whose built-in kernel it stands in for.
+    pub variant: Variant,
+    pub file: PathBuf,
+    /// Its ray kinds (`None`: the sweep's).
+    pub rays: Option<Vec<RayKind>>,
+}
+
+impl Sweep {
+    /// Every ray kind of the sweep: the configured ones, then any a user kernel adds.
+    pub fn kinds(&self) -> Vec<RayKind> {
+        let mut k = self.rays.clone();
+        for r in self.kernels.iter().flat_map(|u| u.rays.iter().flatten()) {
+            if !k.contains(r) {
+                k.push(r.clone());
+            }
+        }
+        k
     }
 
     /// The math modes swept for a layout: those named that it has (in its order), else its
     /// default.
     pub fn maths_of(&self, layout: LayoutId) -> Vec<Math> {
-        let named: Vec<Math> = self.maths.iter().filter_map(|m| m.parse().ok()).collect();
-        let m: Vec<Math> = layout.info().maths.iter().copied().filter(|m| named.contains(m)).collect();
+        let m: Vec<Math> = layout.info().maths.iter().copied().filter(|m| self.maths.contains(m)).collect();
         if m.is_empty() {
             vec![layout.default_math()]
         } else {
@@ -256,26 +359,15 @@ impl Config {
     /// `series` layouts also the B series at P = 1 and the P series at `packet_branching`;
     /// sorted (so each layout and B is contiguous).
     pub fn variants(&self) -> Vec<Variant> {
-        let mut v = Vec::new();
-        for layout in self.layout_ids() {
-            let series = self.series.iter().any(|s| s == layout.name());
-            for math in self.maths_of(layout) {
-                for &b in &self.layout_branchings {
-                    v.push(Variant::new(layout, b, 1).with_math(math));
-                }
-                if series {
-                    for &b in &self.branchings {
-                        v.push(Variant::new(layout, b, 1).with_math(math));
-                    }
-                    for &p in &self.packets {
-                        v.push(Variant::new(layout, self.packet_branching, p).with_math(math));
-                    }
-                }
-            }
-        }
-        v.sort();
-        v.dedup();
-        v
+        crate::variant::series(&crate::variant::Series {
+            layouts: &self.layouts,
+            maths: &|l| self.maths_of(l),
+            series: &self.series,
+            branchings: &self.branchings,
+            layout_branchings: &self.layout_branchings,
+            packets: &self.packets,
+            packet_branching: self.packet_branching,
+        })
     }
 }
 

@@ -4,15 +4,15 @@
 //! (its rows kept, their jobs not run again) or replaced, as asked.
 
 use super::jobs::{self, Job};
-use super::Config;
+use super::Sweep;
 use crate::base::Status;
 use crate::base::{mean_counters, simd_utilisation, Hit};
 use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
 use crate::outdir::OutDir;
-use crate::rays::{RayKind, RayParams};
+use crate::rays::RayKind;
 use crate::report::{self, Row, RowId};
-use crate::runner::{Outcome, Plan, RaySetId, RaySpec, Runner, Target};
+use crate::runner::{Outcome, Plan, RaySetId, Runner, Target};
 use anyhow::Context;
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -22,7 +22,7 @@ pub struct Summary {
     pub rows: usize,
     pub failed: Vec<String>,
     pub out: PathBuf,
-    /// Jobs left unrun when the budget ran out (`Config::budget`).
+    /// Jobs left unrun when the budget ran out (`Sweep::budget`).
     pub unrun: usize,
 }
 
@@ -95,37 +95,41 @@ pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
 /// Runs a sweep, writing `results.csv`/`.json` as it goes, then the report. `mask`: device
 /// features to treat as missing (testing). `kept`: rows of a resumed sweep ([`prepare_out`]);
 /// their jobs are not run again.
-pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row>) -> anyhow::Result<Summary> {
-    cfg.check()?;
+pub fn run(sweep: &Sweep, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row>) -> anyhow::Result<Summary> {
     let start = std::time::Instant::now();
     let opts = gpu::ContextOptions {
-        device: (!cfg.device.is_empty()).then(|| cfg.device.clone()),
+        device: sweep.device.clone(),
         mask_features: mask.to_vec(),
-        kernel_timeout_s: Some(cfg.kernel_timeout),
+        kernel_timeout_s: Some(sweep.kernel_timeout),
         ..Default::default()
     };
     let g = Gpu::new(&opts)?;
-    let mut jobs = jobs::list(cfg);
-    if let Some(s) = cfg.shard {
-        let bytes: Vec<u64> = cfg.scenes.iter().map(|p| std::fs::metadata(p).map(|m| m.len()).unwrap_or(1)).collect();
+    let mut jobs = jobs::list(sweep);
+    if let Some(s) = sweep.shard {
+        let bytes: Vec<u64> = sweep.scenes.iter().map(|p| std::fs::metadata(p).map(|m| m.len()).unwrap_or(1)).collect();
         let all = jobs.len();
-        jobs = jobs::shard(cfg, &jobs, s, &bytes);
+        jobs = jobs::shard(&jobs, s, &bytes);
         if !quiet {
             eprintln!("shard {}/{}: {} of {} jobs", s.k, s.n, jobs.len(), all);
         }
     }
-    let runner = Runner::new(Some(&g), &cfg.baselines(), Default::default())?;
-    let files = SetupFiles::of(cfg);
-    let mut ex = Executor { runner, cfg, gpu: &g, images: None, scene: None, measured: HashSet::new(), files };
+    let runner = Runner::new(Some(&g), &sweep.baselines, Default::default())?;
+    let mut ex = Executor {
+        runner,
+        gpu: &g,
+        plan: sweep.plan,
+        kinds: sweep.kinds().len(),
+        images: None,
+        scene: None,
+        measured: Vec::new(),
+    };
     let done: HashSet<RowId> = kept.iter().map(Row::id).collect();
     let jobs: Vec<Job> = jobs.into_iter().filter(|j| !done.contains(&ex.identity(j).id())).collect();
     let resumed = kept.len();
     let mut writer = report::Writer::create(out, kept)?;
-    if let Some(s) = cfg.shard {
+    if let Some(s) = sweep.shard {
         // Which sweep this share is of, so that `report` merges only shards of one sweep.
-        let whole = Config { shard: None, budget: None, ..cfg.clone() };
-        let config = format!("{:016x}", crate::digest::fnv1a(format!("{whole:?}").as_bytes()));
-        let manifest = report::merge::ShardManifest { k: s.k, n: s.n, config };
+        let manifest = report::merge::ShardManifest { k: s.k, n: s.n, config: sweep.config_hash.clone() };
         crate::fsx::write_atomic(&out.join("shard.json"), serde_json::to_string_pretty(&manifest)?.as_bytes())?;
     }
     let arith = gpu::arith::run(&g, 16384, 256, 3)?;
@@ -145,7 +149,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
     let mut failed = Vec::new();
     let (mut longest, mut unrun) = (0.0f64, 0);
     for (i, job) in jobs.iter().enumerate() {
-        if let Some(budget) = cfg.budget {
+        if let Some(budget) = sweep.budget {
             if i > 0 && start.elapsed().as_secs_f64() + longest > budget {
                 unrun = jobs.len() - i;
                 break;
@@ -167,7 +171,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
                     "{} hung (no result within {} s) and was recorded as FAILED in {}; the device stays busy with it, \
                      so the sweep stops here — rerun with --resume to continue after it",
                     ex.describe(job),
-                    cfg.kernel_timeout,
+                    sweep.kernel_timeout,
                     out.display()
                 );
             }
@@ -199,7 +203,7 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
                 ex.runner.release(layout, b);
             }
         }
-        if jobs.get(i + 1).is_none_or(|n| n.scene != job.scene) {
+        if jobs.get(i + 1).is_none_or(|n| n.scene.index != job.scene.index) {
             ex.finish_scene(out)?;
         }
         longest = longest.max(job_start.elapsed().as_secs_f64());
@@ -219,79 +223,28 @@ pub fn run(cfg: &Config, out: &Path, quiet: bool, mask: &[String], kept: Vec<Row
 /// math), for its images.
 struct Images {
     set: RaySetId,
+    width: u32,
+    height: u32,
     layouts: Vec<(LayoutId, Vec<Hit>, Vec<f64>)>,
 }
 
-struct Executor<'a, 'g> {
+struct Executor<'g> {
     runner: Runner<'g>,
-    cfg: &'a Config,
     gpu: &'g Gpu,
+    /// How every job is measured.
+    plan: Plan,
+    /// How many ray kinds the sweep has (`Sweep::kinds`).
+    kinds: usize,
     images: Option<Images>,
     /// The scene of the jobs run last (its warnings are printed once).
     scene: Option<usize>,
     /// The ray kinds measured on it: once all are, the f32 reference encoding is freed.
-    measured: HashSet<usize>,
-    /// The files behind each row's `setup`, read once per sweep.
-    files: SetupFiles,
+    measured: Vec<RayKind>,
 }
 
-/// What the files a sweep reads contribute to its rows' `setup`: each scene and rays file by
-/// canonical path, size and modification time, each user kernel by its bytes' hash; taken
-/// once, not for every job identity.
-struct SetupFiles {
-    scenes: Vec<String>,
-    /// Per ray kind (`jobs::kinds`): a rays file's stamp, none for generated rays.
-    rays: Vec<Option<String>>,
-    kernels: Vec<u64>,
-}
-
-impl SetupFiles {
-    fn of(cfg: &Config) -> SetupFiles {
-        let stamp = |p: &Path| {
-            let m = std::fs::metadata(p).ok();
-            let mtime =
-                m.as_ref().and_then(|m| m.modified().ok()).and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
-            format!(
-                "{}:{}:{}",
-                p.canonicalize().unwrap_or_else(|_| p.to_path_buf()).display(),
-                m.map_or(0, |m| m.len()),
-                mtime.map_or(0, |d| d.as_nanos())
-            )
-        };
-        SetupFiles {
-            scenes: cfg.scenes.iter().map(|p| stamp(p)).collect(),
-            rays: jobs::kinds(cfg)
-                .iter()
-                .map(|k| match k {
-                    RayKind::File(p) => Some(stamp(p)),
-                    _ => None,
-                })
-                .collect(),
-            kernels: cfg
-                .kernel
-                .iter()
-                .map(|k| crate::digest::fnv1a(&std::fs::read(&k.file).unwrap_or_default()))
-                .collect(),
-        }
-    }
-}
-
-impl Executor<'_, '_> {
-    fn kind(&self, job: &Job) -> RayKind {
-        jobs::kinds(self.cfg)[job.rays].clone()
-    }
-
+impl Executor<'_> {
     fn describe(&self, job: &Job) -> String {
-        let scene = crate::scene::scene_name(&self.cfg.scenes[job.scene]);
-        format!("{scene} {} {}", self.kind(job), self.identity(job).kernel)
-    }
-
-    fn spec(&self, job: &Job) -> RaySpec {
-        let c = self.cfg;
-        RaySpec {
-            kind: self.kind(job),
-            params: RayParams { width: c.width, height: c.height, seed: c.seed, ..Default::default() },
-        }
+        format!("{} {} {}", job.scene.name, job.rays.kind, self.identity(job).kernel)
     }
 
     /// The row a job writes, before it runs: its identity (what `--resume` matches) with no
@@ -299,15 +252,15 @@ impl Executor<'_, '_> {
     fn identity(&self, job: &Job) -> Row {
         let g = &self.gpu.info;
         let mut row = Row {
-            scene: crate::scene::scene_name(&self.cfg.scenes[job.scene]),
-            rays: self.kind(job).to_string(),
+            scene: job.scene.name.clone(),
+            rays: job.rays.kind.to_string(),
             device: g.name.clone(),
             driver: g.driver.clone(),
             version: env!("CARGO_PKG_VERSION").into(),
             commit: env!("HALFTRACE_COMMIT").into(),
             math: "n/a".into(),
             float_controls: "n/a".into(),
-            setup: self.setup(job),
+            setup: job.setup.clone(),
             ..Row::default()
         };
         match &job.target {
@@ -316,7 +269,7 @@ impl Executor<'_, '_> {
                 (row.layout, row.math, row.branching, row.packet) =
                     (v.layout.name().into(), v.math.name().into(), v.branching, v.packet);
                 let (name, fc) = self.runner.name(k);
-                row.kernel = job.user.map_or(name, |i| self.cfg.kernel[i].name.clone());
+                row.kernel = job.user.clone().unwrap_or(name);
                 if let Some(fc) = fc {
                     row.float_controls = fc.name().into();
                 }
@@ -326,53 +279,39 @@ impl Executor<'_, '_> {
         row
     }
 
-    /// What else decides a job's result (the row's `setup`): the scene file, the image size,
-    /// seed and rays file, a user kernel's source; files by canonical path, size and
-    /// modification time (a kernel by its bytes).
-    fn setup(&self, job: &Job) -> String {
-        let (c, f) = (self.cfg, &self.files);
-        let mut text = format!("scene {}; {}x{} seed {}", f.scenes[job.scene], c.width, c.height, c.seed);
-        if let Some(r) = &f.rays[job.rays] {
-            text += &format!("; rays {r}");
-        }
-        if let Some(i) = job.user {
-            text += &format!("; kernel {:016x}", f.kernels[i]);
-        }
-        format!("{:016x}", crate::digest::fnv1a(text.as_bytes()))
-    }
-
     fn run_job(&mut self, job: &Job, bar: &indicatif::ProgressBar) -> anyhow::Result<Row> {
-        let (scene, _) = self.runner.scene(&self.cfg.scenes[job.scene])?;
-        if self.scene != Some(job.scene) {
+        let (scene, _) = self.runner.scene(&job.scene.path)?;
+        if self.scene != Some(job.scene.index) {
             for w in &scene.warnings {
                 bar.suspend(|| eprintln!("warning: {w}"));
             }
-            (self.scene, self.measured) = (Some(job.scene), HashSet::new());
+            (self.scene, self.measured) = (Some(job.scene.index), Vec::new());
         }
         let triangles = scene.len();
-        let set = self.runner.ray_set(&self.spec(job))?;
-        let plan = Plan { warmup: self.cfg.warmup, repeat: self.cfg.repeat, count: true };
-        let o = match job.user {
-            Some(i) => self
-                .runner
-                .measure(&job.target, set, plan)
-                .with_context(|| format!("[[kernel]] '{}'", self.cfg.kernel[i].name)),
-            None => self.runner.measure(&job.target, set, plan),
+        let set = self.runner.ray_set(&job.rays)?;
+        let o = match &job.user {
+            Some(name) => {
+                self.runner.measure(&job.target, set, self.plan).with_context(|| format!("[[kernel]] '{name}'"))
+            }
+            None => self.runner.measure(&job.target, set, self.plan),
         }?;
         // Every ray set of the scene has its f32 hits now: the reference encoding can go.
-        self.measured.insert(job.rays);
-        if self.measured.len() == jobs::kinds(self.cfg).len() {
+        if !self.measured.contains(&job.rays.kind) {
+            self.measured.push(job.rays.kind.clone());
+        }
+        if self.measured.len() == self.kinds {
             self.runner.release_f32_reference();
         }
         let mut row = self.identity(job);
         row.triangles = triangles;
         row.ray_count = self.runner.rays(set).rays.len();
         self.fill(&mut row, &o);
-        if job.scene == 0 && job.user.is_none() && self.kind(job) == RayKind::Primary && o.status.is_ok() {
+        if job.scene.index == 0 && job.user.is_none() && job.rays.kind == RayKind::Primary && o.status.is_ok() {
             if let (Target::Kernel(k), Some(c)) = (&job.target, &o.m.counters) {
                 let v = k.variant;
                 if v.branching == 4 && v.packet == 1 && v.math == v.layout.default_math() {
-                    let img = self.images.get_or_insert_with(|| Images { set, layouts: Vec::new() });
+                    let (width, height) = (job.rays.params.width, job.rays.params.height);
+                    let img = self.images.get_or_insert_with(|| Images { set, width, height, layouts: Vec::new() });
                     img.layouts.push((v.layout, o.m.hits.clone(), c.iter().map(|x| x.nodes as f64).collect()));
                 }
             }
@@ -415,7 +354,7 @@ impl Executor<'_, '_> {
         let f32_hits = self.runner.f32_hits(img.set)?.to_vec();
         let scene = self.runner.current_scene().expect("the images' scene is current");
         let set = self.runner.rays(img.set);
-        let (w, h) = (self.cfg.width, self.cfg.height);
+        let (w, h) = (img.width, img.height);
         crate::images::render(&out.join("render.png"), scene, &set.rays, &f32_hits, w, h)?;
         let max = img.layouts.iter().flat_map(|(_, _, n)| n.iter().cloned()).fold(0.0, f64::max);
         for (layout, hits, nodes) in &img.layouts {

@@ -1,5 +1,6 @@
-//! `halftrace sweep`: a list of jobs — scene × ray set × variant, baseline or user kernel
-//! ([`jobs`], from a [`Config`]) — that one executor per device runs through the runner
+//! `halftrace sweep`: a configuration ([`Config`]) checked into typed values once ([`Sweep`]),
+//! then a list of jobs — scene × ray set × variant, baseline or user kernel, each carrying
+//! what its row needs ([`jobs`]) — that one executor per device runs through the runner
 //! ([`executor`]): each target validated against its reference, then timed and counted; one
 //! result row per job, written as it finishes; the report at the end.
 
@@ -7,9 +8,9 @@ pub mod config;
 pub mod executor;
 pub mod jobs;
 
-pub use config::{check_scenes, Config, KernelSpec, DEFAULT_SCENE};
+pub use config::{check_scenes, Config, KernelTable, Sweep, UserKernel, DEFAULT_SCENE};
 pub use executor::{prepare_out, run, OutMode, Summary};
-pub use jobs::{Job, Shard};
+pub use jobs::{Job, SceneFile, Shard};
 
 use std::path::PathBuf;
 
