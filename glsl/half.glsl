@@ -88,12 +88,15 @@ float16_t mul_sat(float16_t a, float16_t b) {
 #define UNB16 HINF
 #endif
 
-f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
-    float16_t tn = -UNB16;
-    float16_t tf = UNB16;
+// The fp16 slab of one box, widened by w when `widen` (a constant at every call, so where it
+// is false no 0 is added or subtracted: -0 + 0 is +0): (tn, tf). Unwidened, with float
+// controls, the poster's test (f16h-poster's test_child).
+void slab16_span(f16vec3 o, bool widen, float16_t w, f16vec3 lo, f16vec3 hi, out float16_t tn, out float16_t tf) {
+    tn = -UNB16;
+    tf = UNB16;
     for (int a = 0; a < 3; a++) {
-        precise float16_t la = (lo[a] - o[a]) - w;
-        precise float16_t ha = (hi[a] - o[a]) + w;
+        precise float16_t la = widen ? (lo[a] - o[a]) - w : lo[a] - o[a];
+        precise float16_t ha = widen ? (hi[a] - o[a]) + w : hi[a] - o[a];
         float16_t t0, t1;
         if (lr_d16[a] == H0) {
             bool inside = la <= H0 && ha >= H0;
@@ -108,6 +111,11 @@ f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
         tn = max(tn, t0);
         tf = min(tf, t1);
     }
+}
+
+f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
+    float16_t tn, tf;
+    slab16_span(o, true, w, lo, hi, tn, tf);
     const float16_t LO_DOWN = float16_t(1.0 - 1.0 / 256.0);
     const float16_t LO_UP = float16_t(1.0 + 1.0 / 256.0);
     precise float16_t tn_lb = tn * (tn > H0 ? LO_DOWN : LO_UP);

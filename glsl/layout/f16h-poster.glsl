@@ -33,25 +33,9 @@ struct ChildHit { float16_t tn; f16vec3 lo; f16vec3 hi; };
 bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
     f16vec3 lo = slot_lo(ni, s);
     f16vec3 hi = slot_hi(ni, s);
-    float16_t tn = -HINF;
-    float16_t tf = HINF;
-    for (int a = 0; a < 3; a++) {
-        precise float16_t la = lo[a] - en.o[a];
-        precise float16_t ha = hi[a] - en.o[a];
-        float16_t t0, t1;
-        if (lr_d16[a] == H0) {
-            bool inside = la <= H0 && ha >= H0;
-            t0 = inside ? -HINF : HINF;
-            t1 = inside ? HINF : -HINF;
-        } else {
-            precise float16_t x = la * lr_idir[a];
-            precise float16_t y = ha * lr_idir[a];
-            t0 = min(x, y);
-            t1 = max(x, y);
-        }
-        tn = max(tn, t0);
-        tf = min(tf, t1);
-    }
+    // Not widened, with float controls (HMUL a plain product, UNB16 inf): the poster's test.
+    float16_t tn, tf;
+    slab16_span(en.o, false, H0, lo, hi, tn, tf);
     key = float(tn);
     h = ChildHit(tn, lo, hi);
     return tn <= tf && tf >= H0 && tn <= v.s_lim;
