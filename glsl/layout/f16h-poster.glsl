@@ -46,16 +46,13 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
 #define TEST_PAIRS 1
 bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1) {
     f16vec2 lo[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-        lo[a] = pair_lo(ni, s, a);
-        hi[a] = pair_hi(ni, s, a);
-    }
+    pair_boxes(ni, s, lo, hi, h0.lo, h0.hi, h1.lo, h1.hi);
     // Not widened: the poster's test.
     f16vec2 tn, tf;
     slab16x2_span(en.o, false, f16vec2(H0), lo, hi, tn, tf);
     key = vec2(tn);
-    h0 = ChildHit(tn.x, f16vec3(lo[0].x, lo[1].x, lo[2].x), f16vec3(hi[0].x, hi[1].x, hi[2].x));
-    h1 = ChildHit(tn.y, f16vec3(lo[0].y, lo[1].y, lo[2].y), f16vec3(hi[0].y, hi[1].y, hi[2].y));
+    h0.tn = tn.x;
+    h1.tn = tn.y;
     // tn <= tf && tf >= 0 && tn <= s_lim, two comparisons a lane (max is exact).
     bvec2 a = lessThanEqual(max(tn, f16vec2(H0)), tf);
     bvec2 b = lessThanEqual(tn, f16vec2(v.s_lim));
