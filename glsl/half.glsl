@@ -88,12 +88,15 @@ float16_t mul_sat(float16_t a, float16_t b) {
 #define UNB16 HINF
 #endif
 
-f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
-    float16_t tn = -UNB16;
-    float16_t tf = UNB16;
+// The fp16 slab of one box, widened by w when `widen` (a constant at every call, so where it
+// is false no 0 is added or subtracted: -0 + 0 is +0): (tn, tf). Unwidened, with float
+// controls, the poster's test (f16h-poster's test_child).
+void slab16_span(f16vec3 o, bool widen, float16_t w, f16vec3 lo, f16vec3 hi, out float16_t tn, out float16_t tf) {
+    tn = -UNB16;
+    tf = UNB16;
     for (int a = 0; a < 3; a++) {
-        precise float16_t la = (lo[a] - o[a]) - w;
-        precise float16_t ha = (hi[a] - o[a]) + w;
+        precise float16_t la = widen ? (lo[a] - o[a]) - w : lo[a] - o[a];
+        precise float16_t ha = widen ? (hi[a] - o[a]) + w : hi[a] - o[a];
         float16_t t0, t1;
         if (lr_d16[a] == H0) {
             bool inside = la <= H0 && ha >= H0;
@@ -108,6 +111,11 @@ f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
         tn = max(tn, t0);
         tf = min(tf, t1);
     }
+}
+
+f16vec3 slab16(f16vec3 o, float16_t w, f16vec3 lo, f16vec3 hi) {
+    float16_t tn, tf;
+    slab16_span(o, true, w, lo, hi, tn, tf);
     const float16_t LO_DOWN = float16_t(1.0 - 1.0 / 256.0);
     const float16_t LO_UP = float16_t(1.0 + 1.0 / 256.0);
     precise float16_t tn_lb = tn * (tn > H0 ? LO_DOWN : LO_UP);
@@ -182,26 +190,36 @@ f16vec3 move16(f16vec3 o, float16_t s, f16vec3 c, float16_t r, out f16vec3 ea, o
     return f16vec3(oaxy, oaz);
 }
 
-// The fp16 slab of two boxes on lanes (slab16's loop; lo[a], hi[a]: axis a of both boxes,
-// box 0 in x, box 1 in y), each widened by w2 when `widen` (a constant at every call, so no
-// subtraction of 0 is left where it is false): (tn, tf) per lane.
-void slab16x2_span(f16vec3 o, bool widen, f16vec2 w2, f16vec2 lo[3], f16vec2 hi[3], out f16vec2 tn, out f16vec2 tf) {
-    tn = f16vec2(-UNB16);
-    tf = f16vec2(UNB16);
+// The slab of two boxes on lanes (slab16_span's loop; lo[a], hi[a]: axis a of both boxes, box 0
+// in x, box 1 in y), each widened by w2 when `widen` (as slab16_span): (tn, tf) per lane. The
+// differences and products are fp16; min and max are SPAN2's: fp16, or fp32 in MATH_MIXED
+// (slab_math's mixed path: its products converted, exactly, and its unbounded inf).
+#ifdef MATH_MIXED
+#define SPAN2 vec2
+#define SPAN_UNB INF
+#else
+#define SPAN2 f16vec2
+#define SPAN_UNB UNB16
+#endif
+void slab16x2_span(f16vec3 o, bool widen, f16vec2 w2, f16vec2 lo[3], f16vec2 hi[3], out SPAN2 tn, out SPAN2 tf) {
+    tn = SPAN2(-SPAN_UNB);
+    tf = SPAN2(SPAN_UNB);
     for (int a = 0; a < 3; a++) {
         f16vec2 o2 = f16vec2(o[a]);
         precise f16vec2 la = widen ? (lo[a] - o2) - w2 : lo[a] - o2;
         precise f16vec2 ha = widen ? (hi[a] - o2) + w2 : hi[a] - o2;
-        f16vec2 t0, t1;
+        SPAN2 t0, t1;
         if (lr_d16[a] == H0) {
             // la <= 0 && ha >= 0, one comparison a lane: max(la, -ha) <= 0 (exact).
             bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
-            t0 = mix(f16vec2(UNB16), f16vec2(-UNB16), inside);
+            t0 = mix(SPAN2(SPAN_UNB), SPAN2(-SPAN_UNB), inside);
             t1 = -t0;
         } else {
             f16vec2 id = f16vec2(lr_idir[a]);
-            precise f16vec2 x = la * id;
-            precise f16vec2 y = ha * id;
+            precise f16vec2 x16 = la * id;
+            precise f16vec2 y16 = ha * id;
+            SPAN2 x = SPAN2(x16);
+            SPAN2 y = SPAN2(y16);
             t0 = min(x, y);
             t1 = max(x, y);
         }
@@ -217,40 +235,16 @@ void slab16x2_span(f16vec3 o, bool widen, f16vec2 w2, f16vec2 lo[3], f16vec2 hi[
 // tests bit for bit (min and max are exact). Returns (tn, tn_lb, tf_ub) per lane as fp32.
 // lo[a], hi[a]: axis a of both boxes (box 0 in x, box 1 in y).
 void slab16x2(OVEC o, HALF w, f16vec2 lo[3], f16vec2 hi[3], out vec2 tn, out vec2 tn_lb, out vec2 tf_ub) {
-    f16vec2 w2 = f16vec2(w);
+    SPAN2 tn2, tf2;
+    slab16x2_span(o, true, f16vec2(w), lo, hi, tn2, tf2);
 #ifdef MATH_MIXED
-    // fp16 differences and products, fp32 min, max and bounds (slab_math's mixed path).
-    vec2 tn2 = vec2(-INF);
-    vec2 tf2 = vec2(INF);
-    for (int a = 0; a < 3; a++) {
-        f16vec2 o2 = f16vec2(o[a]);
-        precise f16vec2 la = (lo[a] - o2) - w2;
-        precise f16vec2 ha = (hi[a] - o2) + w2;
-        vec2 t0, t1;
-        if (lr_d16[a] == H0) {
-            bvec2 inside = lessThanEqual(max(la, -ha), f16vec2(H0));
-            t0 = mix(vec2(INF), vec2(-INF), inside);
-            t1 = -t0;
-        } else {
-            f16vec2 id = f16vec2(lr_idir[a]);
-            precise f16vec2 x16 = la * id;
-            precise f16vec2 y16 = ha * id;
-            vec2 x = vec2(x16);
-            vec2 y = vec2(y16);
-            t0 = min(x, y);
-            t1 = max(x, y);
-        }
-        tn2 = max(tn2, t0);
-        tf2 = min(tf2, t1);
-    }
+    // fp32 bounds (slab_math's mixed path).
     tn = tn2;
     precise vec2 lb = tn2 * mix(vec2(1.0 + 1.0 / 256.0), vec2(1.0 - 1.0 / 256.0), greaterThan(tn2, vec2(0.0)));
     precise vec2 ub = tf2 * mix(vec2(1.0 - 1.0 / 256.0), vec2(1.0 + 1.0 / 256.0), greaterThan(tf2, vec2(0.0)));
     tn_lb = lb;
     tf_ub = ub;
 #else
-    f16vec2 tn2, tf2;
-    slab16x2_span(o, true, w2, lo, hi, tn2, tf2);
     // x * (x > 0 ? down : up) with the factor chosen by x's sign bit, both lanes in one 32-bit
     // integer operation: the same product, as a zero's factor does not matter (±0 either way)
     // and no NaN occurs (half.rs, slab16).

@@ -54,4 +54,18 @@ f16vec2 pair_hi(uint ni, uint s, int a) { return unpackFloat2x16(nodes[ni].hi[(u
 f16vec2 pair_lo(uint ni, uint s, int a) { return f16vec2(nodes[ni].lo[a * B + s], nodes[ni].lo[a * B + s + 1]); }
 f16vec2 pair_hi(uint ni, uint s, int a) { return f16vec2(nodes[ni].hi[a * B + s], nodes[ni].hi[a * B + s + 1]); }
 #endif
+
+// The boxes of slots s and s + 1 (s even) for a pair test: axis a of both as lo[a], hi[a] (slot s
+// in x, s + 1 in y), and each as a box (lo0, hi0: slot s; lo1, hi1: slot s + 1).
+void pair_boxes(uint ni, uint s, out f16vec2 lo[3], out f16vec2 hi[3], out f16vec3 lo0, out f16vec3 hi0,
+                out f16vec3 lo1, out f16vec3 hi1) {
+    for (int a = 0; a < 3; a++) {
+        lo[a] = pair_lo(ni, s, a);
+        hi[a] = pair_hi(ni, s, a);
+    }
+    lo0 = f16vec3(lo[0].x, lo[1].x, lo[2].x);
+    hi0 = f16vec3(hi[0].x, hi[1].x, hi[2].x);
+    lo1 = f16vec3(lo[0].y, lo[1].y, lo[2].y);
+    hi1 = f16vec3(hi[0].y, hi[1].y, hi[2].y);
+}
 #endif

@@ -33,25 +33,9 @@ struct ChildHit { float16_t tn; f16vec3 lo; f16vec3 hi; };
 bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
     f16vec3 lo = slot_lo(ni, s);
     f16vec3 hi = slot_hi(ni, s);
-    float16_t tn = -HINF;
-    float16_t tf = HINF;
-    for (int a = 0; a < 3; a++) {
-        precise float16_t la = lo[a] - en.o[a];
-        precise float16_t ha = hi[a] - en.o[a];
-        float16_t t0, t1;
-        if (lr_d16[a] == H0) {
-            bool inside = la <= H0 && ha >= H0;
-            t0 = inside ? -HINF : HINF;
-            t1 = inside ? HINF : -HINF;
-        } else {
-            precise float16_t x = la * lr_idir[a];
-            precise float16_t y = ha * lr_idir[a];
-            t0 = min(x, y);
-            t1 = max(x, y);
-        }
-        tn = max(tn, t0);
-        tf = min(tf, t1);
-    }
+    // Not widened, with float controls (HMUL a plain product, UNB16 inf): the poster's test.
+    float16_t tn, tf;
+    slab16_span(en.o, false, H0, lo, hi, tn, tf);
     key = float(tn);
     h = ChildHit(tn, lo, hi);
     return tn <= tf && tf >= H0 && tn <= v.s_lim;
@@ -62,16 +46,13 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
 #define TEST_PAIRS 1
 bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1) {
     f16vec2 lo[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-        lo[a] = pair_lo(ni, s, a);
-        hi[a] = pair_hi(ni, s, a);
-    }
+    pair_boxes(ni, s, lo, hi, h0.lo, h0.hi, h1.lo, h1.hi);
     // Not widened: the poster's test.
     f16vec2 tn, tf;
     slab16x2_span(en.o, false, f16vec2(H0), lo, hi, tn, tf);
     key = vec2(tn);
-    h0 = ChildHit(tn.x, f16vec3(lo[0].x, lo[1].x, lo[2].x), f16vec3(hi[0].x, hi[1].x, hi[2].x));
-    h1 = ChildHit(tn.y, f16vec3(lo[0].y, lo[1].y, lo[2].y), f16vec3(hi[0].y, hi[1].y, hi[2].y));
+    h0.tn = tn.x;
+    h1.tn = tn.y;
     // tn <= tf && tf >= 0 && tn <= s_lim, two comparisons a lane (max is exact).
     bvec2 a = lessThanEqual(max(tn, f16vec2(H0)), tf);
     bvec2 b = lessThanEqual(tn, f16vec2(v.s_lim));

@@ -44,14 +44,7 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
 #define TEST_PAIRS 1
 bvec2 test_pair(uint ni, uint s, Entry en, Visit v, RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1) {
     f16vec2 lo[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-        lo[a] = pair_lo(ni, s, a);
-        hi[a] = pair_hi(ni, s, a);
-    }
-    h0.lo = f16vec3(lo[0].x, lo[1].x, lo[2].x);
-    h0.hi = f16vec3(hi[0].x, hi[1].x, hi[2].x);
-    h1.lo = f16vec3(lo[0].y, lo[1].y, lo[2].y);
-    h1.hi = f16vec3(hi[0].y, hi[1].y, hi[2].y);
+    pair_boxes(ni, s, lo, hi, h0.lo, h0.hi, h1.lo, h1.hi);
     vec2 tn, tn_lb;
     bvec2 hit = half_test2(en.o, v, lo, hi, tn, tn_lb);
     h0.tn = tn.x;
