@@ -12,11 +12,7 @@ const OUTPUTS: &[&str] = &["conformance.csv", "conformance.md"];
 
 pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
     // The folder first: a bad one is refused before the run, not after it.
-    let out = a.out.clone().unwrap_or_else(|| {
-        let d = crate::sweep::default_out();
-        let stamp = d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-        d.with_file_name(format!("conformance-{stamp}"))
-    });
+    let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("conformance")));
     let _lock = OutDir::claim(&out, "--out")?;
     let held: Vec<&str> = OUTPUTS.iter().copied().filter(|f| out.join(f).exists()).collect();
     anyhow::ensure!(

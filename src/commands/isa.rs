@@ -41,11 +41,7 @@ fn line(r: &IsaRow) -> String {
 pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     // The folder first: a bad one is refused before any null device is probed.
-    let out = a.out.clone().unwrap_or_else(|| {
-        let d = crate::sweep::default_out();
-        let name = d.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-        d.with_file_name(format!("isa-{name}"))
-    });
+    let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("isa")));
     let _lock = OutDir::claim(&out, "--out")?;
     let held: Vec<&str> = OUTPUTS.iter().chain(&["disasm"]).copied().filter(|f| out.join(f).exists()).collect();
     anyhow::ensure!(

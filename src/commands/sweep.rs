@@ -48,7 +48,7 @@ fn config(a: &SweepArgs) -> anyhow::Result<Config> {
 
 pub fn sweep(a: &SweepArgs) -> anyhow::Result<()> {
     let c = config(a)?;
-    let mut out = a.out.clone().unwrap_or_else(sweep::default_out);
+    let mut out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(None));
     if let Some(s) = c.shard {
         out = out.join(s.folder());
     }
