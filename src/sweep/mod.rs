@@ -8,5 +8,5 @@ pub mod executor;
 pub mod jobs;
 
 pub use config::{check_scenes, Config, KernelSpec, DEFAULT_SCENE};
-pub use executor::{prepare_out, run, OutMode, Summary};
+pub use executor::{prepare_out, run, Summary, OUTPUTS};
 pub use jobs::{Job, Shard};
