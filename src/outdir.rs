@@ -263,10 +263,9 @@ impl OutDir {
         let held =
             Self::entries(path).map_err(|source| OutDirError::Io { flag: flag.into(), path: path.into(), source })?;
         let own: Vec<String> = held.iter().filter(|n| (outputs.owns)(n)).cloned().collect();
-        let claimed = Claimed { lock, flag: flag.into(), mode, held, own };
-        let blocking = if outputs.alone { &claimed.held } else { &claimed.own };
+        let blocking = if outputs.alone { &held } else { &own };
         if blocking.is_empty() {
-            return Ok(claimed);
+            return Ok(Claimed { lock, flag: flag.into(), mode, resumes: false, held, own });
         }
         let (flag, path, files) = (flag.to_string(), path.to_path_buf(), list(blocking));
         match (mode, outputs.resume) {
@@ -278,13 +277,13 @@ impl OutDir {
             (OutMode::Force, _) if outputs.force => {}
             _ => return Err(OutDirError::Holds { flag, path, files, hint: outputs.hint(true) }),
         }
-        for name in &claimed.own {
+        for name in &own {
             let t = std::fs::symlink_metadata(path.join(name)).map(|m| m.file_type());
             if let Some(t) = t.ok().filter(|t| !t.is_file() && !t.is_dir()) {
                 return Err(OutDirError::Special { flag, path, name: name.clone(), what: kind(&t) });
             }
         }
-        Ok(claimed)
+        Ok(Claimed { lock, flag, mode, resumes: mode == OutMode::Resume, held, own })
     }
 }
 
@@ -377,6 +376,7 @@ pub struct Claimed {
     lock: OutDirLock,
     flag: String,
     mode: OutMode,
+    resumes: bool,
     /// What the folder held when claimed, its lock aside (sorted names).
     pub held: Vec<String>,
     /// Of those, the command's own.
@@ -395,9 +395,9 @@ impl Claimed {
     }
 
     /// Whether the run continues from what the folder holds: `--resume` into a folder that
-    /// holds files (then the file a resume needs is there).
+    /// holds what would otherwise be refused (then the file a resume needs is there).
     pub fn resumes(&self) -> bool {
-        self.mode == OutMode::Resume && !self.held.is_empty()
+        self.resumes
     }
 
     /// Under `--force`, removes the command's own files and folders found at the claim — never
