@@ -255,8 +255,8 @@ impl OutDir {
     /// checks what it holds against `mode`; refuses, changing nothing, a folder that holds
     /// files (anything, for a command whose folder is its alone; else its own files) unless
     /// `Resume` — from the file a resume needs — or `Force`, and, under either, one of the
-    /// command's own names that is not a regular file or a folder (it would be replaced or
-    /// written through). Removes nothing: [`Claimed::replace_own`] does, when the command is
+    /// command's own names that is not what the command writes there (a regular file, or a
+    /// folder where [`Outputs::folders`] says so): it would be replaced or written through. Removes nothing: [`Claimed::replace_own`] does, when the command is
     /// ready to.
     pub fn claim_for(path: &Path, flag: &str, mode: OutMode, outputs: &Outputs) -> Result<Claimed, OutDirError> {
         let lock = Self::claim(path, flag)?;
@@ -278,8 +278,9 @@ impl OutDir {
             _ => return Err(OutDirError::Holds { flag, path, files, hint: outputs.hint(true) }),
         }
         for name in &own {
+            let folder = outputs.folders.contains(&name.as_str());
             let t = std::fs::symlink_metadata(path.join(name)).map(|m| m.file_type());
-            if let Some(t) = t.ok().filter(|t| !t.is_file() && !t.is_dir()) {
+            if let Some(t) = t.ok().filter(|t| if folder { !t.is_dir() } else { !t.is_file() }) {
                 return Err(OutDirError::Special { flag, path, name: name.clone(), what: kind(&t) });
             }
         }
@@ -329,6 +330,10 @@ pub struct Outputs {
     /// Whether a name in the folder is one of the command's files or folders: what `--force`
     /// replaces (nothing else there is ever touched).
     pub owns: fn(&str) -> bool,
+    /// Of those, the ones that are folders; the rest are regular files. An own name of the
+    /// other kind is not the command's (a user's folder called `report.md`) and is refused
+    /// under `--resume` or `--force`, never replaced.
+    pub folders: &'static [&'static str],
     /// The folder is the command's alone (a sweep's, a device report's): anything in it counts
     /// as held. Otherwise (`isa` and `conformance` may write into a sweep's folder, `report`
     /// beside other files) only the command's own files do.
@@ -401,8 +406,8 @@ impl Claimed {
     }
 
     /// Under `--force`, removes the command's own files and folders found at the claim — never
-    /// anything else, never a device, FIFO, socket or link (refused at the claim); otherwise
-    /// nothing. A command that writes its files whole at its end (`isa`, `conformance`) need not
+    /// anything else, never a device, FIFO, socket, link or a name of the wrong kind (refused
+    /// at the claim); otherwise nothing. A command that writes its files whole at its end (`isa`, `conformance`) need not
     /// call it: each file is replaced by a rename as it is written, so a run that fails first
     /// leaves the earlier ones.
     pub fn replace_own(&self) -> Result<(), OutDirError> {
@@ -657,12 +662,13 @@ mod tests {
     const ALONE: Outputs = Outputs {
         command: "sweep",
         owns: |n| ["results.csv", "report.md", "plots"].contains(&n),
+        folders: &["plots"],
         alone: true,
         resume: Some(("results.csv", "keep its rows")),
         force: true,
     };
     const SHARED: Outputs =
-        Outputs { command: "isa", owns: |n| n == "isa.md", alone: false, resume: None, force: true };
+        Outputs { command: "isa", owns: |n| n == "isa.md", folders: &[], alone: false, resume: None, force: true };
 
     #[test]
     fn what_a_folder_may_hold() {
@@ -717,6 +723,13 @@ mod tests {
         drop(c);
         assert_eq!(OutDir::entries(&d).unwrap(), ["notes.txt"]);
         assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "mine");
+        // Nor a folder under a name the command writes as a file (a user's, then).
+        std::fs::create_dir_all(d.join("report.md")).unwrap();
+        std::fs::write(d.join("report.md/draft.txt"), "mine").unwrap();
+        let e = claim(OutMode::Force, &ALONE).unwrap_err().to_string();
+        assert!(e.contains("its report.md is a folder"), "{e}");
+        assert_eq!(std::fs::read_to_string(d.join("report.md/draft.txt")).unwrap(), "mine");
+        std::fs::remove_dir_all(d.join("report.md")).unwrap();
         // Never a FIFO or a link, even of an own name: refused under --force or --resume.
         let fifo = d.join("report.md");
         assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());

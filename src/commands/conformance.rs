@@ -12,6 +12,7 @@ use std::path::PathBuf;
 const OUTPUTS: Outputs = Outputs {
     command: "conformance",
     owns: |n| n == "conformance.csv" || n == "conformance.md",
+    folders: &[],
     alone: false,
     resume: None,
     force: true,

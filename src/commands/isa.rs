@@ -24,8 +24,14 @@ const FILES: &[&str] = &[
 
 /// `isa`'s folder may be a sweep's: only its own [`FILES`] are refused unless `--force`, which
 /// replaces them (each as it is written, once every kernel is built) and nothing else.
-const OUTPUTS: Outputs =
-    Outputs { command: "isa", owns: |n| FILES.contains(&n), alone: false, resume: None, force: true };
+const OUTPUTS: Outputs = Outputs {
+    command: "isa",
+    owns: |n| FILES.contains(&n),
+    folders: &["disasm"],
+    alone: false,
+    resume: None,
+    force: true,
+};
 
 fn line(r: &IsaRow) -> String {
     let f = |x: Option<f64>| x.map(|v| format!("{v:.0}")).unwrap_or_else(|| "–".into());

@@ -61,6 +61,7 @@ pub(super) const OWN: &[&str] = &[
 pub(super) const OUTPUTS: Outputs = Outputs {
     command: "device-report",
     owns: |n| OWN.contains(&n),
+    folders: &["logs", "conformance", "sweep", "scenes"],
     alone: true,
     resume: Some((STATE, "finish the report there")),
     force: true,

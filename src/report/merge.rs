@@ -71,6 +71,7 @@ fn check_shards(dirs: &[PathBuf]) -> anyhow::Result<Vec<String>> {
 pub const OUTPUTS: Outputs = Outputs {
     command: "report",
     owns: |n| ["results.csv", "results.json", "isa.csv", "isa.json"].contains(&n),
+    folders: &[],
     alone: false,
     resume: None,
     force: false,

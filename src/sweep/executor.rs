@@ -33,6 +33,7 @@ pub struct Summary {
 pub const OUTPUTS: Outputs = Outputs {
     command: "sweep",
     owns: report::is_output,
+    folders: &[],
     alone: true,
     resume: Some(("results.csv", "keep its rows and run only the missing jobs")),
     force: true,
