@@ -454,6 +454,15 @@ fn outputs_are_refused_before_any_work() {
     assert!(!o.status.success() && e.contains("error: /nonexistent/scene.obj") && !e.contains("already holds"), "{e}");
     assert_eq!(std::fs::read_to_string(conf.join("conformance.md")).unwrap(), "earlier");
     assert_eq!(std::fs::read_dir(&conf).unwrap().count(), 1, "a refused run left something behind");
+    // A merge's folder of its own that holds rows is someone's results: refused before any
+    // input is read (this one has none).
+    let rows = tmp("report-out-rows");
+    std::fs::create_dir_all(&rows).unwrap();
+    std::fs::write(rows.join("results.csv"), "mine").unwrap();
+    let r = rows.to_str().unwrap();
+    let e = fails(&["report", dir, "--out", r]);
+    assert!(e.contains(&format!("--out {r} already holds results.csv; nothing was changed")), "{e}");
+    assert_eq!(std::fs::read_to_string(rows.join("results.csv")).unwrap(), "mine");
 }
 
 /// A scene's name comes from its file name and names rows and table cells: one with a newline

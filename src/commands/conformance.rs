@@ -3,28 +3,25 @@
 use super::outln;
 use crate::cli::ConformanceArgs;
 use crate::conformance;
-use crate::outdir::OutDir;
+use crate::outdir::{OutDir, OutMode, Outputs};
 use anyhow::Context;
 use std::path::PathBuf;
 
-/// The files `conformance` writes into its folder (`--force` replaces them, nothing else).
-const OUTPUTS: &[&str] = &["conformance.csv", "conformance.md"];
+/// What `conformance` writes into its folder, which it may share: these files, refused unless
+/// `--force`, which replaces them (each as it is written, at the end), nothing else.
+const OUTPUTS: Outputs = Outputs {
+    command: "conformance",
+    owns: |n| n == "conformance.csv" || n == "conformance.md",
+    folders: &[],
+    alone: false,
+    resume: None,
+    force: true,
+};
 
 pub fn conformance(a: &ConformanceArgs) -> anyhow::Result<()> {
     // The folder first: a bad one is refused before the run, not after it.
-    let out = a.out.clone().unwrap_or_else(|| {
-        let d = crate::sweep::default_out();
-        let stamp = d.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-        d.with_file_name(format!("conformance-{stamp}"))
-    });
-    let _lock = OutDir::claim(&out, "--out")?;
-    let held: Vec<&str> = OUTPUTS.iter().copied().filter(|f| out.join(f).exists()).collect();
-    anyhow::ensure!(
-        held.is_empty() || a.force,
-        "{} already holds {} from an earlier conformance run; name another --out, or --force to replace them",
-        out.display(),
-        held.join(", ")
-    );
+    let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("conformance")));
+    let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let mut scenes = a.scene.clone();
     if let Some(d) = &a.scenes_dir {
         let found = crate::scene::obj_files_in(d).with_context(|| format!("--scenes-dir {}", d.display()))?;

@@ -4,15 +4,34 @@
 use super::outln;
 use crate::cli::IsaArgs;
 use crate::isa::{self, Matrix, Target};
-use crate::outdir::OutDir;
+use crate::outdir::{OutDir, OutMode, Outputs};
 use crate::report::isa::IsaRow;
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// The files `isa` writes into its folder (`--force` replaces them, nothing else).
-const OUTPUTS: &[&str] =
-    &["isa.md", "isa.csv", "isa.json", "isa_vgprs.png", "isa_vgprs.svg", "isa_scratch.png", "isa_scratch.svg"];
+/// The files (and the folder) `isa` writes into its output folder.
+const FILES: &[&str] = &[
+    "isa.md",
+    "isa.csv",
+    "isa.json",
+    "isa_vgprs.png",
+    "isa_vgprs.svg",
+    "isa_scratch.png",
+    "isa_scratch.svg",
+    "disasm",
+];
+
+/// `isa`'s folder may be a sweep's: only its own [`FILES`] are refused unless `--force`, which
+/// replaces them (each as it is written, once every kernel is built) and nothing else.
+const OUTPUTS: Outputs = Outputs {
+    command: "isa",
+    owns: |n| FILES.contains(&n),
+    folders: &["disasm"],
+    alone: false,
+    resume: None,
+    force: true,
+};
 
 fn line(r: &IsaRow) -> String {
     let f = |x: Option<f64>| x.map(|v| format!("{v:.0}")).unwrap_or_else(|| "–".into());
@@ -41,19 +60,8 @@ fn line(r: &IsaRow) -> String {
 pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     // The folder first: a bad one is refused before any null device is probed.
-    let out = a.out.clone().unwrap_or_else(|| {
-        let d = crate::sweep::default_out();
-        let name = d.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-        d.with_file_name(format!("isa-{name}"))
-    });
-    let _lock = OutDir::claim(&out, "--out")?;
-    let held: Vec<&str> = OUTPUTS.iter().chain(&["disasm"]).copied().filter(|f| out.join(f).exists()).collect();
-    anyhow::ensure!(
-        held.is_empty() || a.force,
-        "{} already holds {} from an earlier isa run; name another --out, or --force to replace them",
-        out.display(),
-        held.join(", ")
-    );
+    let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("isa")));
+    let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let mut targets: Vec<Target> = Vec::new();
     let exe = std::env::current_exe()?;
     let wants_families = !a.family.is_empty() || a.device.is_empty();

@@ -1,7 +1,8 @@
 //! `halftrace report`: one report from one or more result folders.
 
 use super::outln;
-use crate::outdir::OutDir;
+use crate::outdir::{OutDir, OutMode};
+use crate::report::merge;
 use std::path::{Path, PathBuf};
 
 pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
@@ -18,10 +19,14 @@ pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
         })
         .collect();
     // The folder written (--out, else the first folder) has one writer: a sweep still running
-    // there would overwrite this report, and a second merge would interleave with this one.
+    // there would overwrite this report, and a second merge would interleave with this one. A
+    // folder of its own gets the merged rows too, and is refused if it holds rows already; into
+    // one of the folders read, only the report is rendered again.
     let target = out.map(Path::to_path_buf).unwrap_or_else(|| dirs[0].clone());
-    let _lock = OutDir::claim(&target, if out.is_some() { "--out" } else { "report" })?;
-    let m = crate::report::merge::merge(&dirs, out)?;
+    let own = out.is_some_and(|o| merge::into_own_folder(&dirs, o));
+    let _out = if own { Some(OutDir::claim_for(&target, "--out", OutMode::New, &merge::OUTPUTS)?) } else { None };
+    let _lock = if own { None } else { Some(OutDir::claim(&target, if out.is_some() { "--out" } else { "report" })?) };
+    let m = merge::merge(&dirs, out)?;
     for s in &m.missing_shards {
         eprintln!("warning: {s} is not among the folders: the report covers only part of that sweep");
     }

@@ -3,8 +3,8 @@
 
 use super::outln;
 use crate::cli::SweepArgs;
-use crate::outdir::OutDir;
-use crate::sweep::{self, Config, OutMode, Shard, Sweep};
+use crate::outdir::{self, OutDir, OutMode};
+use crate::sweep::{self, Config, Shard, Sweep};
 use std::time::Instant;
 
 /// The sweep's configuration: the file's (or the defaults), each flag given over it, checked.
@@ -48,20 +48,15 @@ fn config(a: &SweepArgs) -> anyhow::Result<Sweep> {
 
 pub fn sweep(a: &SweepArgs) -> anyhow::Result<()> {
     let c = config(a)?;
-    let mut out = a.out.clone().unwrap_or_else(sweep::default_out);
+    let mut out = a.out.clone().unwrap_or_else(|| outdir::default_out(None));
     if let Some(s) = c.shard {
         out = out.join(s.folder());
     }
-    anyhow::ensure!(!(a.resume && a.force), "--resume and --force exclude each other");
-    let mode = match (a.resume, a.force) {
-        (true, _) => OutMode::Resume,
-        (_, true) => OutMode::Force,
-        _ => OutMode::New,
-    };
+    let mode = OutMode::from_flags(a.resume, a.force)?;
     // One writer per folder (a shard's own): a second run would rewrite results.csv without
     // this one's rows.
-    let _lock = OutDir::claim(&out, "--out")?;
-    let kept = sweep::prepare_out(&out, mode)?;
+    let claimed = OutDir::claim_for(&out, "--out", mode, &sweep::OUTPUTS)?;
+    let kept = sweep::prepare_out(&claimed)?;
     crate::progress::set_quiet(a.quiet);
     let t0 = Instant::now();
     let s = sweep::run(&c, &out, a.quiet, &a.mask_feature, kept)?;

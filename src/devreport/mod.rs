@@ -21,7 +21,7 @@
 //! [`steps`] (the child processes), [`markdown`] (the report).
 
 use crate::gpu::{self, DeviceInfo};
-use crate::outdir::OutDir;
+use crate::outdir::{Claimed, OutDir, OutMode, Outputs};
 use crate::report::{self, Row};
 use crate::sweep;
 use anyhow::Context;
@@ -149,7 +149,7 @@ pub struct Summary {
 
 /// Runs the report (or what an interrupted one left) into its folder.
 pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Result<Summary> {
-    anyhow::ensure!(!(opts.resume && opts.force), "--resume and --force exclude each other");
+    let mode = OutMode::from_flags(opts.resume, opts.force)?;
     anyhow::ensure!(!opts.scenes.is_empty(), "at least one scene is needed");
     for s in &opts.scenes {
         anyhow::ensure!(s.is_file(), "--scene {}: not a readable file", s.display());
@@ -159,11 +159,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     // holds files without --resume or --force) before Vulkan is opened; the default one is
     // known only once the device is.
     let named = match &opts.out {
-        Some(o) => {
-            let lock = OutDir::claim(o, "--out")?;
-            check_held(o, opts)?;
-            Some(lock)
-        }
+        Some(o) => Some(OutDir::claim_for(o, "--out", mode, &OUTPUTS)?),
         None => None,
     };
     let start = Instant::now();
@@ -171,12 +167,12 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
     let (width, height) =
         (opts.width.unwrap_or(default_size(&dev.kind)), opts.height.unwrap_or(default_size(&dev.kind)));
     crate::rays::check_image_size(width, height).map_err(anyhow::Error::msg)?;
-    let out = opts.out.clone().unwrap_or_else(|| opts.reports.join(slug(&dev.name)));
     // Held to the end; each step's child locks the subfolder it writes (conformance/, sweep/).
-    let _lock = match named {
-        Some(l) => l,
-        None => OutDir::claim(&out, "the report folder")?,
+    let claimed = match named {
+        Some(c) => c,
+        None => OutDir::claim_for(&opts.reports.join(slug(&dev.name)), "the report folder", mode, &OUTPUTS)?,
     };
+    let out = claimed.path().to_path_buf();
     let big = big_scene(&dev, &out, &opts.scenes[0])?;
     let mut scene_paths = opts.scenes.clone();
     let mut big_note = None;
@@ -190,7 +186,7 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         ));
     }
     let scenes: Vec<String> = scene_paths.iter().map(|p| p.display().to_string()).collect();
-    let mut state = prepare(&out, opts, &dev, &scenes, (width, height))?;
+    let mut state = prepare(&claimed, &dev, &scenes, (width, height))?;
     if let Some((path, scene, copies)) = big.filter(|(p, _, _)| !p.is_file()) {
         say(&format!("instancing {} ×{copies} into {}", scene.name, path.display()));
         std::fs::create_dir_all(out.join("scenes"))
@@ -306,13 +302,9 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
             "--out".into(),
             dir.display().to_string(),
         ]);
-        if dir.join("results.csv").is_file() {
-            args.push("--resume".into());
-        } else if OutDir::entries(&dir).is_ok_and(|e| !e.is_empty()) {
-            // No rows to keep, but an earlier run's report or isa files: the sweep replaces its
-            // own and leaves isa's.
-            args.push("--force".into());
-        }
+        // Rows to keep: resumed; none, but an earlier run's report or isa files: the sweep
+        // replaces its own and leaves isa's.
+        args.extend(sweep::OUTPUTS.mode_to_continue(&dir).flag().map(String::from));
         // The sweep stops itself between jobs; a job far longer than the budget is stopped.
         let limit = Duration::from_secs_f64(budget + (budget / 2.0).max(120.0));
         let mut r = runner.run("sweep", &args, None, limit)?;

@@ -56,11 +56,21 @@ pub(super) const OWN: &[&str] = &[
     "scenes",
 ];
 
-/// Checks the folder: new (absent or empty), a report of the same device and settings to
-/// resume, or one to replace; returns the state to continue from.
+/// What the report writes into its folder: the folder is its alone, `--resume` continues from
+/// its state, `--force` replaces only [`OWN`].
+pub(super) const OUTPUTS: Outputs = Outputs {
+    command: "device-report",
+    owns: |n| OWN.contains(&n),
+    folders: &["logs", "conformance", "sweep", "scenes"],
+    alone: true,
+    resume: Some((STATE, "finish the report there")),
+    force: true,
+};
+
+/// Readies the claimed folder: new (empty), a report of the same device and settings to
+/// resume, or one whose own files `--force` replaces; returns the state to continue from.
 pub(super) fn prepare(
-    out: &Path,
-    opts: &Options,
+    out: &Claimed,
     dev: &DeviceInfo,
     scenes: &[String],
     (width, height): (u32, u32),
@@ -77,21 +87,13 @@ pub(super) fn prepare(
         height,
         ..Default::default()
     };
-    let entries = check_held(out, opts)?;
-    if entries.is_empty() {
+    if !out.resumes() {
+        out.replace_own()?;
         return Ok(fresh);
     }
-    if opts.force {
-        for e in entries.iter().filter(|e| OWN.contains(&e.as_str())) {
-            let p = out.join(e);
-            let r = if p.is_dir() && !p.is_symlink() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
-            r.with_context(|| format!("--force: removing {}", p.display()))?;
-        }
-        return Ok(fresh);
-    }
-    let path = out.join(STATE);
+    let path = out.path().join(STATE);
     let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("--resume: {} is not a device report (no readable {STATE})", out.display()))?;
+        .with_context(|| format!("--resume: {} is not a device report (no readable {STATE})", out.path().display()))?;
     let old: State = serde_json::from_str(&text).with_context(|| format!("--resume: {}", path.display()))?;
     for (what, was, now) in [
         ("device", old.device.clone(), fresh.device.clone()),
@@ -103,28 +105,10 @@ pub(super) fn prepare(
             was == now,
             "--resume: {} is a report with {what} {was}, not {now}; resume with the same settings, or choose another \
              folder",
-            out.display()
+            out.path().display()
         );
     }
     Ok(old)
-}
-
-/// What the folder holds (its lock aside); refused when that is anything without --resume or
-/// --force.
-pub(super) fn check_held(out: &Path, opts: &Options) -> anyhow::Result<Vec<String>> {
-    let entries = match OutDir::entries(out) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
-    };
-    anyhow::ensure!(
-        entries.is_empty() || opts.resume || opts.force,
-        "--out {} already holds files ({}); nothing was changed. Pass --resume to finish the report there, --force to \
-         replace it, or choose another folder",
-        out.display(),
-        entries.len()
-    );
-    Ok(entries)
 }
 
 /// The files each step writes, relative to the report's folder (the first is the one its row

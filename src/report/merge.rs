@@ -2,6 +2,7 @@
 //! sweeps on several devices), refusing rows that two folders both record.
 
 use super::rows::{is_image, read_rows, sorted, write_rows, Row, RowId};
+use crate::outdir::Outputs;
 use anyhow::Context;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -64,9 +65,27 @@ fn check_shards(dirs: &[PathBuf]) -> anyhow::Result<Vec<String>> {
         .collect())
 }
 
+/// What a merge writes into a folder of its own besides the report: the merged rows. A folder
+/// that already holds rows is someone's results, never overwritten (there is no `--force`:
+/// merged rows go into a new folder).
+pub const OUTPUTS: Outputs = Outputs {
+    command: "report",
+    owns: |n| ["results.csv", "results.json", "isa.csv", "isa.json"].contains(&n),
+    folders: &[],
+    alone: false,
+    resume: None,
+    force: false,
+};
+
+/// Whether `out` is a folder of its own, not one of `dirs` (it gets the merged rows too).
+pub fn into_own_folder(dirs: &[PathBuf], out: &Path) -> bool {
+    let out = out.canonicalize();
+    !dirs.iter().any(|d| out.as_ref().is_ok_and(|o| *o == d.canonicalize().unwrap_or_else(|_| d.clone())))
+}
+
 /// Reads the rows of every folder in `dirs` and renders their report into `out` (default: the
-/// first folder); a folder that is not one of the inputs also gets the merged rows and the
-/// sweep's images.
+/// first folder); a folder that is not one of the inputs ([`into_own_folder`]) also gets the
+/// merged rows and the sweep's images. The caller has claimed `out` ([`OUTPUTS`]).
 pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
     let missing_shards = check_shards(dirs)?;
     let mut rows: Vec<Row> = Vec::new();
@@ -118,18 +137,8 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
     }
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| dirs[0].clone());
     // Into a folder of its own, the merged rows too (never into a folder it read from).
-    let own = !canon.iter().any(|c| out.canonicalize().is_ok_and(|o| o == *c));
+    let own = into_own_folder(dirs, &out);
     if own {
-        anyhow::ensure!(
-            !out.join("results.csv").exists(),
-            "--out {} already holds results.csv; name a new folder for the merged report",
-            out.display()
-        );
-        anyhow::ensure!(
-            !out.join("isa.json").exists(),
-            "--out {} already holds isa.json; name a new folder for the merged report",
-            out.display()
-        );
         if !rows.is_empty() || isa_rows.is_empty() {
             write_rows(&out, &sorted(&rows))?;
         }

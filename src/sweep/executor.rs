@@ -1,7 +1,8 @@
 //! Runs a sweep's job list on one device through the [`Runner`]: one row per job, written as
 //! it finishes; each encoding freed after its last job; the first scene's images at its end;
 //! the report at the end of all. A folder that already holds results is refused, resumed
-//! (its rows kept, their jobs not run again) or replaced, as asked.
+//! (its rows kept, their jobs not run again) or replaced, as asked ([`OUTPUTS`], by the one
+//! policy of `outdir`).
 
 use super::jobs::{self, Job};
 use super::Sweep;
@@ -9,7 +10,7 @@ use crate::base::Status;
 use crate::base::{mean_counters, simd_utilisation, Hit};
 use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
-use crate::outdir::OutDir;
+use crate::outdir::{Claimed, Outputs};
 use crate::rays::RayKind;
 use crate::report::{self, Row, RowId};
 use crate::runner::{Outcome, Plan, RaySetId, Runner, Target};
@@ -26,70 +27,44 @@ pub struct Summary {
     pub unrun: usize,
 }
 
-/// What to do with an output folder that already holds files.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum OutMode {
-    /// Refuse it (the default: a user's results are never overwritten by accident).
-    #[default]
-    New,
-    /// Keep its rows and run only the jobs they do not record (after an interrupt, or to add
-    /// variants).
-    Resume,
-    /// Replace the sweep's own files in it (nothing else in the folder is touched).
-    Force,
-}
+/// What a sweep writes into its folder: the folder is its alone (a file there that is not the
+/// sweep's is still refused without `--resume` or `--force`), `--resume` continues from
+/// `results.csv`, `--force` replaces only the sweep's own files ([`report::is_output`]).
+pub const OUTPUTS: Outputs = Outputs {
+    command: "sweep",
+    owns: report::is_output,
+    folders: &[],
+    alone: true,
+    resume: Some(("results.csv", "keep its rows and run only the missing jobs")),
+    force: true,
+};
 
-/// Checks the output folder against `mode` before anything runs; returns the rows a resumed
-/// sweep keeps. A non-empty folder is refused unless `Resume` or `Force` (its lock, which the
-/// caller holds, is not content: [`OutDir::entries`]).
-pub fn prepare_out(out: &Path, mode: OutMode) -> anyhow::Result<Vec<Row>> {
-    let entries = match OutDir::entries(out) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => anyhow::bail!("--out {}: {e}", out.display()),
-    };
-    if entries.is_empty() {
+/// Readies a claimed output folder before anything runs: the rows a resumed sweep keeps, or,
+/// under `--force`, the sweep's own files removed.
+pub fn prepare_out(out: &Claimed) -> anyhow::Result<Vec<Row>> {
+    if !out.resumes() {
+        out.replace_own()?;
         return Ok(Vec::new());
     }
-    match mode {
-        OutMode::New => anyhow::bail!(
-            "--out {} already holds results ({} file(s)); nothing was changed. Pass --resume to keep its rows and \
-             run only the missing jobs, or --force to replace it, or choose another folder",
-            out.display(),
-            entries.len()
-        ),
-        OutMode::Resume => {
-            let csv = out.join("results.csv");
-            if !csv.is_file() {
-                anyhow::bail!("--resume: {} has no results.csv to resume", out.display());
-            }
-            // Columns this version does not write (a newer version's) would be lost when the
-            // kept rows are written again: refuse.
-            let known = report::rows::columns();
-            let header = std::fs::read_to_string(&csv)
-                .with_context(|| format!("--resume: reading {}", csv.display()))?
-                .lines()
-                .next()
-                .unwrap_or("")
-                .to_string();
-            let unknown: Vec<&str> = header.split(',').filter(|c| !known.iter().any(|k| k == c)).collect();
-            anyhow::ensure!(
-                unknown.is_empty(),
-                "--resume: {} has column(s) this version does not write ({}); they would be lost — resume with the \
-                 version that wrote it, or --force",
-                csv.display(),
-                unknown.join(", ")
-            );
-            report::read_rows(out)
-        }
-        OutMode::Force => {
-            for e in entries.iter().filter(|e| report::is_output(e)) {
-                let p = out.join(e);
-                std::fs::remove_file(&p).with_context(|| format!("--force: removing {}", p.display()))?;
-            }
-            Ok(Vec::new())
-        }
-    }
+    // Columns this version does not write (a newer version's) would be lost when the kept
+    // rows are written again: refuse.
+    let csv = out.path().join("results.csv");
+    let known = report::rows::columns();
+    let header = std::fs::read_to_string(&csv)
+        .with_context(|| format!("--resume: reading {}", csv.display()))?
+        .lines()
+        .next()
+        .unwrap_or("")
+        .to_string();
+    let unknown: Vec<&str> = header.split(',').filter(|c| !known.iter().any(|k| k == c)).collect();
+    anyhow::ensure!(
+        unknown.is_empty(),
+        "--resume: {} has column(s) this version does not write ({}); they would be lost — resume with the version \
+         that wrote it, or --force",
+        csv.display(),
+        unknown.join(", ")
+    );
+    report::read_rows(out.path())
 }
 
 /// Runs a sweep, writing `results.csv`/`.json` as it goes, then the report. `mask`: device

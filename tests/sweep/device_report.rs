@@ -55,7 +55,8 @@ fn device_report_is_interrupted_refused_and_resumed() {
     // A new report into the folder is refused, and changes nothing.
     let o = report_cmd(&out, &["--budget", "1s"]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("already holds files") && err.contains("--resume"), "{err}");
+    let names = err.contains("already holds") && err.contains("device-report.json");
+    assert!(!o.status.success() && names && err.contains("--resume") && err.contains("--force"), "{err}");
     assert_eq!(state(&out), s);
 
     // Resumed with a 1 s budget: only the sweep runs (at least one more job).
