@@ -79,8 +79,7 @@ pub fn list(s: &Sweep) -> Vec<Job> {
             push(&s.rays, Target::Baseline(b), None);
         }
         for (k, &hash) in s.kernels.iter().zip(&kernels) {
-            let target =
-                Target::Kernel(KernelSpec::builtin(k.variant).with_fc(fc).with_source(Source::user(&k.file)));
+            let target = Target::Kernel(KernelSpec::builtin(k.variant).with_fc(fc).with_source(Source::user(&k.file)));
             push(k.rays.as_deref().unwrap_or(&s.rays), target, Some((k.name.as_str(), hash)));
         }
     }

@@ -93,8 +93,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
             assert_eq!(imp, want, "{feature} masked: {v}");
             if imp != PacketImpl::Subgroup && v.packet > 1 {
                 let e = support::admit(&g.info, &KernelId::new(v, PacketImpl::Subgroup, false))
-                    .err()
-                    .expect("a subgroup kernel without clustered operations is refused");
+                    .expect_err("a subgroup kernel without clustered operations is refused");
                 assert!(e.to_string().contains("clustered subgroup operations"), "{e}");
             }
             let k = builtin(&g, &v, imp, true);
@@ -125,8 +124,7 @@ fn missing_features_fall_back_to_what_stays_exact() {
             };
             assert!(why.contains(&named) && why.contains("lacks"), "{why}");
             let e = support::admit(&g.info, &KernelId::new(v, PacketImpl::Single, false))
-                .err()
-                .expect("an unsupported kernel is not admitted");
+                .expect_err("an unsupported kernel is not admitted");
             assert!(e.contains(&named), "{e}");
         }
         clean(&g);
