@@ -6,11 +6,10 @@ use super::DeviceInfo;
 use crate::layout::{LayoutId, Needs};
 use crate::precision::{FcChoice, FloatControls, Math};
 use crate::variant::{Buffers, DeviceBuild, KernelId, KernelSpec, PacketImpl, Variant};
+use rspirv::spirv::ExecutionMode::{self, RoundingModeRTE, SignedZeroInfNanPreserve};
 
 /// A float-control execution mode a kernel declares: (SPIR-V execution mode, float width).
-pub type FloatMode = (u32, u32);
-pub const SIGNED_ZERO_INF_NAN_PRESERVE: u32 = 4461;
-pub const ROUNDING_MODE_RTE: u32 = 4462;
+pub type FloatMode = (ExecutionMode, u32);
 
 /// The execution modes the kernel of `v` declares: with float controls on, round-to-nearest-even
 /// and signed-zero/inf/NaN preservation for fp32, and for fp16 when the layout computes in fp16
@@ -19,9 +18,9 @@ pub fn float_modes(v: &Variant) -> Vec<FloatMode> {
     if v.fc == FloatControls::Off {
         return Vec::new();
     }
-    let mut m = vec![(ROUNDING_MODE_RTE, 32), (SIGNED_ZERO_INF_NAN_PRESERVE, 32)];
+    let mut m = vec![(RoundingModeRTE, 32), (SignedZeroInfNanPreserve, 32)];
     if needs(v.layout, v.math).float16 {
-        m.extend([(ROUNDING_MODE_RTE, 16), (SIGNED_ZERO_INF_NAN_PRESERVE, 16)]);
+        m.extend([(RoundingModeRTE, 16), (SignedZeroInfNanPreserve, 16)]);
     }
     m
 }
@@ -33,8 +32,8 @@ fn needs(layout: LayoutId, math: Math) -> Needs {
 /// The device feature behind a float mode.
 fn mode_feature(info: &DeviceInfo, (mode, width): FloatMode) -> (&'static str, bool) {
     match (mode, width) {
-        (ROUNDING_MODE_RTE, 16) => ("shaderRoundingModeRTEFloat16", info.fp16_rte),
-        (ROUNDING_MODE_RTE, _) => ("shaderRoundingModeRTEFloat32", info.fp32_rte),
+        (RoundingModeRTE, 16) => ("shaderRoundingModeRTEFloat16", info.fp16_rte),
+        (RoundingModeRTE, _) => ("shaderRoundingModeRTEFloat32", info.fp32_rte),
         (_, 16) => ("shaderSignedZeroInfNanPreserveFloat16", info.preserve_16),
         _ => ("shaderSignedZeroInfNanPreserveFloat32", info.preserve_32),
     }

@@ -5,6 +5,8 @@ use halftrace::gpu::buffer::Buffer;
 use halftrace::gpu::pipeline::ComputePipeline;
 use halftrace::gpu::shader::{self, Includes};
 use halftrace::interface::{binding, PushConstants};
+use rspirv::dr::Operand;
+use rspirv::spirv::{Capability, Op};
 
 /// A kernel that copies every child box and child word back out through each layout's own
 /// GLSL hooks proves the layout's GLSL `Node` reads the bytes exactly as its Rust node type
@@ -96,12 +98,6 @@ void main() {
     clean(&g);
 }
 
-/// SPIR-V words as (opcode, operands), through the library's one instruction walker.
-fn instructions(words: &[u32]) -> Vec<(u32, Vec<u32>)> {
-    let insts = halftrace::gpu::shader::spirv::instructions(words).expect("a module that decodes");
-    insts.iter().map(|i| (i.op, i.operands.to_vec())).collect()
-}
-
 #[test]
 fn spirv_folder_is_fresh_valid_and_really_fp16() {
     let dir = repo("spirv");
@@ -129,24 +125,35 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
             assert!(val.status.success(), "spirv-val {}: {}", p.display(), String::from_utf8_lossy(&val.stderr));
             // The fp16 math modes must really compute in float16_t; fp32 math and the f32
             // layout must not need fp16 arithmetic (they run on devices without shaderFloat16).
-            let ins = instructions(&fresh);
-            let f16_cap = ins.iter().any(|(op, o)| *op == 17 && o[0] == 9);
+            let m = shader::spirv::load(&fresh).expect("a module that loads");
+            let f16_cap = m.capabilities.iter().any(|i| i.operands[0] == Operand::Capability(Capability::Float16));
             assert_eq!(f16_cap, (v.layout.info().needs)(v.math).float16, "{name}: Float16 capability");
             // Every float-control mode the kernel relies on is declared, per width.
             for (mode, width) in halftrace::gpu::support::float_modes(v) {
+                let want = [Operand::ExecutionMode(mode), Operand::LiteralBit32(width)];
                 assert!(
-                    ins.iter().any(|(op, o)| *op == 16 && o.len() >= 3 && o[1] == mode && o[2] == width),
-                    "{name}: execution mode {mode} for fp{width} missing"
+                    m.execution_modes.iter().any(|i| i.operands[1..] == want),
+                    "{name}: execution mode {mode:?} for fp{width} missing"
                 );
             }
             if v.math != Math::F32 {
+                let types = |op: Op, first: Operand| {
+                    m.types_global_values.iter().filter(move |i| i.class.opcode == op && i.operands[0] == first)
+                };
                 let mut f16: Vec<u32> =
-                    ins.iter().filter(|(op, o)| *op == 22 && o[1] == 16).map(|(_, o)| o[0]).collect();
-                let vecs: Vec<u32> =
-                    ins.iter().filter(|(op, o)| *op == 23 && f16.contains(&o[1])).map(|(_, o)| o[0]).collect();
+                    types(Op::TypeFloat, Operand::LiteralBit32(16)).filter_map(|i| i.result_id).collect();
+                let vecs: Vec<u32> = f16
+                    .iter()
+                    .flat_map(|&t| types(Op::TypeVector, Operand::IdRef(t)))
+                    .filter_map(|i| i.result_id)
+                    .collect();
                 f16.extend(vecs);
-                let count = |opc: u32| ins.iter().filter(|(op, o)| *op == opc && f16.contains(&o[0])).count();
-                let (add, sub, mul) = (count(129), count(131), count(133));
+                let count = |op: Op| {
+                    m.all_inst_iter()
+                        .filter(|i| i.class.opcode == op && i.result_type.is_some_and(|t| f16.contains(&t)))
+                        .count()
+                };
+                let (add, sub, mul) = (count(Op::FAdd), count(Op::FSub), count(Op::FMul));
                 assert!(
                     add > 0 && sub > 0 && mul > 0,
                     "{name}: fp16 OpFAdd {add}, OpFSub {sub}, OpFMul {mul}: box test / origin move not in float16_t"

@@ -2,6 +2,9 @@
 
 use super::*;
 use halftrace::gpu::shader::{self, Includes};
+use rspirv::binary::Assemble;
+use rspirv::dr::Operand;
+use rspirv::spirv::AddressingModel;
 
 #[test]
 fn user_kernels_are_checked_then_validated_and_timed() {
@@ -101,10 +104,16 @@ fn user_kernels_are_checked_then_validated_and_timed() {
     std::fs::write(&truncated, &good[..good.len() / 2 / 4 * 4 + 4]).unwrap();
     // Cut exactly after an instruction in the middle: still not a complete module.
     let words: Vec<u32> = bytemuck::pod_collect_to_vec(&good);
-    let insts = shader::spirv::instructions(&words).unwrap();
-    let cut = insts.iter().map(|i| i.start).take_while(|&s| s < words.len() / 2).last().unwrap();
+    let m = shader::spirv::load(&words).unwrap();
+    let mut cut = words[..5].to_vec();
+    for inst in m.all_inst_iter() {
+        if cut.len() >= words.len() / 2 {
+            break;
+        }
+        inst.assemble_into(&mut cut);
+    }
     let clean_cut = tmp("clean_cut.spv");
-    std::fs::write(&clean_cut, bytemuck::cast_slice::<u32, u8>(&words[..cut])).unwrap();
+    std::fs::write(&clean_cut, bytemuck::cast_slice::<u32, u8>(&cut)).unwrap();
     let odd = tmp("odd.spv");
     std::fs::write(&odd, &good[..good.len() - 1]).unwrap();
     // Valid modules with the wrong interface.
@@ -191,9 +200,9 @@ fn invalid_spirv_gets_the_validators_message() {
     // Well formed (its interface reads fine) but invalid: the Physical32 addressing model,
     // which Vulkan does not allow.
     let good = std::fs::read(repo("spirv/trav_f32_b4_p1.spv")).unwrap();
-    let mut words: Vec<u32> = bytemuck::pod_collect_to_vec(&good);
-    let i = (5..words.len() - 2).find(|&i| words[i] == (3 << 16 | 14)).expect("OpMemoryModel");
-    words[i + 1] = 1;
+    let mut m = shader::spirv::load(&bytemuck::pod_collect_to_vec(&good)).unwrap();
+    m.memory_model.as_mut().expect("OpMemoryModel").operands[0] = Operand::AddressingModel(AddressingModel::Physical32);
+    let words = m.assemble();
     let cut = tmp("cut.spv");
     std::fs::write(&cut, bytemuck::cast_slice::<u32, u8>(&words)).unwrap();
     let scene = scene_path("teapot.obj");

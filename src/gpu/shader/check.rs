@@ -2,10 +2,11 @@
 //! point, workgroup, bindings, push constants, capabilities the device has), and the
 //! SPIRV-Tools validator ([`validate`]), whose message beats a driver's "unknown error".
 
-use super::spirv::{op, parse_interface};
+use super::spirv::parse_interface;
 use crate::gpu::{Gpu, GpuError};
 use crate::interface::{binding, PushConstants};
 use crate::variant::{Buffers, KernelId};
+use rspirv::spirv::{Capability, ExecutionModel};
 use std::path::Path;
 
 /// [`validate`] as the error of a user's module at `path`.
@@ -15,6 +16,9 @@ pub fn validate_user(path: &Path, words: &[u32]) -> Result<(), GpuError> {
 
 mod spirv_tools {
     //! The SPIRV-Tools validator's C API (libspirv.h), from the static library shaderc links.
+    //! Not the `spirv-tools` crate: it compiles SPIRV-Tools' C++ itself (about 200 files: 17.7
+    //! minutes of a cold build here, 11.5 CPU-minutes) or runs the `spirv-val` binary, and
+    //! cannot link the library already linked for shaderc.
     use std::ffi::{c_char, c_void};
 
     #[repr(C)]
@@ -82,27 +86,33 @@ pub fn validate(words: &[u32]) -> Result<(), String> {
     }
 }
 
-/// SPIR-V capabilities a traversal kernel may declare, and whether `gpu` (as halftrace opens
-/// it) provides each.
-fn capability(gpu: &Gpu, cap: u32) -> Option<(&'static str, bool)> {
+/// The subgroup capabilities, in the order of Vulkan's `VkSubgroupFeatureFlagBits`.
+const SUBGROUP_OPS: [Capability; 8] = [
+    Capability::GroupNonUniform,
+    Capability::GroupNonUniformVote,
+    Capability::GroupNonUniformArithmetic,
+    Capability::GroupNonUniformBallot,
+    Capability::GroupNonUniformShuffle,
+    Capability::GroupNonUniformShuffleRelative,
+    Capability::GroupNonUniformClustered,
+    Capability::GroupNonUniformQuad,
+];
+
+/// Whether `gpu` (as halftrace opens it) provides a SPIR-V capability a traversal kernel may
+/// declare; `None` for any other capability.
+fn capability(gpu: &Gpu, cap: Capability) -> Option<bool> {
     let i = &gpu.info;
-    let sub = |bit: u32| i.subgroup_ops & (1 << bit) != 0;
+    if let Some(bit) = SUBGROUP_OPS.iter().position(|&c| c == cap) {
+        return Some(i.subgroup_ops & (1 << bit) != 0);
+    }
     Some(match cap {
-        1 => ("Shader", true),
-        op::FLOAT16 => ("Float16", i.shader_float16),
-        10 => ("Float64", i.shader_float64),
-        4433 => ("StorageBuffer16BitAccess", i.storage_16bit),
-        op::SIGNED_ZERO_INF_NAN_PRESERVE => ("SignedZeroInfNanPreserve", i.preserve_16 || i.preserve_32),
-        op::ROUNDING_MODE_RTE => ("RoundingModeRTE", i.fp16_rte || i.fp32_rte),
-        61 => ("GroupNonUniform", sub(0)),
-        62 => ("GroupNonUniformVote", sub(1)),
-        63 => ("GroupNonUniformArithmetic", sub(2)),
-        64 => ("GroupNonUniformBallot", sub(3)),
-        65 => ("GroupNonUniformShuffle", sub(4)),
-        66 => ("GroupNonUniformShuffleRelative", sub(5)),
-        67 => ("GroupNonUniformClustered", sub(6)),
-        68 => ("GroupNonUniformQuad", sub(7)),
-        op::PHYSICAL_STORAGE_BUFFER_ADDRESSES => ("PhysicalStorageBufferAddresses", i.buffer_device_address),
+        Capability::Shader => true,
+        Capability::Float16 => i.shader_float16,
+        Capability::Float64 => i.shader_float64,
+        Capability::StorageBuffer16BitAccess => i.storage_16bit,
+        Capability::SignedZeroInfNanPreserve => i.preserve_16 || i.preserve_32,
+        Capability::RoundingModeRTE => i.fp16_rte || i.fp32_rte,
+        Capability::PhysicalStorageBufferAddresses => i.buffer_device_address,
         _ => return None,
     })
 }
@@ -118,7 +128,7 @@ pub fn check_user(path: &Path, words: &[u32], k: &KernelId, gpu: &Gpu) -> Result
         msg: format!("cannot stand in for {name}: {msg}"),
     };
     let itf = parse_interface(words).map_err(|m| GpuError::Spirv { path: path.display().to_string(), msg: m })?;
-    if !itf.entry_points.iter().any(|(model, n)| *model == op::GL_COMPUTE && n == "main") {
+    if !itf.entry_points.iter().any(|(model, n)| *model == ExecutionModel::GLCompute && n == "main") {
         return Err(err(format!("no GLCompute entry point named 'main' (found {:?})", itf.entry_points)));
     }
     let wg = v.workgroup(imp);
@@ -139,7 +149,7 @@ pub fn check_user(path: &Path, words: &[u32], k: &KernelId, gpu: &Gpu) -> Result
             return Err(err(format!("it does not use binding {need} ({what}), so it cannot be a traversal kernel")));
         }
     }
-    if v.buffers == Buffers::Bound && itf.capabilities.contains(&op::PHYSICAL_STORAGE_BUFFER_ADDRESSES) {
+    if v.buffers == Buffers::Bound && itf.capabilities.contains(&Capability::PhysicalStorageBufferAddresses) {
         return Err(err("it reads buffers by address (PhysicalStorageBufferAddresses: built with ADDRESSED?), but this scene's buffers are bound, and binding 0 holds the nodes, not addresses".into()));
     }
     if v.buffers == Buffers::Addressed {
@@ -169,7 +179,7 @@ pub fn check_user(path: &Path, words: &[u32], k: &KernelId, gpu: &Gpu) -> Result
     // What the module computes must be the variant's: another variant's module of the same
     // layout would return the same hits and be timed under the wrong name.
     let needs = (v.layout.info().needs)(v.math);
-    let f16 = itf.capabilities.contains(&op::FLOAT16);
+    let f16 = itf.capabilities.contains(&Capability::Float16);
     if f16 != needs.float16 {
         return Err(err(if f16 {
             format!("it computes in fp16 (Float16 capability), but math {} of {} does not; is it a kernel of another math mode?", v.math.name(), v.layout)
@@ -177,18 +187,18 @@ pub fn check_user(path: &Path, words: &[u32], k: &KernelId, gpu: &Gpu) -> Result
             format!("it has no fp16 arithmetic (no Float16 capability), but math {} of {} computes in fp16; is it a kernel of another math mode?", v.math.name(), v.layout)
         }));
     }
-    if v.packet == 1 && itf.capabilities.iter().any(|c| (61..=68).contains(c)) {
+    if v.packet == 1 && itf.capabilities.iter().any(|c| SUBGROUP_OPS.contains(c)) {
         return Err(err(
             "it uses subgroup operations: it is a packet kernel, and the variant traces single rays (P = 1)".into(),
         ));
     }
     for &c in &itf.capabilities {
         match capability(gpu, c) {
-            Some((_, true)) => {}
-            Some((n, false)) => {
-                return Err(err(format!("it requires capability {n}, which {} does not provide", gpu.info.name)))
+            Some(true) => {}
+            Some(false) => {
+                return Err(err(format!("it requires capability {c:?}, which {} does not provide", gpu.info.name)))
             }
-            None => return Err(err(format!("it requires SPIR-V capability {c}, which halftrace does not enable"))),
+            None => return Err(err(format!("it requires SPIR-V capability {c:?}, which halftrace does not enable"))),
         }
     }
     Ok(words.to_vec())

@@ -1,5 +1,5 @@
 //! GLSL → SPIR-V with shaderc ([`compile`], [`compile_user`]), reading and patching SPIR-V
-//! ([`spirv`]: one instruction walker for all of it) and the checks a user's module passes
+//! ([`spirv`]: rspirv for all of it) and the checks a user's module passes
 //! before it stands in for a built-in kernel ([`check`]).
 //!
 //! Includes resolve, in order, to: `interface.glsl` (generated for the variant from the Rust
@@ -86,7 +86,13 @@ pub fn compile(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
         &Includes::variant(v),
         dev.spirv_minor,
     )?;
-    Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
+    with_float_modes(&k.name(), &words, v)
+}
+
+/// `words` with the float-control modes of `v` added ([`spirv::add_float_modes`]).
+fn with_float_modes(name: &str, words: &[u32], v: &Variant) -> Result<Vec<u32>, GpuError> {
+    spirv::add_float_modes(words, &super::support::float_modes(v))
+        .map_err(|e| GpuError::Compile { variant: name.to_string(), log: format!("adding float controls: {e}") })
 }
 
 /// Compiles a user's GLSL kernel file with the defines and includes of the built-in kernel
@@ -99,9 +105,9 @@ pub fn compile_user(path: &Path, k: &KernelId, dev: DeviceBuild) -> Result<Vec<u
     inc.user_dir = path.parent().map(Path::to_path_buf);
     let file = path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
     let defines = v.defines(k.imp, k.stats, dev);
-    let words =
-        compile_source(&format!("{} ({})", k.name(), path.display()), &file, &src, &defines, &inc, dev.spirv_minor)?;
-    Ok(spirv::add_float_modes(&words, &super::support::float_modes(v)))
+    let name = format!("{} ({})", k.name(), path.display());
+    let words = compile_source(&name, &file, &src, &defines, &inc, dev.spirv_minor)?;
+    with_float_modes(&name, &words, v)
 }
 
 /// Compiles a shared kernel without a layout (`trav_rq.comp`, `arith.comp`, the ray-tracing
