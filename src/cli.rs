@@ -331,7 +331,7 @@ pub struct ConformanceArgs {
 pub struct IsaModelArgs {
     #[arg(long)]
     pub model: String,
-    /// quick, default or full.
+    /// layouts (isa --quick), cover, default or full (`variant::Matrix`).
     #[arg(long, default_value = "default")]
     pub matrix: String,
     #[arg(long, value_delimiter = ',')]
