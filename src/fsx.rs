@@ -41,10 +41,15 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 
 /// What a path that exists is, when it is not a regular file (`None`: absent or regular).
 fn special(path: &Path) -> Option<&'static str> {
-    use std::os::unix::fs::FileTypeExt;
     let t = std::fs::symlink_metadata(path).ok()?.file_type();
-    Some(if t.is_file() {
-        return None;
+    (!t.is_file()).then(|| kind(&t))
+}
+
+/// What a file type is, for messages ("a regular file", "a FIFO", …).
+pub fn kind(t: &std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_file() {
+        "a regular file"
     } else if t.is_dir() {
         "a folder"
     } else if t.is_symlink() {
@@ -58,8 +63,8 @@ fn special(path: &Path) -> Option<&'static str> {
     } else if t.is_socket() {
         "a socket"
     } else {
-        "not a regular file"
-    })
+        "an unknown kind of file"
+    }
 }
 
 /// Refuses an output (`flag`: the option that names it) that exists and is not a regular

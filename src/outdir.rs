@@ -22,6 +22,7 @@
 //! Files themselves are written through a temporary name and a rename (`fsx::write_atomic`), so
 //! an interrupted run leaves the earlier ones whole.
 
+use crate::fsx::kind;
 use serde::{Deserialize, Serialize};
 use std::fs::OpenOptions;
 use std::io::{ErrorKind, Read, Write};
@@ -429,28 +430,6 @@ impl Claimed {
             r.map_err(|source| OutDirError::Remove { path: p, source })?;
         }
         Ok(())
-    }
-}
-
-/// What a file type is, for messages.
-fn kind(t: &std::fs::FileType) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    if t.is_file() {
-        "a regular file"
-    } else if t.is_dir() {
-        "a folder"
-    } else if t.is_symlink() {
-        "a symbolic link"
-    } else if t.is_char_device() {
-        "a character device"
-    } else if t.is_block_device() {
-        "a block device"
-    } else if t.is_fifo() {
-        "a FIFO"
-    } else if t.is_socket() {
-        "a socket"
-    } else {
-        "an unknown kind of file"
     }
 }
 
