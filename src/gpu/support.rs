@@ -124,8 +124,13 @@ impl Decision {
 /// [`admit`]. `Err`: why the device cannot run it, in one line.
 pub fn decide(info: &DeviceInfo, k: &KernelSpec) -> Result<Decision, String> {
     let v = resolve(info, k.variant, k.fc)?;
-    let imp = k.imp.filter(|_| v.packet > 1).unwrap_or_else(|| packet_plan(info, v.packet).0);
-    admit(info, &KernelId::new(v, imp, false))
+    admit(info, &KernelId::new(v, packet_impl(info, k), false))
+}
+
+/// The packet implementation kernel `k` runs in: the one asked for at P > 1, else the
+/// device's [`packet_plan`].
+pub fn packet_impl(info: &DeviceInfo, k: &KernelSpec) -> PacketImpl {
+    k.imp.filter(|_| k.variant.packet > 1).unwrap_or_else(|| packet_plan(info, k.variant.packet).0)
 }
 
 /// Whether the device runs kernel `k` exactly as given (its features: [`check`]; its packet

@@ -227,7 +227,7 @@ fn build_one(
         ..IsaRow::default()
     };
     row.vendor = crate::report::isa::vendor_of(&row.driver).to_string();
-    let imp = b.imp.filter(|_| v.packet > 1).unwrap_or_else(|| support::packet_plan(&g.info, v.packet).0);
+    let imp = support::packet_impl(&g.info, b);
     row.packet_impl = format!("{imp:?}").to_lowercase();
     let d = match support::decide(&g.info, b) {
         Ok(d) => d,
