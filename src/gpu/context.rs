@@ -81,6 +81,8 @@ pub struct Gpu {
     /// Pipelines capture their statistics and internal representations ([`ContextOptions::statistics`]).
     pub(crate) capture: bool,
     kernel_timeout: std::time::Duration,
+    /// How the device was opened ([`Gpu::sibling`] opens it again).
+    opts: ContextOptions,
     /// Set when a submission did not finish in time: the device is still running it, so
     /// nothing it may use is destroyed any more (the process ends without freeing it).
     hung: AtomicBool,
@@ -157,6 +159,7 @@ impl Gpu {
             kernel_timeout: std::time::Duration::try_from_secs_f64(timeout)
                 .unwrap_or(std::time::Duration::from_secs_f64(DEFAULT_KERNEL_TIMEOUT_S)),
             hung: AtomicBool::new(false),
+            opts: ContextOptions { device: Some(idx.to_string()), ..opts.clone() },
             logical: ManuallyDrop::new(logical),
             inst: ManuallyDrop::new(inst),
         })
@@ -292,6 +295,23 @@ impl Gpu {
     /// Whether a submission hung (then nothing the device may still use is destroyed).
     pub fn hung(&self) -> bool {
         self.hung.load(Ordering::SeqCst)
+    }
+
+    /// The same device opened again, by its index and with the same options, but without the
+    /// validation layer: a second queue for work beside this device's, such as warming
+    /// pipelines ([`super::pipeline::ComputePipeline::warm`]).
+    pub fn sibling(&self) -> Result<Gpu, GpuError> {
+        Gpu::new(&ContextOptions { validation: false, ..self.opts.clone() })
+    }
+
+    /// Whether the driver compiles a compute pipeline's code at its first dispatch rather than
+    /// when the pipeline is created, keeping it in Mesa's shader cache (lavapipe: llvmpipe
+    /// compiles there, one pipeline at a time on the device's one queue thread); false where
+    /// that cache is switched off (`MESA_SHADER_CACHE_DISABLE`), since then a warmed pipeline
+    /// helps no other device.
+    pub fn compiles_at_first_dispatch(&self) -> bool {
+        let cache_off = std::env::var("MESA_SHADER_CACHE_DISABLE").is_ok_and(|v| v == "1" || v == "true");
+        self.info.driver.starts_with("llvmpipe") && !cache_off
     }
 
     /// Records commands with `record`, submits them and waits for completion, at most the

@@ -13,6 +13,7 @@ pub struct ComputePipeline<'g> {
     pipeline: vk::Pipeline,
     pool: vk::DescriptorPool,
     set: vk::DescriptorSet,
+    types: Vec<vk::DescriptorType>,
     push_size: u32,
 }
 
@@ -67,6 +68,7 @@ impl<'g> ComputePipeline<'g> {
             pipeline: vk::Pipeline::null(),
             pool: vk::DescriptorPool::null(),
             set: vk::DescriptorSet::null(),
+            types: types.to_vec(),
             push_size,
         };
         // Every object created is destroyed by Drop, even when a later step fails.
@@ -177,6 +179,28 @@ impl<'g> ComputePipeline<'g> {
             .push_next(&mut asw);
         w.descriptor_count = 1;
         unsafe { self.gpu.device.update_descriptor_sets(&[w], &[]) };
+    }
+
+    /// Has the driver compile the pipeline's code now, by submitting a dispatch of no
+    /// workgroups with a small buffer behind every storage binding. lavapipe (llvmpipe)
+    /// compiles a compute pipeline at its first dispatch, on the device's one queue thread, and
+    /// keeps the code in Mesa's shader cache ([`Gpu::compiles_at_first_dispatch`]).
+    pub fn warm(&self) -> Result<(), GpuError> {
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let dummy = Buffer::new(self.gpu, "warm-up", 16, usage, gpu_allocator::MemoryLocation::GpuOnly)?;
+        let storage: Vec<(u32, &Buffer)> = (0..self.types.len() as u32)
+            .filter(|&i| self.types[i as usize] == vk::DescriptorType::STORAGE_BUFFER)
+            .map(|i| (i, &dummy))
+            .collect();
+        self.bind_at(&storage);
+        let push = vec![0u8; self.push_size as usize];
+        let d = &self.gpu.device;
+        self.gpu.submit_and_wait(|cmd| unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+            d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[self.set], &[]);
+            d.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, &push);
+            d.cmd_dispatch(cmd, 0, 1, 1);
+        })
     }
 
     /// Records a dispatch of `groups` workgroups (split over x and y past 65535).

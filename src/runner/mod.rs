@@ -211,10 +211,11 @@ impl<'g> Runner<'g> {
     }
 
     /// Builds the built-in kernels of `ks` that the device admits and this runner has not built
-    /// yet, timed and counting, on every core at once (pipelines are independent; a compiler
-    /// such as lavapipe's builds one on one core), so that measuring them later finds them
-    /// built. A kernel that fails to build is left out: measuring it builds it again and
-    /// reports why.
+    /// yet, timed and counting, on every core at once (pipelines are independent), so that
+    /// measuring them later finds them built; on a device that compiles at the first dispatch
+    /// ([`Gpu::compiles_at_first_dispatch`]) the kernels are also warmed, on every core, so
+    /// that the first dispatches find their code compiled. A kernel that fails to build is
+    /// left out: measuring it builds it again and reports why.
     pub fn prebuild(&mut self, ks: &[KernelSpec]) {
         use rayon::prelude::*;
         let Some(gpu) = self.gpu else { return };
@@ -229,6 +230,19 @@ impl<'g> Runner<'g> {
         }
         todo.sort_by_key(|d| d.id);
         todo.dedup();
+        if gpu.compiles_at_first_dispatch() {
+            // Its first dispatches would compile one kernel at a time; warmed on one sibling
+            // device per core, they find the code in Mesa's shader cache instead.
+            let n = rayon::current_num_threads().clamp(1, todo.len().max(1));
+            (0..n).into_par_iter().for_each(|t| {
+                let Ok(sib) = gpu.sibling() else { return };
+                for d in todo.iter().skip(t).step_by(n) {
+                    if let Ok(k) = Kernel::build(&sib, d, &Source::Builtin) {
+                        let _ = k.pipe.warm();
+                    }
+                }
+            });
+        }
         let built: Vec<(KernelId, Kernel<'g>)> =
             todo.par_iter().filter_map(|d| Kernel::build(gpu, d, &Source::Builtin).ok().map(|k| (d.id, k))).collect();
         for (id, k) in built {
