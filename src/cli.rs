@@ -60,6 +60,11 @@ pub enum Cmd {
     /// write registers, scratch, occupancy and the fp16 instruction mix per kernel (isa.md,
     /// isa.csv, isa.json, plots). Nothing runs.
     Isa(IsaArgs),
+    /// Estimated cycles per ray on AMD GPUs we do not have: ACO's cycle estimate (Latency) of
+    /// each kernel taken apart per loop on RADV null devices (checked to rebuild it exactly),
+    /// its loops' trips taken from real rays in lockstep waves (estimate.md, estimate.csv,
+    /// estimate-rays.csv). The compiler's model, not a measurement; nothing runs.
+    Estimate(EstimateArgs),
     /// Print the RADV null devices listed with RADV_FORCE_FAMILY as set (how `isa` and `devices`
     /// learn which families the installed RADV knows: RADV aborts on the others).
     #[command(hide = true)]
@@ -328,7 +333,38 @@ pub struct ConformanceArgs {
 }
 
 #[derive(clap::Args)]
+pub struct EstimateArgs {
+    /// AMD families, comma-separated (RADV null devices: e.g. navi31, navi21, navi10, vega10,
+    /// gfx1201).
+    #[arg(long, value_delimiter = ',', default_value = "navi31")]
+    pub family: Vec<String>,
+    /// Kernels: layouts (every layout and math at B = 4), cover, default or full.
+    #[arg(long, default_value = "default")]
+    pub matrix: String,
+    /// Only these layouts (and f32, the reference).
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    /// Scenes whose rays weight the loops (OBJ, glTF or PLY; repeatable).
+    #[arg(long, default_value = "scenes/teapot.obj")]
+    pub scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing or a .npy file).
+    #[arg(long, value_delimiter = ',', default_value = "primary,ao")]
+    pub rays: Vec<String>,
+    /// Image side of the primary rays (ao and diffuse start from their hits).
+    #[arg(long, default_value_t = 256)]
+    pub res: u32,
+    /// Output folder (default reports/estimate-<UTC timestamp>/). Its estimate files, if any,
+    /// are refused unless --force; other files there are left alone.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace the estimate files in --out.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::Args)]
 pub struct IsaModelArgs {
+    /// A model under its drm-shim (this process has its environment) or an AMD family.
     #[arg(long)]
     pub model: String,
     /// layouts (isa --quick), cover, default or full (`variant::Matrix`).

@@ -25,6 +25,7 @@ pub mod commands;
 pub mod conformance;
 pub mod devreport;
 pub mod digest;
+pub mod estimate;
 pub mod fp16;
 pub mod fsx;
 #[allow(unsafe_code)]

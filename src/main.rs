@@ -22,6 +22,7 @@ fn main() {
         Cmd::Devices(a) => commands::devices(a),
         Cmd::Conformance(a) => commands::conformance(a),
         Cmd::Isa(a) => commands::isa(a),
+        Cmd::Estimate(a) => commands::estimate(a),
         Cmd::DeviceReport(a) => commands::device_report(a),
         Cmd::ProbeFamily => commands::probe_family(),
         Cmd::IsaModel(a) => commands::isa_model(a),

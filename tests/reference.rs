@@ -348,3 +348,48 @@ fn deferred_entries_ignore_the_closest_hit() {
         }
     }
 }
+
+/// The loop work the estimate weighs a kernel's loops with (`layout::traverse::loop_work`)
+/// follows the reference's own counters: summed over rays each on its own, a visit per
+/// counted node and a triangle pass per triangle test; in lockstep waves a wave makes at least
+/// as many passes as its busiest lane and no more than its lanes together, and on incoherent
+/// (ao, diffuse) rays strictly more than the average lane.
+#[test]
+fn loop_work_follows_the_counters_and_lockstep_costs_more() {
+    use halftrace::precision::{FloatControls, Math};
+    let p = prepare(&scene_path("sponza_dabrovic.obj"));
+    for (kind, rays) in &ray_sets(&p, 48, 64) {
+        for (name, math) in [("f32", Math::F32), ("f16h", Math::F16), ("q8", Math::F32)] {
+            for b in [4, 8] {
+                let enc = encode(&p, layout(name), b);
+                let what = format!("{name} B{b} {kind}");
+                let counters = enc.reference(rays, 1, math, FloatControls::On).1;
+                let (lock, lanes) = enc.layout.imp().loop_work(&enc, rays, 64, math, FloatControls::On);
+                let nodes: u64 = counters.iter().map(|c| c.nodes as u64).sum();
+                let tris: u64 = counters.iter().map(|c| c.tri_tests as u64).sum();
+                assert_eq!((lanes.visits, lanes.tri_passes), (nodes, tris), "{what}: lane sums against the counters");
+                assert_eq!(
+                    (lanes.rays, lanes.waves, lock.rays),
+                    (rays.len() as u64, rays.len() as u64, rays.len() as u64),
+                    "{what}"
+                );
+                assert_eq!(lock.waves, rays.len().div_ceil(64) as u64, "{what}");
+                assert!(lanes.steps >= lanes.visits && lock.steps >= lock.visits, "{what}: {lock:?}");
+                assert!(lock.steps <= lanes.steps && lock.tri_passes <= lanes.tri_passes, "{what}: {lock:?} {lanes:?}");
+                let avg = |x: u64| x as f64 / 64.0;
+                if kind == "ao" || kind == "diffuse" {
+                    assert!(lock.steps as f64 > avg(lanes.steps), "{what}: lockstep {lock:?} against lanes {lanes:?}");
+                    assert!(lock.tri_passes as f64 > avg(lanes.tri_passes), "{what}: {lock:?} {lanes:?}");
+                }
+                // Each ray twice in a row: twice the lanes' work, per ray the same.
+                let twice: Vec<_> = rays.iter().flat_map(|r| [*r, *r]).collect();
+                let (_, lanes2) = enc.layout.imp().loop_work(&enc, &twice, 64, math, FloatControls::On);
+                assert_eq!(
+                    (lanes2.steps, lanes2.visits, lanes2.tri_passes),
+                    (2 * lanes.steps, 2 * lanes.visits, 2 * lanes.tri_passes),
+                    "{what}"
+                );
+            }
+        }
+    }
+}

@@ -203,10 +203,14 @@ pub fn probe_family() -> anyhow::Result<()> {
 /// `halftrace isa-model` (hidden): the isa matrix on the model whose drm-shim environment this
 /// process has, one JSON row per line on stdout (read by `isa`, `isa::vendors::run_model`).
 pub fn isa_model(a: &crate::cli::IsaModelArgs) -> anyhow::Result<()> {
-    let m = isa::vendors::model(&a.model).ok_or_else(|| anyhow::anyhow!("--model {}: no such model", a.model))?;
+    anyhow::ensure!(
+        isa::vendors::model(&a.model).is_some() || crate::gpu::null::family(&a.model).is_some(),
+        "--model {}: no such model or AMD family",
+        a.model
+    );
     let matrix = Matrix::parse(&a.matrix)
         .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default or full", a.matrix))?;
-    let messages = isa::run_model_here(&m, &isa::plan(matrix, &a.layouts), a.validation, a.disasm.as_deref())?;
+    let messages = isa::run_model_here(&a.model, &isa::plan(matrix, &a.layouts), a.validation, a.disasm.as_deref())?;
     anyhow::ensure!(
         messages.is_empty(),
         "{} validation-layer message(s), the first: {}",

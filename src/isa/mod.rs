@@ -5,6 +5,7 @@
 //! SIMD) and its disassembly ([`counts`]: packed and scalar fp16, fp32, scratch traffic). One
 //! [`IsaRow`] per kernel × device; nothing is dispatched.
 
+pub mod aco;
 pub mod counts;
 pub mod mix;
 pub mod vendors;
@@ -18,6 +19,7 @@ use crate::precision::{FcChoice, FloatControls};
 use crate::report::isa::IsaRow;
 pub use crate::variant::Matrix;
 use crate::variant::{self, KernelId, KernelSpec, Source};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -152,32 +154,103 @@ fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<vendors::Mo
     vendors::run_model(exe, &m, &dir, &args, &cfg.builds)
 }
 
-/// Builds `builds` on the device a drm-shim fakes as model `m` (this process was started with
-/// its environment: `halftrace isa-model`), printing each row as one line of JSON as it is
-/// made and, on stderr, [`vendors::MARKER`] and the kernel before building it.
+/// Builds `builds` in this process (`halftrace isa-model`) on model `name` — a device a
+/// drm-shim fakes (this process was started with its environment) or an AMD family's RADV
+/// null device — printing each row as one line of JSON as it is made and, on stderr,
+/// [`vendors::MARKER`] and the kernel before building it.
 pub fn run_model_here(
-    m: &vendors::Model,
+    name: &str,
     builds: &[KernelSpec],
     validation: bool,
     disasm: Option<&Path>,
 ) -> anyhow::Result<Vec<String>> {
     use std::io::Write as _;
-    let g = Gpu::new(&ContextOptions { validation, statistics: true, ..Default::default() })?;
-    anyhow::ensure!(
-        g.info.compile_only,
-        "{}: {} is not under a drm-shim here (LD_PRELOAD={})",
-        m.name,
-        g.info.name,
-        std::env::var("LD_PRELOAD").unwrap_or_default()
-    );
-    let who = Who { family: None, model: Some(*m) };
+    let (g, who) = match vendors::model(name) {
+        Some(m) => {
+            let g = Gpu::new(&ContextOptions { validation, statistics: true, ..Default::default() })?;
+            anyhow::ensure!(
+                g.info.compile_only,
+                "{}: {} is not under a drm-shim here (LD_PRELOAD={})",
+                m.name,
+                g.info.name,
+                std::env::var("LD_PRELOAD").unwrap_or_default()
+            );
+            (g, Who { family: None, model: Some(m) })
+        }
+        None => (null::open(name, validation)?, Who { family: null::family(name), model: None }),
+    };
     let mut out = std::io::stdout().lock();
     for b in builds {
         let row = build_one(&g, &who, b, disasm, |k| eprintln!("{}{k}", vendors::MARKER))?;
         writeln!(out, "{}", serde_json::to_string(&row)?)?;
         out.flush()?;
     }
-    Ok(g.validation_messages().into_iter().map(|msg| format!("{}: {msg}", m.name)).collect())
+    Ok(g.validation_messages().into_iter().map(|msg| format!("{name}: {msg}")).collect())
+}
+
+/// Builds `builds` on AMD family `family` in a child process (`exe isa-model`) with ACO's
+/// printouts on (`ACO_DEBUG=perfinfo`, `RADV_DEBUG=preoptir`, Mesa's shader cache off so
+/// that every kernel is compiled and printed): each kernel's row beside its program as ACO
+/// estimated it ([`aco::Program`]), or why that printout could not be read.
+pub fn aco_programs(
+    exe: &Path,
+    family: &str,
+    matrix: Matrix,
+    layouts: &[LayoutId],
+) -> anyhow::Result<Vec<(IsaRow, Result<aco::Program, String>)>> {
+    use std::io::Read as _;
+    use std::process::{Command, Stdio};
+    let mut args =
+        vec!["isa-model".to_string(), "--model".into(), family.into(), "--matrix".into(), matrix.name().into()];
+    if !layouts.is_empty() {
+        args.push("--layouts".into());
+        args.push(layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
+    }
+    let mut child = Command::new(exe)
+        .args(&args)
+        .env("ACO_DEBUG", "perfinfo")
+        .env("RADV_DEBUG", "preoptir")
+        .env("MESA_SHADER_CACHE_DISABLE", "true")
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    let mut err = child.stderr.take().expect("piped");
+    let reader = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        let _ = err.read_to_end(&mut s);
+        String::from_utf8_lossy(&s).to_string()
+    });
+    let mut stdout = String::new();
+    child.stdout.take().expect("piped").read_to_string(&mut stdout)?;
+    let status = child.wait()?;
+    let stderr = reader.join().unwrap_or_default();
+    if !status.success() {
+        let tail: Vec<&str> = stderr.lines().filter(|l| !l.starts_with('\t')).rev().take(3).collect();
+        anyhow::bail!("--family {family}: the compiler's process failed ({status}): {}", tail.join(" | "));
+    }
+    let rows: Vec<IsaRow> = stdout.lines().map(serde_json::from_str).collect::<Result<_, _>>()?;
+    // Each kernel's printout runs from its marker to the next one.
+    let mut sections: BTreeMap<String, &str> = BTreeMap::new();
+    let mut parts = stderr.split(vendors::MARKER).skip(1);
+    for part in parts.by_ref() {
+        let (kernel, text) = part.split_once('\n').unwrap_or((part, ""));
+        sections.insert(kernel.trim().to_string(), text);
+    }
+    Ok(rows
+        .into_iter()
+        .map(|r| {
+            let p = if !r.status.is_ok() {
+                Err(format!("not built: {}", r.status))
+            } else {
+                match sections.get(&r.kernel) {
+                    Some(text) => aco::Program::from_printout(text).map_err(|e| format!("{}: {e}", r.kernel)),
+                    None => Err(format!("{}: no printout after its marker", r.kernel)),
+                }
+            };
+            (r, p)
+        })
+        .collect())
 }
 
 /// What a device is besides its driver's name: an AMD family, or a model under a drm-shim.

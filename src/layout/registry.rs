@@ -2,6 +2,7 @@
 //! `layout/mod.rs` lists one line per layout) and the object-safe face every layout gets
 //! ([`DynLayout`], through [`Plug`]).
 
+use super::traverse::LoopWork;
 use super::{EncodeError, Encoded, Layout, LayoutInfo, TriBuffer, REGISTRY};
 use crate::base::{Counters, Hit, Ray};
 use crate::bvh::WideBvh;
@@ -97,6 +98,16 @@ pub trait DynLayout: Send + Sync {
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError>;
     /// The CPU reference: rays in packets of `p` (1: single rays) in math mode `math`.
     fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>);
+    /// How often the kernel's loops run for single rays in waves of `wave` (in lockstep, and
+    /// each ray on its own): [`super::traverse::loop_work`].
+    fn loop_work(
+        &self,
+        enc: &Encoded,
+        rays: &[Ray],
+        wave: usize,
+        math: Math,
+        fc: FloatControls,
+    ) -> (LoopWork, LoopWork);
 }
 
 /// The [`DynLayout`] of a [`Layout`] (`layout/mod.rs`'s `layouts!` list makes one per layout).
@@ -148,6 +159,17 @@ fn trace_b<L: Layout, const B: usize>(
     super::traverse::trace_all::<L, B>(nodes, root, enc, rays, p, math, fc)
 }
 
+fn loop_work_b<L: Layout, const B: usize>(
+    enc: &Encoded,
+    rays: &[Ray],
+    wave: usize,
+    math: Math,
+    fc: FloatControls,
+) -> (LoopWork, LoopWork) {
+    let (nodes, root) = enc.typed::<L, B>().expect("Encoded of another layout or B");
+    super::traverse::loop_work::<L, B>(nodes, root, enc, rays, wave, math, fc)
+}
+
 impl<L: Layout> DynLayout for Plug<L> {
     fn info(&self) -> &'static LayoutInfo {
         &L::INFO
@@ -158,6 +180,17 @@ impl<L: Layout> DynLayout for Plug<L> {
     fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
         assert!(L::INFO.maths.contains(&math), "{}: math {} is not one of its modes", L::INFO.name, math.name());
         with_branching!(enc.branching, trace_b, enc, rays, p, math, fc)
+    }
+    fn loop_work(
+        &self,
+        enc: &Encoded,
+        rays: &[Ray],
+        wave: usize,
+        math: Math,
+        fc: FloatControls,
+    ) -> (LoopWork, LoopWork) {
+        assert!(L::INFO.maths.contains(&math), "{}: math {} is not one of its modes", L::INFO.name, math.name());
+        with_branching!(enc.branching, loop_work_b, enc, rays, wave, math, fc)
     }
 }
 

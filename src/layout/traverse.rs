@@ -115,10 +115,113 @@ pub fn trace_all<L: Layout, const B: usize>(
     rays.par_chunks(p).zip(hits.par_chunks_mut(p)).zip(counters.par_chunks_mut(p)).for_each_init(
         Scratch::<L>::new,
         |s, ((rays, hits), counters)| {
-            packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters)
+            packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters, None)
         },
     );
     (hits, counters)
+}
+
+/// One pass of a single ray's traversal loop: one node entered, as the kernel enters it (the
+/// root, then one per pop). `visited`: the ray was active there; `tris[s]`: the triangles it
+/// tested in the leaf in child slot `s`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Step {
+    pub visited: bool,
+    pub tris: [u8; 16],
+}
+
+/// How often a kernel's loops run for a set of single rays: the traversal loop's passes
+/// (`steps`), the passes in which a node is visited (`visits`; a visit runs the child-slot loop
+/// once over every slot) and the triangle loop's passes (`tri_passes`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LoopWork {
+    /// Waves (lanes in lockstep), each running the passes outside the loops once.
+    pub waves: u64,
+    pub rays: u64,
+    pub steps: u64,
+    pub visits: u64,
+    pub tri_passes: u64,
+}
+
+impl std::ops::AddAssign for LoopWork {
+    fn add_assign(&mut self, o: LoopWork) {
+        self.waves += o.waves;
+        self.rays += o.rays;
+        self.steps += o.steps;
+        self.visits += o.visits;
+        self.tri_passes += o.tri_passes;
+    }
+}
+
+impl LoopWork {
+    /// One wave of lanes running `lanes` (each lane's steps) in lockstep: the wave makes a
+    /// pass while any lane does, visits when any lane visits, and runs the triangle loop of
+    /// each slot as long as its slowest lane.
+    pub fn lockstep(lanes: &[Vec<Step>]) -> LoopWork {
+        let k = lanes.iter().map(Vec::len).max().unwrap_or(0);
+        let mut w = LoopWork { waves: 1, rays: lanes.len() as u64, steps: k as u64, ..Default::default() };
+        for i in 0..k {
+            let at = || lanes.iter().filter_map(move |l| l.get(i));
+            w.visits += at().any(|s| s.visited) as u64;
+            w.tri_passes += (0..16).map(|s| at().map(|x| x.tris[s] as u64).max().unwrap_or(0)).sum::<u64>();
+        }
+        w
+    }
+
+    /// The same lanes each on its own (the sum over lanes of one-lane waves).
+    pub fn lanes(lanes: &[Vec<Step>]) -> LoopWork {
+        let mut w = LoopWork::default();
+        for l in lanes {
+            w += LoopWork::lockstep(std::slice::from_ref(l));
+        }
+        w
+    }
+}
+
+/// [`LoopWork`] of single rays `rays` in waves of `wave` consecutive rays (the last may be
+/// partial): summed over the waves in lockstep, and summed over the rays each on its own.
+#[allow(clippy::too_many_arguments)]
+pub fn loop_work<L: Layout, const B: usize>(
+    nodes: &[L::Node<B>],
+    root: &L::Root,
+    enc: &Encoded,
+    rays: &[Ray],
+    wave: usize,
+    math: Math,
+    fc: FloatControls,
+) -> (LoopWork, LoopWork) {
+    let box_lo: [f32; 3] = enc.root_box.min.into();
+    let box_hi: [f32; 3] = enc.root_box.max.into();
+    rays.par_chunks(wave.max(1))
+        .map_init(Scratch::<L>::new, |s, rays| {
+            let lanes: Vec<Vec<Step>> = rays
+                .iter()
+                .map(|ray| {
+                    let (mut hit, mut c, mut steps) = ([Hit::MISS], [Counters::default()], Vec::new());
+                    let one = std::slice::from_ref(ray);
+                    packet::<L, B>(
+                        nodes,
+                        root,
+                        &enc.tris,
+                        (box_lo, box_hi),
+                        one,
+                        math,
+                        fc,
+                        s,
+                        &mut hit,
+                        &mut c,
+                        Some(&mut steps),
+                    );
+                    steps
+                })
+                .collect();
+            (LoopWork::lockstep(&lanes), LoopWork::lanes(&lanes))
+        })
+        .reduce(Default::default, |mut a, b| {
+            a.0 += b.0;
+            a.1 += b.1;
+            a
+        })
 }
 
 /// Traces one packet.
@@ -134,6 +237,7 @@ fn packet<L: Layout, const B: usize>(
     s: &mut Scratch<L>,
     hits: &mut [Hit],
     counters: &mut [Counters],
+    mut steps: Option<&mut Vec<Step>>,
 ) {
     let p = rays.len();
     let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries } = s;
@@ -162,6 +266,9 @@ fn packet<L: Layout, const B: usize>(
     }
     let (mut packet_nodes, mut active_lanes) = (0u32, 0u32);
     while let Some(ni) = stack.pop() {
+        if let Some(st) = steps.as_mut() {
+            st.push(Step::default());
+        }
         cur.clear();
         cur.extend(entries.drain(entries.len() - p..));
         visits.clear();
@@ -177,6 +284,9 @@ fn packet<L: Layout, const B: usize>(
         }
         if active == 0 {
             continue;
+        }
+        if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
+            st.visited = true;
         }
         packet_nodes += 1;
         active_lanes += active;
@@ -218,6 +328,9 @@ fn packet<L: Layout, const B: usize>(
                         if t.is_some() {
                             lane.test_leaf(tris, first, count);
                         }
+                    }
+                    if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
+                        st.tris[slot] = if tests[0].is_some() { count as u8 } else { 0 };
                     }
                 }
                 ChildRef::Inner(j) => {

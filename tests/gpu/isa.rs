@@ -96,6 +96,52 @@ fn isa_builds_every_kernel_on_a_null_device() {
     let _ = std::fs::remove_dir_all(&merged);
 }
 
+/// ACO's `Latency` rebuilt from its own printouts (`halftrace::isa::aco`): for every kernel
+/// of the default matrix on RDNA3 (navi31) and GCN5 (vega10), the final program's block
+/// cycles weighted by the depths that replaying instruction selection gives them equal the
+/// `latency` ACO printed (to its six decimals) and, rounded, the row's `Latency` statistic;
+/// so does the sum over loops of cycles per pass × ACO's passes, and every single-ray kernel's
+/// traversal and triangle loops are found.
+#[test]
+fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
+    assert!(std::path::Path::new(RADV_ICD).exists(), "{RADV_ICD} is missing: RADV provides the null devices");
+    let bin = std::path::Path::new(env!("CARGO_BIN_EXE_halftrace"));
+    let runs: Vec<_> = std::thread::scope(|s| {
+        let hs: Vec<_> = ["navi31", "vega10"]
+            .map(|f| s.spawn(move || (f, halftrace::isa::aco_programs(bin, f, Matrix::Default, &[]))))
+            .into_iter()
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (family, run) in runs {
+        let run = run.unwrap_or_else(|e| panic!("{family}: {e:#}"));
+        assert_eq!(run.len(), plan(Matrix::Default, &[]).len(), "{family}: one row per kernel");
+        for (row, p) in run {
+            let p = p.unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
+            let mine = p.aco_latency();
+            assert!(
+                (mine - p.printed_latency).abs() <= 1e-6,
+                "{family} {}: rebuilt {mine} against ACO's {}",
+                row.kernel,
+                p.printed_latency
+            );
+            assert_eq!(Some(&mine.round()), row.stats.get("Latency"), "{family} {}: the Latency statistic", row.kernel);
+            // The same from the loops' parts: cycles per pass × ACO's passes.
+            let parts = p.cycles(|l| p.aco_passes(l));
+            assert!(
+                (parts - mine).abs() <= 1e-9 * mine,
+                "{family} {}: {parts} from the loops, {mine} from the blocks",
+                row.kernel
+            );
+            if row.packet == 1 {
+                let r = halftrace::estimate::roles(&p).unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
+                assert_eq!(r.traversal.depth, 1, "{family} {}", row.kernel);
+                assert!(r.triangles.depth > 1, "{family} {}: {r:?}", row.kernel);
+            }
+        }
+    }
+}
+
 /// A null device runs nothing (a wait on it crashes inside RADV): every command that would run
 /// refuses it by name and points to `isa`, exiting 1 rather than crashing.
 #[test]
