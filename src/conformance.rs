@@ -148,8 +148,6 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
     let mut runner = Runner::new(Some(&g), &[], Default::default())?;
     let admitted: Vec<KernelSpec> =
         checks.iter().filter(|c| c.status.is_ok()).map(|c| KernelSpec::exact(c.variant, c.imp)).collect();
-    runner.prebuild(&admitted);
-    progress(&format!("{} kernels built ({:.0} s)", admitted.len(), t0.elapsed().as_secs_f64()));
     let mut scene_names = Vec::new();
     for path in &opts.scenes {
         let name = runner.scene(path)?.0.name.clone();
@@ -157,6 +155,12 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
         for spec in ray_specs(opts.quick) {
             let id = runner.ray_set(&spec).with_context(|| format!("{} {} rays", path.display(), spec.kind))?;
             sets.push((spec.kind, id));
+        }
+        // Built (on lavapipe: compiled) once the first scene and its rays have loaded, so that
+        // a scene that does not load is reported at once.
+        if scene_names.is_empty() {
+            runner.prebuild(&admitted);
+            progress(&format!("{} kernels built ({:.0} s)", admitted.len(), t0.elapsed().as_secs_f64()));
         }
         // Each encoding (layout × B) stays on the device while its checks run.
         let mut keys: Vec<(LayoutId, usize)> =
