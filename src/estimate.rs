@@ -27,7 +27,9 @@ use crate::layout::traverse::LoopWork;
 use crate::layout::{Encoded, LayoutId};
 use crate::precision::{FloatControls, Math};
 use crate::rays::RayKind;
+pub use crate::report::estimate::{RayRow, Split};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 use std::path::Path;
 
 /// A loop's part of a kernel's estimate (`header` `None`: the blocks outside every loop).
@@ -171,30 +173,6 @@ pub fn roles(p: &aco::Program) -> Result<Roles, String> {
     Ok(Roles { traversal, slots: between.first().copied(), triangles })
 }
 
-/// A ray's cycles split by the part of the kernel they are spent in.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Split {
-    /// Outside the traversal loop: the ray's set-up and the hit's write.
-    pub setup: f64,
-    /// The traversal loop's own blocks: entering a node, its box tests, ordering and pushing
-    /// children, popping.
-    pub step: f64,
-    /// The child-slot loop's own blocks (where it is a loop): which children are leaves.
-    pub slots: f64,
-    /// The triangle loop and the loops inside it: the triangle tests.
-    pub triangles: f64,
-}
-
-impl Split {
-    pub fn total(&self) -> f64 {
-        self.setup + self.step + self.slots + self.triangles
-    }
-
-    fn scaled(self, k: f64) -> Split {
-        Split { setup: self.setup * k, step: self.step * k, slots: self.slots * k, triangles: self.triangles * k }
-    }
-}
-
 /// The model's cycles for `w` (waves of a ray set, summed) with branching factor `b`: the
 /// rays' passes through the three named loops, ACO's relative trips for every other loop.
 pub fn ray_cycles(p: &aco::Program, roles: &Roles, w: &LoopWork, b: usize) -> Split {
@@ -220,34 +198,13 @@ pub fn ray_cycles(p: &aco::Program, roles: &Roles, w: &LoopWork, b: usize) -> Sp
     Split { setup: parts[0], step: parts[1], slots: parts[2], triangles: parts[3] }
 }
 
-/// One kernel on one family for one ray set.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct RayRow {
-    pub family: String,
-    pub generation: String,
-    pub kernel: String,
-    pub layout: String,
-    pub math: String,
-    pub branching: usize,
-    pub scene: String,
-    pub rays: String,
-    pub ray_count: u64,
-    /// The wave size the kernel was compiled for (lanes in lockstep).
-    pub wave: u32,
-    pub status: Status,
-    /// Issue-bound cycles per ray: a wave's cycles in lockstep ÷ its rays.
-    pub cycles_per_ray: f64,
-    /// The same if every pass lasted as long as the wave's average lane (no divergence).
-    pub lane_average: f64,
-    /// Per ray, by part.
-    pub split: Split,
-    /// ACO's waves per SIMD (registers and LDS).
-    pub waves: f64,
-    /// Rays per 1000 clocks per SIMD: ACO's throughput (`wave64_per_cycle`, its waves per SIMD
-    /// hiding latency) scaled by its latency ÷ the rays' cycles per wave.
-    pub rays_per_kclk: f64,
-    /// cycles_per_ray ÷ f32's at the same B, family, scene and rays.
-    pub vs_f32: Option<f64>,
+/// What [`ray_rows`] computes once for every family: encodings per (ray set, layout, B) and
+/// loop work per (ray set, layout, B, math, float controls, wave size).
+#[derive(Default)]
+pub struct WorkCache {
+    encoded: HashMap<(usize, String, usize), Result<Encoded, String>>,
+    #[allow(clippy::type_complexity)]
+    work: HashMap<(usize, String, usize, String, String, usize), (LoopWork, LoopWork)>,
 }
 
 /// A ray set for [`ray_rows`]: a scene and its rays.
@@ -277,11 +234,11 @@ pub fn ray_rows(
     family: &str,
     built: &[(crate::report::isa::IsaRow, Result<aco::Program, String>)],
     sets: &[RaySet],
+    cache: &mut WorkCache,
 ) -> Vec<RayRow> {
     let generation = null::family(family).map_or("", |x| x.generation);
     let mut out = Vec::new();
-    for set in sets {
-        let mut encoded: Vec<((String, usize), anyhow::Result<Encoded>)> = Vec::new();
+    for (si, set) in sets.iter().enumerate() {
         for (r, p) in built.iter().filter(|(r, _)| r.packet == 1) {
             let mut row = RayRow {
                 family: family.into(),
@@ -303,14 +260,16 @@ pub fn ray_rows(
                 let layout = LayoutId::parse(&r.layout).map_err(|e| e.to_string())?;
                 let math: Math = r.math.parse()?;
                 let fc = if r.float_controls == "off" { FloatControls::Off } else { FloatControls::On };
-                let key = (r.layout.clone(), r.branching);
-                if !encoded.iter().any(|(k, _)| *k == key) {
-                    encoded.push((key.clone(), Encoded::new(&set.scene_data, &set.bin, layout, r.branching)));
-                }
-                let enc = encoded.iter().find(|(k, _)| *k == key).map(|(_, e)| e).expect("just added");
-                let enc = enc.as_ref().map_err(|e| format!("{e:#}"))?;
                 let wave = (r.subgroup_size as usize).max(1);
-                let (lock, lanes) = layout.imp().loop_work(enc, &set.rays, wave, math, fc);
+                let key = (si, r.layout.clone(), r.branching, r.math.clone(), r.float_controls.clone(), wave);
+                if !cache.work.contains_key(&key) {
+                    let enc = cache.encoded.entry((si, r.layout.clone(), r.branching)).or_insert_with(|| {
+                        Encoded::new(&set.scene_data, &set.bin, layout, r.branching).map_err(|e| format!("{e:#}"))
+                    });
+                    let enc = enc.as_ref().map_err(String::clone)?;
+                    cache.work.insert(key.clone(), layout.imp().loop_work(enc, &set.rays, wave, math, fc));
+                }
+                let (lock, lanes) = cache.work[&key];
                 let rays = set.rays.len().max(1) as f64;
                 let split = ray_cycles(p, &roles, &lock, r.branching);
                 row.cycles_per_ray = split.total() / rays;
@@ -356,111 +315,14 @@ pub fn run(
     use rayon::prelude::*;
     let built: Vec<anyhow::Result<_>> =
         families.par_iter().map(|f| isa::aco_programs(exe, f, matrix, layouts)).collect();
-    let (mut rows, mut ray_out) = (Vec::new(), Vec::new());
+    let (mut rows, mut ray_out, mut cache) = (Vec::new(), Vec::new(), WorkCache::default());
     for (f, b) in families.iter().zip(built) {
         let b = b?;
         let generation = null::family(f).map_or("", |x| x.generation);
-        ray_out.extend(ray_rows(f, &b, sets));
+        ray_out.extend(ray_rows(f, &b, sets, &mut cache));
         rows.extend(b.into_iter().map(|(r, p)| row(f, generation, &r, p)));
     }
     Ok((rows, ray_out))
-}
-
-/// The ray-weighted part of estimate.md: per family, kernel × ray set.
-pub fn rays_markdown(rows: &[RayRow]) -> String {
-    let mut md = String::from("# Estimated cycles per ray\n\n");
-    md += "ACO's model of each single-ray kernel with the trips of its traversal, child-slot and triangle loops \
-           counted on real rays by the CPU reference, the lanes of a wave in lockstep (a wave makes a pass while \
-           any lane does). **An estimate from the compiler's model, an upper bound on one wave with no latency \
-           hidden, not a measurement.** `cycles/ray`: a wave's cycles ÷ its rays; `lane avg`: the same if every \
-           pass lasted as long as the wave's average lane; the split: set-up and hit write, the traversal step \
-           (entering a node, box tests, ordering, stack), the child-slot loop, the triangle tests; `rays/kclk`: \
-           rays per 1000 clocks per SIMD at ACO's occupancy (its throughput model scaled to these rays).\n\n";
-    let mut groups: Vec<(&str, &str, &str)> =
-        rows.iter().map(|r| (r.family.as_str(), r.scene.as_str(), r.rays.as_str())).collect();
-    groups.dedup();
-    for (f, scene, kind) in groups {
-        let g: Vec<&RayRow> = rows.iter().filter(|r| r.family == f && r.scene == scene && r.rays == kind).collect();
-        md +=
-            &format!("## {f} ({}), {scene}, {kind} rays ({}, wave {})\n\n", g[0].generation, g[0].ray_count, g[0].wave);
-        md += "| kernel | layout | math | B | cycles/ray | ÷ f32 | lane avg | set-up | step | slots | triangles | waves | rays/kclk | status |\n";
-        md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
-        for r in g {
-            let ok = r.status.is_ok();
-            let n = |x: f64| if ok { format!("{x:.1}") } else { "–".into() };
-            md += &format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                r.kernel,
-                r.layout,
-                r.math,
-                r.branching,
-                n(r.cycles_per_ray),
-                r.vs_f32.map_or("–".into(), |v| format!("{v:.2}")),
-                n(r.lane_average),
-                n(r.split.setup),
-                n(r.split.step),
-                n(r.split.slots),
-                n(r.split.triangles),
-                if ok { format!("{:.0}", r.waves) } else { "–".into() },
-                if ok { format!("{:.2}", r.rays_per_kclk) } else { "–".into() },
-                r.status
-            );
-        }
-        md += "\n";
-    }
-    md
-}
-
-/// estimate-rays.csv: one line per kernel, family and ray set.
-pub fn rays_csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record([
-        "family",
-        "generation",
-        "kernel",
-        "layout",
-        "math",
-        "B",
-        "scene",
-        "rays",
-        "ray_count",
-        "wave",
-        "status",
-        "cycles_per_ray",
-        "vs_f32",
-        "lane_average",
-        "setup",
-        "step",
-        "slots",
-        "triangles",
-        "waves",
-        "rays_per_kclk",
-    ])?;
-    for r in rows {
-        w.write_record([
-            r.family.clone(),
-            r.generation.clone(),
-            r.kernel.clone(),
-            r.layout.clone(),
-            r.math.clone(),
-            r.branching.to_string(),
-            r.scene.clone(),
-            r.rays.clone(),
-            r.ray_count.to_string(),
-            r.wave.to_string(),
-            r.status.to_string(),
-            r.cycles_per_ray.to_string(),
-            r.vs_f32.map(|v| v.to_string()).unwrap_or_default(),
-            r.lane_average.to_string(),
-            r.split.setup.to_string(),
-            r.split.step.to_string(),
-            r.split.slots.to_string(),
-            r.split.triangles.to_string(),
-            r.waves.to_string(),
-            r.rays_per_kclk.to_string(),
-        ])?;
-    }
-    Ok(w.into_inner()?)
 }
 
 /// The loops of a row, largest share first (the blocks outside every loop last).

@@ -9,7 +9,8 @@ use crate::isa::{self, Matrix};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use std::time::Instant;
 
-const FILES: &[&str] = &["estimate.md", "estimate.csv", "estimate-rays.csv"];
+const FILES: &[&str] =
+    &["estimate.md", "estimate.csv", "estimate-rays.csv", "estimate-rays.json", "estimate.png", "estimate.svg"];
 
 /// Like `isa`'s, the folder may be a sweep's or an isa run's: only its own files are refused.
 const OUTPUTS: Outputs = Outputs {
@@ -53,8 +54,9 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     }
     let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &sets)?;
     crate::fsx::write_atomic(&out.join("estimate.csv"), &estimate::csv(&rows)?)?;
-    crate::fsx::write_atomic(&out.join("estimate-rays.csv"), &estimate::rays_csv(&ray_rows)?)?;
-    let md = estimate::markdown(&rows) + &estimate::rays_markdown(&ray_rows);
+    crate::report::estimate::write(&ray_rows, &out)?;
+    crate::report::estimate::plot(&ray_rows, &out)?;
+    let md = estimate::markdown(&rows) + &crate::report::estimate::section(&ray_rows);
     crate::fsx::write_atomic(&out.join("estimate.md"), md.as_bytes())?;
     let failed: Vec<String> = rows
         .iter()

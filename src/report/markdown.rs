@@ -60,9 +60,25 @@ pub fn render_with(
     for l in skip_lines {
         md += &format!("Skipped: {l}\n\n");
     }
+    let mut estimates = Vec::new();
+    for s in sources {
+        estimates.extend(super::estimate::read(s)?.unwrap_or_default());
+    }
+    let estimate_section = |md: &mut String| -> anyhow::Result<()> {
+        if !estimates.is_empty() {
+            *md += "\n";
+            *md += &super::estimate::section(&estimates)
+                .replacen("# Estimated", "## Estimated", 1)
+                .replace("\n## ", "\n### ");
+            *md += "\n![Estimated cycles per ray](estimate.png)\n";
+            super::estimate::plot(&estimates, out)?;
+        }
+        Ok(())
+    };
     if rows.is_empty() && !isa_rows.is_empty() {
         // Only the compiler's view (isa folders).
         md += &super::isa::section(isa_rows, 2);
+        estimate_section(&mut md)?;
         crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
         write_headline(out, &devices, "", isa_rows)?;
         return isa_files(isa_rows, out);
@@ -80,6 +96,7 @@ pub fn render_with(
         md += &super::isa::section(isa_rows, 2);
         isa_files(isa_rows, out)?;
     }
+    estimate_section(&mut md)?;
     crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
     write_headline(out, &devices, &tables::headline(&by_b, &by_p), isa_rows)?;
     plots::plots(rows, &by_b, &by_p, out)?;

@@ -3,6 +3,7 @@
 //! ([`markdown`]) and its plots ([`plots`]); and the merge of several result folders into one
 //! report ([`merge`]). Pure functions of the rows: nothing here traces.
 
+pub mod estimate;
 pub mod isa;
 pub mod markdown;
 pub mod merge;

@@ -142,6 +142,57 @@ fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
     }
 }
 
+/// `halftrace estimate` end to end on navi31 (f32 and f16a, B = 4, the teapot's primary and ao
+/// rays): every kernel rebuilt exactly and estimated; f32's ratio is 1; a wave in lockstep
+/// costs at least its average lane and, on incoherent ao rays, more; the triangle tests and
+/// the traversal step carry cycles; `report` renders the section and the plot; bad arguments
+/// are refused by name.
+#[test]
+fn estimate_weighs_acos_model_with_the_rays() {
+    assert!(std::path::Path::new(RADV_ICD).exists(), "{RADV_ICD} is missing: RADV provides the null devices");
+    let out = tmp("estimate");
+    let o = out.to_str().unwrap();
+    let scene = format!("{}/scenes/teapot.obj", env!("CARGO_MANIFEST_DIR"));
+    let (ok, _, err) = cli(&["isa", "--quick", "--family", "navi31", "--layouts", "f16a", "--out", o]);
+    assert!(ok, "{err}");
+    let (ok, stdout, err) =
+        cli(&["estimate", "--matrix", "layouts", "--layouts", "f16a", "--scene", &scene, "--res", "48", "--out", o]);
+    assert!(ok, "{err}");
+    assert!(
+        stdout.contains("3 kernels on 1 family taken apart (3 rebuilt exactly), 6 estimated on 2 ray set(s)"),
+        "{stdout}"
+    );
+    let rows = halftrace::report::estimate::read(&out).unwrap().expect("estimate-rays.json");
+    assert_eq!(rows.len(), 6);
+    for r in &rows {
+        let what = format!("{} {}", r.kernel, r.rays);
+        assert!(r.status.is_ok(), "{what}: {}", r.status);
+        assert_eq!(r.wave, 64, "{what}: RADV compiles compute in wave64");
+        assert!(r.cycles_per_ray >= r.lane_average && r.lane_average > 0.0, "{what}: {r:?}");
+        assert!((r.split.total() - r.cycles_per_ray).abs() < 1e-6 * r.cycles_per_ray, "{what}: the split adds up");
+        assert!(r.split.triangles > 0.0 && r.split.step > 0.0 && r.split.setup > 0.0, "{what}: {r:?}");
+        if r.rays == "ao" {
+            assert!(r.cycles_per_ray > 1.2 * r.lane_average, "{what}: lockstep on incoherent rays {r:?}");
+        }
+        if r.layout == "f32" {
+            assert_eq!(r.vs_f32, Some(1.0), "{what}");
+        }
+    }
+    let (ok, _, err) = cli(&["report", o]);
+    assert!(ok, "{err}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("## Estimated cycles per ray") && md.contains("trav_f16a_m32_b4_p1"), "{md}");
+    assert!(out.join("estimate.png").is_file());
+    // Its own files are refused without --force; bad arguments name themselves.
+    let (ok, _, err) = cli(&["estimate", "--matrix", "layouts", "--out", o]);
+    assert!(!ok && err.contains("already holds estimate") && err.contains("--force"), "{err}");
+    let (ok, _, err) = cli(&["estimate", "--family", "navi99", "--out", &format!("{o}-2")]);
+    assert!(!ok && err.contains("--family 'navi99'"), "{err}");
+    let (ok, _, err) = cli(&["estimate", "--rays", "sideways", "--out", &format!("{o}-3")]);
+    assert!(!ok && err.contains("--rays sideways"), "{err}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 /// A null device runs nothing (a wait on it crashes inside RADV): every command that would run
 /// refuses it by name and points to `isa`, exiting 1 rather than crashing.
 #[test]

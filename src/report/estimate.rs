@@ -1,0 +1,207 @@
+//! The estimate's rows as the report reads them (`halftrace estimate` writes them:
+//! `estimate-rays.json`, `estimate-rays.csv`), its section of the report and its plot.
+
+use super::plots;
+use super::rows::Status;
+use anyhow::Context as _;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A ray's cycles split by the part of the kernel they are spent in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Split {
+    /// Outside the traversal loop: the ray's set-up and the hit's write.
+    pub setup: f64,
+    /// The traversal loop's own blocks: entering a node, its box tests, ordering and pushing
+    /// children, popping.
+    pub step: f64,
+    /// The child-slot loop's own blocks (where it is a loop): which children are leaves.
+    pub slots: f64,
+    /// The triangle loop and the loops inside it: the triangle tests.
+    pub triangles: f64,
+}
+
+impl Split {
+    pub fn total(&self) -> f64 {
+        self.setup + self.step + self.slots + self.triangles
+    }
+
+    pub fn scaled(self, k: f64) -> Split {
+        Split { setup: self.setup * k, step: self.step * k, slots: self.slots * k, triangles: self.triangles * k }
+    }
+}
+
+/// One kernel on one family for one ray set.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RayRow {
+    pub family: String,
+    pub generation: String,
+    pub kernel: String,
+    pub layout: String,
+    pub math: String,
+    pub branching: usize,
+    pub scene: String,
+    pub rays: String,
+    pub ray_count: u64,
+    /// The wave size the kernel was compiled for (lanes in lockstep).
+    pub wave: u32,
+    pub status: Status,
+    /// Issue-bound cycles per ray: a wave's cycles in lockstep ÷ its rays.
+    pub cycles_per_ray: f64,
+    /// The same if every pass lasted as long as the wave's average lane (no divergence).
+    pub lane_average: f64,
+    /// Per ray, by part.
+    pub split: Split,
+    /// ACO's waves per SIMD (registers and LDS).
+    pub waves: f64,
+    /// Rays per 1000 clocks per SIMD: ACO's throughput (`wave64_per_cycle`, its waves per SIMD
+    /// hiding latency) scaled by its latency ÷ the rays' cycles per wave.
+    pub rays_per_kclk: f64,
+    /// cycles_per_ray ÷ f32's at the same B, family, scene and rays.
+    pub vs_f32: Option<f64>,
+}
+
+/// The report's section (and estimate.md's second part): per family and ray set, each
+/// kernel's estimated cycles per ray.
+pub fn section(rows: &[RayRow]) -> String {
+    let mut md = String::from("# Estimated cycles per ray\n\n");
+    md += "ACO's model of each single-ray kernel with the trips of its traversal, child-slot and triangle loops \
+           counted on real rays by the CPU reference, the lanes of a wave in lockstep (a wave makes a pass while \
+           any lane does). **An estimate from the compiler's model, an upper bound on one wave with no latency \
+           hidden, not a measurement.** `cycles/ray`: a wave's cycles ÷ its rays; `lane avg`: the same if every \
+           pass lasted as long as the wave's average lane; the split: set-up and hit write, the traversal step \
+           (entering a node, box tests, ordering, stack), the child-slot loop, the triangle tests; `rays/kclk`: \
+           rays per 1000 clocks per SIMD at ACO's occupancy (its throughput model scaled to these rays).\n\n";
+    let mut groups: Vec<(&str, &str, &str)> =
+        rows.iter().map(|r| (r.family.as_str(), r.scene.as_str(), r.rays.as_str())).collect();
+    groups.dedup();
+    for (f, scene, kind) in groups {
+        let g: Vec<&RayRow> = rows.iter().filter(|r| r.family == f && r.scene == scene && r.rays == kind).collect();
+        md +=
+            &format!("## {f} ({}), {scene}, {kind} rays ({}, wave {})\n\n", g[0].generation, g[0].ray_count, g[0].wave);
+        md += "| kernel | layout | math | B | cycles/ray | ÷ f32 | lane avg | set-up | step | slots | triangles | waves | rays/kclk | status |\n";
+        md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+        for r in g {
+            let ok = r.status.is_ok();
+            let n = |x: f64| if ok { format!("{x:.1}") } else { "–".into() };
+            md += &format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                r.kernel,
+                r.layout,
+                r.math,
+                r.branching,
+                n(r.cycles_per_ray),
+                r.vs_f32.map_or("–".into(), |v| format!("{v:.2}")),
+                n(r.lane_average),
+                n(r.split.setup),
+                n(r.split.step),
+                n(r.split.slots),
+                n(r.split.triangles),
+                if ok { format!("{:.0}", r.waves) } else { "–".into() },
+                if ok { format!("{:.2}", r.rays_per_kclk) } else { "–".into() },
+                r.status
+            );
+        }
+        md += "\n";
+    }
+    md
+}
+
+/// estimate-rays.csv: one line per kernel, family and ray set.
+pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record([
+        "family",
+        "generation",
+        "kernel",
+        "layout",
+        "math",
+        "B",
+        "scene",
+        "rays",
+        "ray_count",
+        "wave",
+        "status",
+        "cycles_per_ray",
+        "vs_f32",
+        "lane_average",
+        "setup",
+        "step",
+        "slots",
+        "triangles",
+        "waves",
+        "rays_per_kclk",
+    ])?;
+    for r in rows {
+        w.write_record([
+            r.family.clone(),
+            r.generation.clone(),
+            r.kernel.clone(),
+            r.layout.clone(),
+            r.math.clone(),
+            r.branching.to_string(),
+            r.scene.clone(),
+            r.rays.clone(),
+            r.ray_count.to_string(),
+            r.wave.to_string(),
+            r.status.to_string(),
+            r.cycles_per_ray.to_string(),
+            r.vs_f32.map(|v| v.to_string()).unwrap_or_default(),
+            r.lane_average.to_string(),
+            r.split.setup.to_string(),
+            r.split.step.to_string(),
+            r.split.slots.to_string(),
+            r.split.triangles.to_string(),
+            r.waves.to_string(),
+            r.rays_per_kclk.to_string(),
+        ])?;
+    }
+    Ok(w.into_inner()?)
+}
+
+/// `estimate-rays.json` and `estimate-rays.csv` into `out`.
+pub fn write(rows: &[RayRow], out: &Path) -> anyhow::Result<()> {
+    crate::fsx::write_atomic(&out.join("estimate-rays.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;
+    crate::fsx::write_atomic(&out.join("estimate-rays.csv"), &csv(rows)?)
+}
+
+/// The rows of `dir/estimate-rays.json`, `None` where there is none.
+pub fn read(dir: &Path) -> anyhow::Result<Option<Vec<RayRow>>> {
+    let p = dir.join("estimate-rays.json");
+    if !p.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+    let rows = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not the rows `halftrace estimate` writes", p.display()))?;
+    Ok(Some(rows))
+}
+
+/// `estimate.png` (and `.svg`): one panel per family, scene and ray kind; x = B, one line per
+/// layout and math; y = estimated cycles per ray.
+pub fn plot(rows: &[RayRow], out: &Path) -> anyhow::Result<()> {
+    let mut panels: Vec<(String, plots::Lines)> = Vec::new();
+    for r in rows.iter().filter(|r| r.status.is_ok()) {
+        let caption = format!("{} ({}), {} {}", r.family, r.generation, r.scene, r.rays);
+        let label = format!("{} {}", r.layout, r.math);
+        if !panels.iter().any(|p| p.0 == caption) {
+            panels.push((caption.clone(), Vec::new()));
+        }
+        let lines = &mut panels.iter_mut().find(|p| p.0 == caption).expect("just added").1;
+        match lines.iter_mut().find(|l| l.0 == label) {
+            Some(l) => l.1.push((r.branching, r.cycles_per_ray)),
+            None => lines.push((label, vec![(r.branching, r.cycles_per_ray)])),
+        }
+    }
+    if panels.is_empty() {
+        return Ok(());
+    }
+    plots::panels(
+        out,
+        "estimate",
+        "Estimated cycles per ray (ACO's model weighted by the rays' loop trips, lockstep waves; not a measurement)",
+        "branching factor B",
+        "cycles per ray",
+        &panels,
+    )
+}
