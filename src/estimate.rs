@@ -8,12 +8,13 @@
 //! carries; rebuilt from those parts it must equal ACO's figure, which every row checks.
 //!
 //! Then the rays take the place of ACO's assumed trips ([`ray_rows`]). Three loops of a
-//! single-ray kernel are named by the program's shape ([`roles`]): the traversal loop (the
+//! kernel are named by the program's shape ([`roles`]): the traversal loop (the
 //! outermost loop that carries most of the estimate), the triangle loop (the loop inside it
 //! with the costliest pass) and, where the compiler kept it a loop, the child-slot loop
-//! between them. The CPU reference counts, per wave of the device's wave size in lockstep,
-//! how often each runs ([`crate::layout::traverse::LoopWork`]): a pass per node entered, B
-//! slot passes per visit, a triangle pass per triangle of the slowest lane of each slot.
+//! between them. The CPU reference counts, per wave of the device's wave size in lockstep
+//! (single rays, or packets of P rays that step together), how often each runs
+//! ([`crate::layout::traverse::LoopWork`]): a pass per node entered, B slot passes per visit,
+//! a triangle pass per triangle of the slowest lane of each slot.
 //! Every other loop (an exact division's corrections, a per-axis loop the compiler kept)
 //! keeps ACO's assumed trips relative to the nearest of those three around it, or runs as
 //! ACO assumes when outside them; branches inside a loop keep ACO's weights (0.5 for a
@@ -126,7 +127,7 @@ fn row(family: &str, generation: &str, r: &crate::report::isa::IsaRow, p: Result
     row
 }
 
-/// The loops of a single-ray kernel that the rays give trips to.
+/// The loops of a kernel that the rays give trips to.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Roles {
     /// The outermost loop with the largest share of the estimate.
@@ -138,26 +139,48 @@ pub struct Roles {
     pub triangles: aco::Loop,
 }
 
+/// A compiler's cost model in the shape the rays weigh: its loops (outer before inner), the
+/// cycles of one pass through a loop's own blocks (or of the blocks outside every loop, once
+/// through), and the passes the compiler assumes per run. ACO's ([`aco::Program`]) and Intel's
+/// ([`isa::intel::Program`]) have it.
+pub trait LoopCosts {
+    fn loops(&self) -> &[aco::Loop];
+    fn per_pass(&self, l: Option<&aco::Loop>) -> f64;
+    fn assumed_passes(&self, l: &aco::Loop) -> f64;
+}
+
+impl LoopCosts for aco::Program {
+    fn loops(&self) -> &[aco::Loop] {
+        &self.loops
+    }
+    fn per_pass(&self, l: Option<&aco::Loop>) -> f64 {
+        aco::Program::per_pass(self, l)
+    }
+    fn assumed_passes(&self, l: &aco::Loop) -> f64 {
+        self.aco_passes(l)
+    }
+}
+
 /// Names the traversal, slot and triangle loops of `p` by its shape, or says why it cannot.
-pub fn roles(p: &aco::Program) -> Result<Roles, String> {
+pub fn roles(p: &impl LoopCosts) -> Result<Roles, String> {
     let within = |outer: &aco::Loop, inner: &aco::Loop| outer.header <= inner.header && inner.exit <= outer.exit;
     let share = |l: &aco::Loop| -> f64 {
-        p.loops.iter().filter(|m| within(l, m)).map(|m| p.per_pass(Some(m)) * p.aco_passes(m)).sum()
+        p.loops().iter().filter(|m| within(l, m)).map(|m| p.per_pass(Some(m)) * p.assumed_passes(m)).sum()
     };
     let traversal = *p
-        .loops
+        .loops()
         .iter()
         .filter(|l| l.depth == 1)
         .max_by(|a, b| share(a).total_cmp(&share(b)))
         .ok_or("no loop: not a traversal kernel")?;
     let triangles = *p
-        .loops
+        .loops()
         .iter()
         .filter(|l| **l != traversal && within(&traversal, l))
         .max_by(|a, b| p.per_pass(Some(a)).total_cmp(&p.per_pass(Some(b))))
         .ok_or("no loop inside the traversal loop (the triangle loop)")?;
     let between: Vec<aco::Loop> = p
-        .loops
+        .loops()
         .iter()
         .filter(|l| **l != traversal && **l != triangles && within(&traversal, l) && within(l, &triangles))
         .copied()
@@ -174,8 +197,9 @@ pub fn roles(p: &aco::Program) -> Result<Roles, String> {
 }
 
 /// The model's cycles for `w` (waves of a ray set, summed) with branching factor `b`: the
-/// rays' passes through the three named loops, ACO's relative trips for every other loop.
-pub fn ray_cycles(p: &aco::Program, roles: &Roles, w: &LoopWork, b: usize) -> Split {
+/// rays' passes through the three named loops, the compiler's relative trips for every other
+/// loop.
+pub fn ray_cycles(p: &impl LoopCosts, roles: &Roles, w: &LoopWork, b: usize) -> Split {
     let named: Vec<(aco::Loop, f64, usize)> = [
         Some((roles.traversal, w.steps as f64, 1)),
         roles.slots.map(|l| (l, (w.visits * b as u64) as f64, 2)),
@@ -185,13 +209,13 @@ pub fn ray_cycles(p: &aco::Program, roles: &Roles, w: &LoopWork, b: usize) -> Sp
     .flatten()
     .collect();
     let mut parts = [p.per_pass(None) * w.waves as f64, 0.0, 0.0, 0.0];
-    for l in &p.loops {
+    for l in p.loops() {
         // The nearest named loop around l (or l itself), else the blocks outside every loop.
         let anchor =
             named.iter().filter(|(n, _, _)| n.header <= l.header && l.exit <= n.exit).max_by_key(|(n, _, _)| n.depth);
         let (passes, part) = match anchor {
-            Some((n, passes, part)) => (passes * p.aco_passes(l) / p.aco_passes(n), *part),
-            None => (w.waves as f64 * p.aco_passes(l), 0),
+            Some((n, passes, part)) => (passes * p.assumed_passes(l) / p.assumed_passes(n), *part),
+            None => (w.waves as f64 * p.assumed_passes(l), 0),
         };
         parts[part] += p.per_pass(Some(l)) * passes;
     }
@@ -199,12 +223,12 @@ pub fn ray_cycles(p: &aco::Program, roles: &Roles, w: &LoopWork, b: usize) -> Sp
 }
 
 /// What [`ray_rows`] computes once for every family: encodings per (ray set, layout, B) and
-/// loop work per (ray set, layout, B, math, float controls, wave size).
+/// loop work per (ray set, layout, B, P, math, float controls, wave size).
 #[derive(Default)]
 pub struct WorkCache {
     encoded: HashMap<(usize, String, usize), Result<Encoded, String>>,
     #[allow(clippy::type_complexity)]
-    work: HashMap<(usize, String, usize, String, String, usize), (LoopWork, LoopWork)>,
+    work: HashMap<(usize, String, usize, usize, String, String, usize), (LoopWork, LoopWork)>,
 }
 
 /// A ray set for [`ray_rows`]: a scene and its rays.
@@ -228,7 +252,7 @@ impl RaySet {
     }
 }
 
-/// Each single-ray kernel of `built` (one family's isa rows and ACO programs) on each ray set:
+/// Each kernel of `built` (one family's isa rows and ACO programs) on each ray set:
 /// its estimated cycles per ray, with f32's ratio.
 pub fn ray_rows(
     family: &str,
@@ -239,7 +263,7 @@ pub fn ray_rows(
     let generation = null::family(family).map_or("", |x| x.generation);
     let mut out = Vec::new();
     for (si, set) in sets.iter().enumerate() {
-        for (r, p) in built.iter().filter(|(r, _)| r.packet == 1) {
+        for (r, p) in built {
             let mut row = RayRow {
                 family: family.into(),
                 generation: generation.into(),
@@ -247,6 +271,8 @@ pub fn ray_rows(
                 layout: r.layout.clone(),
                 math: r.math.clone(),
                 branching: r.branching,
+                packet: r.packet,
+                packet_impl: r.packet_impl.clone(),
                 scene: set.scene.clone(),
                 rays: set.kind.clone(),
                 ray_count: set.rays.len() as u64,
@@ -261,20 +287,22 @@ pub fn ray_rows(
                 let math: Math = r.math.parse()?;
                 let fc = if r.float_controls == "off" { FloatControls::Off } else { FloatControls::On };
                 let wave = (r.subgroup_size as usize).max(1);
-                let key = (si, r.layout.clone(), r.branching, r.math.clone(), r.float_controls.clone(), wave);
+                let key = (si, r.layout.clone(), r.branching, r.packet, r.math.clone(), r.float_controls.clone(), wave);
                 if !cache.work.contains_key(&key) {
                     let enc = cache.encoded.entry((si, r.layout.clone(), r.branching)).or_insert_with(|| {
                         Encoded::new(&set.scene_data, &set.bin, layout, r.branching).map_err(|e| format!("{e:#}"))
                     });
                     let enc = enc.as_ref().map_err(String::clone)?;
-                    cache.work.insert(key.clone(), layout.imp().loop_work(enc, &set.rays, wave, math, fc));
+                    cache.work.insert(key.clone(), layout.imp().loop_work(enc, &set.rays, r.packet, wave, math, fc));
                 }
                 let (lock, lanes) = cache.work[&key];
                 let rays = set.rays.len().max(1) as f64;
                 let split = ray_cycles(p, &roles, &lock, r.branching);
                 row.cycles_per_ray = split.total() / rays;
                 row.split = split.scaled(1.0 / rays);
-                row.lane_average = ray_cycles(p, &roles, &lanes, r.branching).total() / (rays * wave as f64);
+                // Packets (or single rays) per wave: a lane average is one packet's cost ÷ them.
+                let per_wave = lanes.waves as f64 / lock.waves.max(1) as f64;
+                row.lane_average = ray_cycles(p, &roles, &lanes, r.branching).total() / (rays * per_wave);
                 row.waves = p.printed.get("num_waves").copied().unwrap_or(0.0);
                 let per_wave = split.total() / lock.waves.max(1) as f64;
                 let w64 = p.printed.get("wave64_per_cycle").copied().unwrap_or(0.0);
@@ -293,6 +321,7 @@ pub fn ray_rows(
         let f32_row = out.iter().find(|o| {
             o.layout == "f32"
                 && o.branching == out[i].branching
+                && o.packet == out[i].packet
                 && o.scene == out[i].scene
                 && o.rays == out[i].rays
                 && o.status.is_ok()

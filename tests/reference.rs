@@ -364,7 +364,7 @@ fn loop_work_follows_the_counters_and_lockstep_costs_more() {
                 let enc = encode(&p, layout(name), b);
                 let what = format!("{name} B{b} {kind}");
                 let counters = enc.reference(rays, 1, math, FloatControls::On).1;
-                let (lock, lanes) = enc.layout.imp().loop_work(&enc, rays, 64, math, FloatControls::On);
+                let (lock, lanes) = enc.layout.imp().loop_work(&enc, rays, 1, 64, math, FloatControls::On);
                 let nodes: u64 = counters.iter().map(|c| c.nodes as u64).sum();
                 let tris: u64 = counters.iter().map(|c| c.tri_tests as u64).sum();
                 assert_eq!((lanes.visits, lanes.tri_passes), (nodes, tris), "{what}: lane sums against the counters");
@@ -383,11 +383,26 @@ fn loop_work_follows_the_counters_and_lockstep_costs_more() {
                 }
                 // Each ray twice in a row: twice the lanes' work, per ray the same.
                 let twice: Vec<_> = rays.iter().flat_map(|r| [*r, *r]).collect();
-                let (_, lanes2) = enc.layout.imp().loop_work(&enc, &twice, 64, math, FloatControls::On);
+                let (_, lanes2) = enc.layout.imp().loop_work(&enc, &twice, 1, 64, math, FloatControls::On);
                 assert_eq!(
                     (lanes2.steps, lanes2.visits, lanes2.tri_passes),
                     (2 * lanes.steps, 2 * lanes.visits, 2 * lanes.tri_passes),
                     "{what}"
+                );
+                // Packets of 8: a wave is 8 packets in lockstep; a packet's visits are its packet
+                // counter; a wave makes no more passes than its packets together.
+                let (plock, plane) = enc.layout.imp().loop_work(&enc, rays, 8, 64, math, FloatControls::On);
+                let pc = enc.reference(rays, 8, math, FloatControls::On).1;
+                let packet_nodes: u64 = pc.iter().map(|c| c.packet_nodes as u64).sum();
+                assert_eq!(plane.visits, packet_nodes, "{what} P8: visits against the packet counters");
+                assert_eq!(
+                    (plane.waves, plock.waves),
+                    (rays.len().div_ceil(8) as u64, rays.len().div_ceil(64) as u64),
+                    "{what} P8"
+                );
+                assert!(
+                    plock.steps <= plane.steps && plock.tri_passes <= plane.tri_passes,
+                    "{what} P8: {plock:?} {plane:?}"
                 );
             }
         }

@@ -98,12 +98,14 @@ pub trait DynLayout: Send + Sync {
     fn encode(&self, scene: &Scene, w: &WideBvh) -> Result<Encoded, EncodeError>;
     /// The CPU reference: rays in packets of `p` (1: single rays) in math mode `math`.
     fn trace(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>);
-    /// How often the kernel's loops run for single rays in waves of `wave` (in lockstep, and
-    /// each ray on its own): [`super::traverse::loop_work`].
+    /// How often the kernel's loops run for packets of `p` rays (1: single rays) in waves of
+    /// `wave` rays (in lockstep, and each packet on its own): [`super::traverse::loop_work`].
+    #[allow(clippy::too_many_arguments)]
     fn loop_work(
         &self,
         enc: &Encoded,
         rays: &[Ray],
+        p: usize,
         wave: usize,
         math: Math,
         fc: FloatControls,
@@ -162,12 +164,13 @@ fn trace_b<L: Layout, const B: usize>(
 fn loop_work_b<L: Layout, const B: usize>(
     enc: &Encoded,
     rays: &[Ray],
+    p: usize,
     wave: usize,
     math: Math,
     fc: FloatControls,
 ) -> (LoopWork, LoopWork) {
     let (nodes, root) = enc.typed::<L, B>().expect("Encoded of another layout or B");
-    super::traverse::loop_work::<L, B>(nodes, root, enc, rays, wave, math, fc)
+    super::traverse::loop_work::<L, B>(nodes, root, enc, rays, p, wave, math, fc)
 }
 
 impl<L: Layout> DynLayout for Plug<L> {
@@ -185,12 +188,13 @@ impl<L: Layout> DynLayout for Plug<L> {
         &self,
         enc: &Encoded,
         rays: &[Ray],
+        p: usize,
         wave: usize,
         math: Math,
         fc: FloatControls,
     ) -> (LoopWork, LoopWork) {
         assert!(L::INFO.maths.contains(&math), "{}: math {} is not one of its modes", L::INFO.name, math.name());
-        with_branching!(enc.branching, loop_work_b, enc, rays, wave, math, fc)
+        with_branching!(enc.branching, loop_work_b, enc, rays, p, wave, math, fc)
     }
 }
 

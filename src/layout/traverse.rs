@@ -121,9 +121,10 @@ pub fn trace_all<L: Layout, const B: usize>(
     (hits, counters)
 }
 
-/// One pass of a single ray's traversal loop: one node entered, as the kernel enters it (the
-/// root, then one per pop). `visited`: the ray was active there; `tris[s]`: the triangles it
-/// tested in the leaf in child slot `s`.
+/// One pass of a packet's traversal loop (a single ray is a packet of one): one node entered, as
+/// the kernel enters it (the root, then one per pop). `visited`: a ray was active there;
+/// `tris[s]`: the triangles of the leaf in child slot `s` where a ray tested it (its lanes run
+/// that loop together).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Step {
     pub visited: bool,
@@ -154,9 +155,9 @@ impl std::ops::AddAssign for LoopWork {
 }
 
 impl LoopWork {
-    /// One wave of lanes running `lanes` (each lane's steps) in lockstep: the wave makes a
-    /// pass while any lane does, visits when any lane visits, and runs the triangle loop of
-    /// each slot as long as its slowest lane.
+    /// One wave running `lanes` (each packet's or single ray's steps) in lockstep: the wave
+    /// makes a pass while any lane does, visits when any lane visits, and runs the triangle
+    /// loop of each slot as long as its slowest lane.
     pub fn lockstep(lanes: &[Vec<Step>]) -> LoopWork {
         let k = lanes.iter().map(Vec::len).max().unwrap_or(0);
         let mut w = LoopWork { waves: 1, rays: lanes.len() as u64, steps: k as u64, ..Default::default() };
@@ -168,7 +169,8 @@ impl LoopWork {
         w
     }
 
-    /// The same lanes each on its own (the sum over lanes of one-lane waves).
+    /// The same lanes each on its own (the sum over lanes of one-lane waves; `waves` counts
+    /// them).
     pub fn lanes(lanes: &[Vec<Step>]) -> LoopWork {
         let mut w = LoopWork::default();
         for l in lanes {
@@ -178,33 +180,36 @@ impl LoopWork {
     }
 }
 
-/// [`LoopWork`] of single rays `rays` in waves of `wave` consecutive rays (the last may be
-/// partial): summed over the waves in lockstep, and summed over the rays each on its own.
+/// [`LoopWork`] of `rays` traced in packets of `p` consecutive rays (1: single rays), in waves
+/// of `wave` consecutive rays (the last may be partial), a wave's packets in lockstep: summed
+/// over the waves, and summed over the packets each on its own.
 #[allow(clippy::too_many_arguments)]
 pub fn loop_work<L: Layout, const B: usize>(
     nodes: &[L::Node<B>],
     root: &L::Root,
     enc: &Encoded,
     rays: &[Ray],
+    p: usize,
     wave: usize,
     math: Math,
     fc: FloatControls,
 ) -> (LoopWork, LoopWork) {
     let box_lo: [f32; 3] = enc.root_box.min.into();
     let box_hi: [f32; 3] = enc.root_box.max.into();
-    rays.par_chunks(wave.max(1))
+    let p = p.max(1);
+    rays.par_chunks(wave.max(p))
         .map_init(Scratch::<L>::new, |s, rays| {
             let lanes: Vec<Vec<Step>> = rays
-                .iter()
-                .map(|ray| {
-                    let (mut hit, mut c, mut steps) = ([Hit::MISS], [Counters::default()], Vec::new());
-                    let one = std::slice::from_ref(ray);
+                .chunks(p)
+                .map(|rays| {
+                    let n = rays.len();
+                    let (mut hit, mut c, mut steps) = (vec![Hit::MISS; n], vec![Counters::default(); n], Vec::new());
                     packet::<L, B>(
                         nodes,
                         root,
                         &enc.tris,
                         (box_lo, box_hi),
-                        one,
+                        rays,
                         math,
                         fc,
                         s,
@@ -329,8 +334,9 @@ fn packet<L: Layout, const B: usize>(
                             lane.test_leaf(tris, first, count);
                         }
                     }
+                    // A packet's lanes run the leaf's loop together while any of them tests it.
                     if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
-                        st.tris[slot] = if tests[0].is_some() { count as u8 } else { 0 };
+                        st.tris[slot] = if tests.iter().any(Option::is_some) { count as u8 } else { 0 };
                     }
                 }
                 ChildRef::Inner(j) => {

@@ -40,6 +40,11 @@ pub struct RayRow {
     pub layout: String,
     pub math: String,
     pub branching: usize,
+    /// Rays per packet (1: single rays) and the packet implementation the device builds.
+    #[serde(default)]
+    pub packet: usize,
+    #[serde(default)]
+    pub packet_impl: String,
     pub scene: String,
     pub rays: String,
     pub ray_count: u64,
@@ -65,11 +70,11 @@ pub struct RayRow {
 /// kernel's estimated cycles per ray.
 pub fn section(rows: &[RayRow]) -> String {
     let mut md = String::from("# Estimated cycles per ray\n\n");
-    md += "ACO's model of each single-ray kernel with the trips of its traversal, child-slot and triangle loops \
-           counted on real rays by the CPU reference, the lanes of a wave in lockstep (a wave makes a pass while \
-           any lane does). **An estimate from the compiler's model, an upper bound on one wave with no latency \
+    md += "ACO's model of each kernel with the trips of its traversal, child-slot and triangle loops counted on \
+           real rays by the CPU reference, the lanes of a wave in lockstep (a wave makes a pass while any lane \
+           does; a packet's P lanes step together). **An estimate from the compiler's model, an upper bound on one wave with no latency \
            hidden, not a measurement.** `cycles/ray`: a wave's cycles ÷ its rays; `lane avg`: the same if every \
-           pass lasted as long as the wave's average lane; the split: set-up and hit write, the traversal step \
+           pass lasted as long as the wave's average lane (or packet); the split: set-up and hit write, the traversal step \
            (entering a node, box tests, ordering, stack), the child-slot loop, the triangle tests; `rays/kclk`: \
            rays per 1000 clocks per SIMD at ACO's occupancy (its throughput model scaled to these rays).\n\n";
     let mut groups: Vec<(&str, &str, &str)> =
@@ -79,17 +84,18 @@ pub fn section(rows: &[RayRow]) -> String {
         let g: Vec<&RayRow> = rows.iter().filter(|r| r.family == f && r.scene == scene && r.rays == kind).collect();
         md +=
             &format!("## {f} ({}), {scene}, {kind} rays ({}, wave {})\n\n", g[0].generation, g[0].ray_count, g[0].wave);
-        md += "| kernel | layout | math | B | cycles/ray | ÷ f32 | lane avg | set-up | step | slots | triangles | waves | rays/kclk | status |\n";
-        md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+        md += "| kernel | layout | math | B | P | cycles/ray | ÷ f32 | lane avg | set-up | step | slots | triangles | waves | rays/kclk | status |\n";
+        md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
         for r in g {
             let ok = r.status.is_ok();
             let n = |x: f64| if ok { format!("{x:.1}") } else { "–".into() };
             md += &format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.layout,
                 r.math,
                 r.branching,
+                if r.packet > 1 { format!("{} {}", r.packet, r.packet_impl) } else { "1".into() },
                 n(r.cycles_per_ray),
                 r.vs_f32.map_or("–".into(), |v| format!("{v:.2}")),
                 n(r.lane_average),
@@ -117,6 +123,8 @@ pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
         "layout",
         "math",
         "B",
+        "P",
+        "packet_impl",
         "scene",
         "rays",
         "ray_count",
@@ -140,6 +148,8 @@ pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
             r.layout.clone(),
             r.math.clone(),
             r.branching.to_string(),
+            r.packet.to_string(),
+            r.packet_impl.clone(),
             r.scene.clone(),
             r.rays.clone(),
             r.ray_count.to_string(),
@@ -178,10 +188,10 @@ pub fn read(dir: &Path) -> anyhow::Result<Option<Vec<RayRow>>> {
 }
 
 /// `estimate.png` (and `.svg`): one panel per family, scene and ray kind; x = B, one line per
-/// layout and math; y = estimated cycles per ray.
+/// layout and math (single rays); y = estimated cycles per ray.
 pub fn plot(rows: &[RayRow], out: &Path) -> anyhow::Result<()> {
     let mut panels: Vec<(String, plots::Lines)> = Vec::new();
-    for r in rows.iter().filter(|r| r.status.is_ok()) {
+    for r in rows.iter().filter(|r| r.status.is_ok() && r.packet <= 1) {
         let caption = format!("{} ({}), {} {}", r.family, r.generation, r.scene, r.rays);
         let label = format!("{} {}", r.layout, r.math);
         if !panels.iter().any(|p| p.0 == caption) {
