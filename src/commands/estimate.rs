@@ -29,14 +29,22 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("estimate")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;
-    let known = isa::known_families(&exe);
-    let families: Vec<String> = a.family.iter().map(|f| f.to_lowercase()).collect();
+    let asked: Vec<String> = a.family.iter().map(|f| f.to_lowercase()).collect();
+    let (models, families): (Vec<String>, Vec<String>) =
+        asked.into_iter().partition(|f| isa::vendors::model(f).is_some());
+    let known = if families.is_empty() { Vec::new() } else { isa::known_families(&exe) };
     for f in &families {
         anyhow::ensure!(
             known.iter().any(|k| k.name == f),
-            "--family '{f}': not an AMD family the installed RADV opens a null device for ({})",
-            known.iter().map(|k| k.name).collect::<Vec<_>>().join(", ")
+            "--family '{f}': neither an AMD family the installed RADV opens a null device for ({}) nor a model of \
+             the other vendors ({})",
+            known.iter().map(|k| k.name).collect::<Vec<_>>().join(", "),
+            isa::vendors::MODELS.iter().map(|m| m.name).collect::<Vec<_>>().join(", ")
         );
+    }
+    if !models.is_empty() {
+        // Before any work: the compilers must be there.
+        isa::vendors::compilers().map_err(anyhow::Error::msg)?;
     }
     let kinds: Vec<crate::rays::RayKind> = a
         .rays
@@ -53,15 +61,32 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         }
     }
     let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &sets)?;
+    // The other vendors: their compilers' whole-shader estimates, beside.
+    let vendor_rows = if models.is_empty() {
+        Vec::new()
+    } else {
+        let cfg = isa::Config {
+            targets: models.iter().cloned().map(isa::Target::Model).collect(),
+            matrix,
+            layouts: a.layouts.clone(),
+            builds: isa::plan(matrix, &a.layouts),
+            disasm: None,
+            validation: false,
+        };
+        isa::run(&cfg, &exe, |_| {})?.rows
+    };
     crate::fsx::write_atomic(&out.join("estimate.csv"), &estimate::csv(&rows)?)?;
     crate::report::estimate::write(&ray_rows, &out)?;
     crate::report::estimate::plot(&ray_rows, &out)?;
-    let md = estimate::markdown(&rows) + &crate::report::estimate::section(&ray_rows);
+    let md = estimate::markdown(&rows)
+        + &crate::report::estimate::section(&ray_rows)
+        + &crate::report::estimate::vendors_section(&vendor_rows);
     crate::fsx::write_atomic(&out.join("estimate.md"), md.as_bytes())?;
     let failed: Vec<String> = rows
         .iter()
         .map(|r| &r.status)
         .chain(ray_rows.iter().map(|r| &r.status))
+        .chain(vendor_rows.iter().map(|r| &r.status))
         .filter(|s| s.is_failed())
         .map(|s| s.to_string())
         .collect();

@@ -169,6 +169,65 @@ pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
     Ok(w.into_inner()?)
 }
 
+/// What each vendor's whole-shader cycle figure assumes (docs/vendors.md), by the driver's
+/// vendor name.
+pub fn vendor_assumes(vendor: &str) -> &'static str {
+    match vendor {
+        "Intel" => {
+            "`Cycle Count` (`INTEL_DEBUG=cs`): one SIMD thread's issue and dependency cycles, each loop's \
+                    body weighted ×10 per nesting level, branches unweighted"
+        }
+        "Arm" => {
+            "normalized cycles (`BIFROST_MESA_DEBUG=shaderdb`): the busiest functional unit's cycles, \
+                  every instruction counted once (loops not weighted)"
+        }
+        _ => "no cycle estimate from this driver",
+    }
+}
+
+/// The other vendors' section: their compilers' own whole-shader cycle estimates at P = 1 with
+/// what each assumes, beside the ray-weighted AMD figures ("" without rows). Whole-shader
+/// figures cannot be weighted by the rays: they give no per-block costs.
+pub fn vendors_section(rows: &[super::isa::IsaRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut md = String::from(
+        "# The other vendors' own estimates (whole shader)\n\nThese compilers print one cycle figure per kernel, not \
+         per block, so the rays cannot weigh their loops: each figure is the compiler's own assumption about how \
+         often loops run, shown as it is, with ÷ f32 at the same B. Not a measurement.\n\n",
+    );
+    let mut devices: Vec<String> = Vec::new();
+    for r in rows {
+        if !devices.contains(&r.device_label()) {
+            devices.push(r.device_label());
+        }
+    }
+    for d in devices {
+        let g: Vec<&super::isa::IsaRow> = rows.iter().filter(|r| r.device_label() == d && r.packet == 1).collect();
+        let Some(first) = g.first() else { continue };
+        md += &format!("## {d}: {}\n\n", vendor_assumes(&first.vendor));
+        md += "| kernel | layout | math | B | cycles | ÷ f32 | registers | spills | status |\n|---|---|---|---:|---:|---:|---:|---:|---|\n";
+        let num = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.0}"));
+        for r in g {
+            md += &format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                r.kernel,
+                r.layout,
+                r.math,
+                r.branching,
+                num(r.cycles),
+                r.vs_f32.and_then(|v| v.cycles).map_or("–".into(), |v| format!("{v:.2}")),
+                num(r.registers),
+                num(r.spills),
+                r.status
+            );
+        }
+        md += "\n";
+    }
+    md
+}
+
 /// `estimate-rays.json` and `estimate-rays.csv` into `out`.
 pub fn write(rows: &[RayRow], out: &Path) -> anyhow::Result<()> {
     crate::fsx::write_atomic(&out.join("estimate-rays.json"), serde_json::to_string_pretty(rows)?.as_bytes())?;

@@ -290,4 +290,23 @@ fn isa_builds_on_every_vendors_compiler() {
     }
     let md = std::fs::read_to_string(out.join("isa.md")).unwrap();
     assert!(md.contains("Across vendors"), "isa.md has no table across vendors");
+    // `estimate` shows Intel's and Mali's whole-shader estimates beside, saying what each assumes.
+    let est = tmp("vendors-estimate");
+    let (ok, stdout, stderr) = cli(&[
+        "estimate",
+        "--family",
+        "lnl,g610",
+        "--matrix",
+        "layouts",
+        "--layouts",
+        "f16h",
+        "--out",
+        est.to_str().unwrap(),
+    ]);
+    assert!(ok, "estimate on the vendors failed:\n{stdout}\n{stderr}");
+    let md = std::fs::read_to_string(est.join("estimate.md")).unwrap();
+    assert!(md.contains("## lnl (Xe2): `Cycle Count`") && md.contains("×10 per nesting level"), "{md}");
+    assert!(md.contains("## g610 (Valhall (v10)): normalized cycles"), "{md}");
+    assert!(md.contains("| trav_f32_b4_p1 | f32 | f32 | 4 | ") && md.contains("| 1.00 |"), "{md}");
+    let _ = std::fs::remove_dir_all(&est);
 }
