@@ -22,22 +22,17 @@
 //! Files themselves are written through a temporary name and a rename (`fsx::write_atomic`), so
 //! an interrupted run leaves the earlier ones whole.
 
+mod lock;
+
+use lock::{break_stale, read_lock, remove_empty, BREAK_FILE, UNREADABLE_GRACE};
+pub use lock::{Holder, OutDirLock, LOCK_FILE};
+
 use crate::fsx::kind;
-use serde::{Deserialize, Serialize};
 use std::fs::OpenOptions;
-use std::io::{ErrorKind, Read, Write};
+use std::io::{ErrorKind, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use thiserror::Error;
-
-/// The lock file's name, in the folder it locks.
-pub const LOCK_FILE: &str = ".halftrace.lock";
-/// Taken briefly by whoever removes a stale lock, so that two runs that both find one do not
-/// both replace it (the second would remove the first's fresh lock).
-const BREAK_FILE: &str = ".halftrace.lock.break";
-/// A lock file that cannot be read as a [`Holder`] (its writer died between creating and
-/// writing it) is taken for stale once it is this old; younger, its writer may still be at it.
-const UNREADABLE_GRACE: Duration = Duration::from_secs(10);
 
 #[derive(Debug, Error)]
 pub enum OutDirError {
@@ -66,90 +61,6 @@ pub enum OutDirError {
     Special { flag: String, path: PathBuf, name: String, what: &'static str },
     #[error("--force: removing {path}: {source}")]
     Remove { path: PathBuf, source: std::io::Error },
-}
-
-/// Who holds a lock: the lock file's contents (JSON).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Holder {
-    pub pid: u32,
-    pub host: String,
-    /// The holder's command line (for the message a second writer gets).
-    pub command: String,
-    pub started_unix: u64,
-    /// The process's start time in clock ticks since boot (`/proc/<pid>/stat`), so that a
-    /// pid reused by another process after a kill is not taken for the holder.
-    #[serde(default)]
-    pub start_ticks: Option<u64>,
-}
-
-impl Holder {
-    /// This process.
-    pub fn current() -> Holder {
-        let mut command: String = std::env::args()
-            .collect::<Vec<_>>()
-            .join(" ")
-            .chars()
-            .map(|c| if c.is_control() { ' ' } else { c })
-            .collect();
-        if command.chars().count() > 300 {
-            command = command.chars().take(300).collect::<String>() + "…";
-        }
-        let started_unix = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-        Holder {
-            pid: std::process::id(),
-            host: host_name(),
-            command,
-            started_unix,
-            start_ticks: proc_stat(std::process::id()).and_then(|s| s.1),
-        }
-    }
-
-    /// Whether the holder may still be running: on another host, or where `/proc` does not
-    /// list processes, it cannot be told, so yes. A zombie (killed, not yet reaped: an orphan
-    /// in a container whose init reaps nothing) has ended. (Through `/proc` rather than
-    /// `kill(pid, 0)`: the `unsafe` of this crate stays in `gpu`.)
-    fn may_run(&self) -> bool {
-        if self.host != host_name() || !Path::new("/proc/self/stat").exists() {
-            return true;
-        }
-        match proc_stat(self.pid) {
-            Some((state, ticks)) => {
-                !matches!(state, 'Z' | 'X') && !matches!((self.start_ticks, ticks), (Some(a), Some(b)) if a != b)
-            }
-            None => Path::new(&format!("/proc/{}", self.pid)).exists(),
-        }
-    }
-}
-
-impl std::fmt::Display for Holder {
-    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-        write!(
-            f,
-            "pid {} on {}, `{}`, started {} s ago",
-            self.pid,
-            self.host,
-            self.command,
-            now.saturating_sub(self.started_unix)
-        )
-    }
-}
-
-/// The host name, to tell whether a lock's pid can be checked here.
-fn host_name() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .map(|h| h.trim().to_string())
-        .or_else(|_| std::env::var("HOSTNAME"))
-        .unwrap_or_default()
-}
-
-/// A process's state letter and start time in clock ticks since boot: fields 3 and 22 of
-/// `/proc/<pid>/stat` (after the command name, which may hold spaces and parentheses).
-fn proc_stat(pid: u32) -> Option<(char, Option<u64>)> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let mut fields = stat.rsplit_once(')')?.1.split_whitespace();
-    let state = fields.next()?.chars().next()?;
-    Some((state, fields.nth(18).and_then(|t| t.parse().ok())))
 }
 
 /// An output folder's policy, in one place: what it may be, who writes into it, what it holds.
@@ -466,71 +377,9 @@ pub fn default_out(command: Option<&str>) -> PathBuf {
     PathBuf::from(format!("reports/{prefix}{y:04}{m:02}{d:02}-{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60))
 }
 
-/// A lock file's text (empty when unreadable) and age.
-fn read_lock(file: &Path) -> (String, Option<Duration>) {
-    let mut text = String::new();
-    let age = std::fs::metadata(file).ok().and_then(|m| m.modified().ok()).and_then(|t| t.elapsed().ok());
-    if let Ok(mut f) = std::fs::File::open(file) {
-        let _ = f.read_to_string(&mut text);
-    }
-    (text, age)
-}
-
-/// Removes `dir`'s lock if it still reads `seen` (stale), under the break file; whether it
-/// did. A break file older than the grace period is itself stale (its taker died in these few
-/// lines) and removed.
-fn break_stale(dir: &Path, seen: &str) -> bool {
-    let brk = dir.join(BREAK_FILE);
-    if OpenOptions::new().write(true).create_new(true).open(&brk).is_err() {
-        if read_lock(&brk).1.is_some_and(|a| a > UNREADABLE_GRACE) {
-            let _ = std::fs::remove_file(&brk);
-        }
-        return false;
-    }
-    let file = dir.join(LOCK_FILE);
-    let removed = read_lock(&file).0 == seen && std::fs::remove_file(&file).is_ok();
-    let _ = std::fs::remove_file(&brk);
-    removed
-}
-
-/// A claimed output folder ([`OutDir::claim`]); dropping it releases the folder.
-#[derive(Debug)]
-pub struct OutDirLock {
-    dir: PathBuf,
-    holder: Holder,
-    created: Vec<PathBuf>,
-}
-
-impl OutDirLock {
-    /// The folder.
-    pub fn path(&self) -> &Path {
-        &self.dir
-    }
-}
-
-impl Drop for OutDirLock {
-    fn drop(&mut self) {
-        let file = self.dir.join(LOCK_FILE);
-        // Only our own lock (had it been broken as stale, the file may be another run's now).
-        if serde_json::from_str::<Holder>(&read_lock(&file).0).is_ok_and(|h| h == self.holder) {
-            let _ = std::fs::remove_file(&file);
-        }
-        // A run that wrote nothing (a failed one) leaves no folder behind.
-        remove_empty(&self.created);
-    }
-}
-
-/// Removes the folders a claim made, deepest first, while they are empty.
-fn remove_empty(created: &[PathBuf]) {
-    for d in created {
-        if std::fs::remove_dir(d).is_err() {
-            break;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use super::lock::proc_stat;
     use super::*;
 
     fn tmp(name: &str) -> PathBuf {
