@@ -198,33 +198,19 @@ pub fn aco_programs(
     matrix: Matrix,
     layouts: &[LayoutId],
 ) -> anyhow::Result<Vec<(IsaRow, Result<aco::Program, String>)>> {
-    use std::io::Read as _;
-    use std::process::{Command, Stdio};
     let mut args =
         vec!["isa-model".to_string(), "--model".into(), family.into(), "--matrix".into(), matrix.name().into()];
     if !layouts.is_empty() {
         args.push("--layouts".into());
         args.push(layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
     }
-    let mut child = Command::new(exe)
-        .args(&args)
-        .env("ACO_DEBUG", "perfinfo")
-        .env("RADV_DEBUG", "preoptir")
-        .env("MESA_SHADER_CACHE_DISABLE", "true")
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()?;
-    let mut err = child.stderr.take().expect("piped");
-    let reader = std::thread::spawn(move || {
-        let mut s = Vec::new();
-        let _ = err.read_to_end(&mut s);
-        String::from_utf8_lossy(&s).to_string()
-    });
-    let mut stdout = String::new();
-    child.stdout.take().expect("piped").read_to_string(&mut stdout)?;
-    let status = child.wait()?;
-    let stderr = reader.join().unwrap_or_default();
+    let (stdout, status, stderr) = vendors::run_child(
+        std::process::Command::new(exe)
+            .args(&args)
+            .env("ACO_DEBUG", "perfinfo")
+            .env("RADV_DEBUG", "preoptir")
+            .env("MESA_SHADER_CACHE_DISABLE", "true"),
+    )?;
     if !status.success() {
         let tail: Vec<&str> = stderr.lines().filter(|l| !l.starts_with('\t')).rev().take(3).collect();
         anyhow::bail!("--family {family}: the compiler's process failed ({status}): {}", tail.join(" | "));

@@ -14,9 +14,9 @@ use crate::base::Status;
 use crate::report::isa::IsaRow;
 use crate::variant::KernelSpec;
 use anyhow::Context as _;
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Command, ExitStatus, Stdio};
 
 /// A driver under a drm-shim: its shim library, ICD manifest and the vendor it compiles for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -191,6 +191,23 @@ pub struct ModelRun {
     pub note: Option<String>,
 }
 
+/// Runs `cmd` with an empty stdin to its end, reading its stdout and, on a thread beside (so
+/// that neither pipe fills while the other is read), its stderr: (stdout, exit status,
+/// stderr, lossily decoded).
+pub fn run_child(cmd: &mut Command) -> std::io::Result<(String, ExitStatus, String)> {
+    let mut child = cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn()?;
+    let mut err = child.stderr.take().expect("piped");
+    let reader = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        let _ = err.read_to_end(&mut s);
+        String::from_utf8_lossy(&s).to_string()
+    });
+    let mut stdout = String::new();
+    child.stdout.take().expect("piped").read_to_string(&mut stdout)?;
+    let status = child.wait()?;
+    Ok((stdout, status, reader.join().unwrap_or_default()))
+}
+
 /// Builds `builds` on `m` in a child process `exe isa-model` with the shim's environment.
 /// Rows the child printed before dying are kept; builds it never reported become failed rows
 /// naming the crash. `args`: the child's arguments after `isa-model --model NAME`.
@@ -201,31 +218,16 @@ pub fn run_model(
     args: &[String],
     builds: &[KernelSpec],
 ) -> anyhow::Result<ModelRun> {
-    let mut child = Command::new(exe)
-        .args(["isa-model", "--model", m.name])
-        .args(args)
-        .envs(environment(m, dir))
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()?;
-    let mut err = child.stderr.take().expect("piped");
-    let reader = std::thread::spawn(move || {
-        let mut s = Vec::new();
-        let _ = err.read_to_end(&mut s);
-        String::from_utf8_lossy(&s).to_string()
-    });
+    let (stdout, status, stderr) =
+        run_child(Command::new(exe).args(["isa-model", "--model", m.name]).args(args).envs(environment(m, dir)))?;
     let mut rows: Vec<IsaRow> = Vec::new();
     let mut bad_lines = 0;
-    for line in BufReader::new(child.stdout.take().expect("piped")).lines() {
-        let line = line?;
-        match serde_json::from_str::<IsaRow>(&line) {
+    for line in stdout.lines() {
+        match serde_json::from_str::<IsaRow>(line) {
             Ok(r) => rows.push(r),
             Err(_) => bad_lines += 1,
         }
     }
-    let status = child.wait()?;
-    let stderr = reader.join().unwrap_or_default();
     // The driver's own printout (IR3_SHADER_DEBUG, INTEL_DEBUG, NAK_DEBUG, …) kept for
     // checking the statistics against: HALFTRACE_DRIVER_STDERR=DIR writes DIR/<model>.txt.
     if let Some(d) = std::env::var_os("HALFTRACE_DRIVER_STDERR").map(std::path::PathBuf::from) {
