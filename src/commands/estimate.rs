@@ -52,15 +52,12 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         .map(|k| k.parse().map_err(|e| anyhow::anyhow!("--rays {k}: {e}")))
         .collect::<anyhow::Result<_>>()?;
     anyhow::ensure!(a.res > 0, "--res must be at least 1");
-    let mut sets = Vec::new();
+    // Scenes load after the kernels are built: a missing one is refused before.
     for scene in &a.scene {
-        for k in &kinds {
-            sets.push(
-                estimate::RaySet::load(scene, k, a.res).map_err(|e| anyhow::anyhow!("{}: {e:#}", scene.display()))?,
-            );
-        }
+        anyhow::ensure!(scene.exists(), "--scene {}: no such file", scene.display());
     }
-    let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &sets)?;
+    let rays = estimate::Rays { scenes: a.scene.clone(), kinds, res: a.res };
+    let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &rays)?;
     // The other vendors: their compilers' whole-shader estimates, beside.
     let vendor_rows = if models.is_empty() {
         Vec::new()
@@ -97,7 +94,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         if families.len() == 1 { "y" } else { "ies" },
         rows.iter().filter(|r| r.status.is_ok()).count(),
         ray_rows.iter().filter(|r| r.status.is_ok()).count(),
-        sets.len(),
+        rays.sets(),
         t0.elapsed().as_secs_f64(),
         out.join("estimate.md").display()
     );

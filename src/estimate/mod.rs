@@ -24,7 +24,7 @@
 mod rays;
 
 pub use crate::report::estimate::{RayRow, Split};
-pub use rays::{ray_cycles, ray_rows, roles, LoopCosts, RaySet, Roles, WorkCache};
+pub use rays::{ray_cycles, ray_rows, roles, Built, LoopCosts, Rays, Roles};
 
 use crate::base::Status;
 use crate::gpu::null;
@@ -129,22 +129,22 @@ fn row(family: &str, generation: &str, r: &crate::report::isa::IsaRow, p: Result
 
 /// Builds `matrix` (for `layouts`; empty: all) on each AMD family, one child process each,
 /// as many at once as there are cores, takes each kernel's estimate apart and weighs its
-/// loops with the rays of `sets`; rows in family order.
+/// loops with `rays`; rows in family order.
 pub fn run(
     exe: &Path,
     families: &[String],
     matrix: Matrix,
     layouts: &[LayoutId],
-    sets: &[RaySet],
+    rays: &Rays,
 ) -> anyhow::Result<(Vec<Row>, Vec<RayRow>)> {
     use rayon::prelude::*;
-    let built: Vec<anyhow::Result<_>> =
-        families.par_iter().map(|f| isa::aco_programs(exe, f, matrix, layouts)).collect();
-    let (mut rows, mut ray_out, mut cache) = (Vec::new(), Vec::new(), WorkCache::default());
+    let built: Vec<Vec<_>> =
+        families.par_iter().map(|f| isa::aco_programs(exe, f, matrix, layouts)).collect::<anyhow::Result<_>>()?;
+    let by_family: Vec<(String, &Built)> = families.iter().cloned().zip(built.iter().map(Vec::as_slice)).collect();
+    let ray_out = ray_rows(&by_family, rays)?;
+    let mut rows = Vec::new();
     for (f, b) in families.iter().zip(built) {
-        let b = b?;
         let generation = null::family(f).map_or("", |x| x.generation);
-        ray_out.extend(ray_rows(f, &b, sets, &mut cache));
         rows.extend(b.into_iter().map(|(r, p)| row(f, generation, &r, p)));
     }
     Ok((rows, ray_out))

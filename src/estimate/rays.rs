@@ -6,12 +6,16 @@ use crate::base::Status;
 use crate::gpu::null;
 use crate::isa::aco;
 use crate::layout::traverse::LoopWork;
-use crate::layout::{Encoded, LayoutId};
-use crate::precision::{FloatControls, Math};
+use crate::layout::LayoutId;
+use crate::precision::FloatControls;
 use crate::rays::RayKind;
 pub use crate::report::estimate::{RayRow, Split};
+use crate::runner::rays::RaySpec;
+use crate::runner::Runner;
+use crate::variant::Variant;
+use anyhow::Context as _;
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::PathBuf;
 
 /// The loops of a kernel that the rays give trips to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -108,104 +112,106 @@ pub fn ray_cycles(p: &impl LoopCosts, roles: &Roles, w: &LoopWork, b: usize) -> 
     Split { setup: parts[0], step: parts[1], slots: parts[2], triangles: parts[3] }
 }
 
-/// What [`ray_rows`] computes once for every family: encodings per (ray set, layout, B) and
-/// loop work per (ray set, layout, B, P, math, float controls, wave size).
-#[derive(Default)]
-pub struct WorkCache {
-    encoded: HashMap<(usize, String, usize), Result<Encoded, String>>,
-    #[allow(clippy::type_complexity)]
-    work: HashMap<(usize, String, usize, usize, String, String, usize), (LoopWork, LoopWork)>,
+/// The rays the kernels are weighed with: each scene's ray kinds, primary rays at `res`².
+pub struct Rays {
+    pub scenes: Vec<PathBuf>,
+    pub kinds: Vec<RayKind>,
+    pub res: u32,
 }
 
-/// A ray set for [`ray_rows`]: a scene and its rays.
-pub struct RaySet {
-    pub scene: String,
-    pub kind: String,
-    pub scene_data: crate::scene::Scene,
-    pub bin: crate::bvh::BinaryBvh,
-    pub rays: Vec<crate::base::Ray>,
-}
-
-impl RaySet {
-    /// `kind` rays at `res`² of the scene at `path`.
-    pub fn load(path: &Path, kind: &RayKind, res: u32) -> anyhow::Result<RaySet> {
-        let scene = crate::scene::load(path)?;
-        let bin = crate::bvh::build_binary(&scene);
-        let params = crate::rays::RayParams { width: res, height: res, ..Default::default() };
-        let spec = crate::runner::rays::RaySpec { kind: kind.clone(), params };
-        let rays = crate::runner::rays::make(&scene, &bin, &spec)?;
-        Ok(RaySet { scene: scene.name.clone(), kind: kind.to_string(), scene_data: scene, bin, rays })
+impl Rays {
+    /// How many ray sets: scenes × kinds.
+    pub fn sets(&self) -> usize {
+        self.scenes.len() * self.kinds.len()
     }
 }
 
-/// Each kernel of `built` (one family's isa rows and ACO programs) on each ray set:
-/// its estimated cycles per ray, with f32's ratio.
-pub fn ray_rows(
-    family: &str,
-    built: &[(crate::report::isa::IsaRow, Result<aco::Program, String>)],
-    sets: &[RaySet],
-    cache: &mut WorkCache,
-) -> Vec<RayRow> {
-    let generation = null::family(family).map_or("", |x| x.generation);
-    let mut out = Vec::new();
-    for (si, set) in sets.iter().enumerate() {
-        for (r, p) in built {
-            let mut row = RayRow {
-                family: family.into(),
-                generation: generation.into(),
-                kernel: r.kernel.clone(),
-                layout: r.layout.clone(),
-                math: r.math.clone(),
-                branching: r.branching,
-                packet: r.packet,
-                packet_impl: r.packet_impl.clone(),
-                scene: set.scene.clone(),
-                rays: set.kind.clone(),
-                ray_count: set.rays.len() as u64,
-                wave: r.subgroup_size,
-                status: r.status.clone(),
-                ..RayRow::default()
-            };
-            let mut run = || -> Result<(), String> {
-                let p = p.as_ref().map_err(String::clone)?;
-                let roles = roles(p)?;
-                let layout = LayoutId::parse(&r.layout).map_err(|e| e.to_string())?;
-                let math: Math = r.math.parse()?;
-                let fc = if r.float_controls == "off" { FloatControls::Off } else { FloatControls::On };
-                let wave = (r.subgroup_size as usize).max(1);
-                let key = (si, r.layout.clone(), r.branching, r.packet, r.math.clone(), r.float_controls.clone(), wave);
-                if !cache.work.contains_key(&key) {
-                    let enc = cache.encoded.entry((si, r.layout.clone(), r.branching)).or_insert_with(|| {
-                        Encoded::new(&set.scene_data, &set.bin, layout, r.branching).map_err(|e| format!("{e:#}"))
-                    });
-                    let enc = enc.as_ref().map_err(String::clone)?;
-                    cache.work.insert(key.clone(), layout.imp().loop_work(enc, &set.rays, r.packet, wave, math, fc));
-                }
-                let (lock, lanes) = cache.work[&key];
-                let rays = set.rays.len().max(1) as f64;
-                let split = ray_cycles(p, &roles, &lock, r.branching);
-                row.cycles_per_ray = split.total() / rays;
-                row.split = split.scaled(1.0 / rays);
-                // Packets (or single rays) per wave: a lane average is one packet's cost ÷ them.
-                let per_wave = lanes.waves as f64 / lock.waves.max(1) as f64;
-                row.lane_average = ray_cycles(p, &roles, &lanes, r.branching).total() / (rays * per_wave);
-                row.waves = p.printed.get("num_waves").copied().unwrap_or(0.0);
-                let per_wave = split.total() / lock.waves.max(1) as f64;
-                let w64 = p.printed.get("wave64_per_cycle").copied().unwrap_or(0.0);
-                row.rays_per_kclk = 1000.0 * 64.0 * w64 * p.printed_latency / per_wave.max(1.0);
-                Ok(())
-            };
-            if row.status.is_ok() {
-                if let Err(e) = run() {
-                    row.status = Status::Failed(format!("{family} {} on {} {}: {e}", r.kernel, set.scene, set.kind));
+/// One family's kernels: its isa rows beside ACO's programs ([`crate::isa::aco_programs`]).
+pub type Built = [(crate::report::isa::IsaRow, Result<aco::Program, String>)];
+
+/// Each kernel of each family in `built` on each ray set of `rays`: its estimated cycles per
+/// ray, with f32's ratio; rows by family, then ray set. Scenes, ray sets and encodings come
+/// from the [`Runner`]'s caches (one scene at a time, each ray set and encoding made once);
+/// a kernel's loop work is counted once for every family that compiles it with the same
+/// wave size.
+pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<RayRow>> {
+    // The loops the rays weigh depend on the program only.
+    let named: Vec<Vec<Result<Roles, String>>> = built
+        .iter()
+        .map(|(_, b)| b.iter().map(|(_, p)| p.as_ref().map_err(String::clone).and_then(roles)).collect())
+        .collect();
+    let mut per_family: Vec<Vec<RayRow>> = vec![Vec::new(); built.len()];
+    let mut runner = Runner::new(None, &[], Default::default())?;
+    for path in &rays.scenes {
+        let scene = runner.scene(path).with_context(|| path.display().to_string())?.0.name.clone();
+        for kind in &rays.kinds {
+            let params = crate::rays::RayParams { width: rays.res, height: rays.res, ..Default::default() };
+            let set = runner
+                .ray_set(&RaySpec { kind: kind.clone(), params })
+                .with_context(|| format!("{} {kind} rays", path.display()))?;
+            let ray_count = runner.rays(set).rays.len();
+            let mut work: HashMap<(Variant, usize), (LoopWork, LoopWork)> = HashMap::new();
+            for (((family, b), named), out) in built.iter().zip(&named).zip(per_family.iter_mut()) {
+                let generation = null::family(family).map_or("", |x| x.generation);
+                for ((r, p), roles) in b.iter().zip(named) {
+                    let mut row = RayRow {
+                        family: family.clone(),
+                        generation: generation.into(),
+                        kernel: r.kernel.clone(),
+                        layout: r.layout.clone(),
+                        math: r.math.clone(),
+                        branching: r.branching,
+                        packet: r.packet,
+                        packet_impl: r.packet_impl.clone(),
+                        scene: scene.clone(),
+                        rays: kind.to_string(),
+                        ray_count: ray_count as u64,
+                        wave: r.subgroup_size,
+                        status: r.status.clone(),
+                        ..RayRow::default()
+                    };
+                    let mut weigh = || -> Result<(), String> {
+                        let (p, roles) = (p.as_ref().map_err(String::clone)?, roles.as_ref().map_err(String::clone)?);
+                        let layout = LayoutId::parse(&r.layout).map_err(|e| e.to_string())?;
+                        let fc = if r.float_controls == "off" { FloatControls::Off } else { FloatControls::On };
+                        let v = Variant::new(layout, r.branching, r.packet).with_math(r.math.parse()?).with_fc(fc);
+                        let wave = (r.subgroup_size as usize).max(1);
+                        let (lock, lanes) = match work.get(&(v, wave)) {
+                            Some(w) => *w,
+                            None => {
+                                let w = runner.loop_work(&v, set, wave).map_err(|e| format!("{e:#}"))?;
+                                *work.entry((v, wave)).or_insert(w)
+                            }
+                        };
+                        let rays = ray_count.max(1) as f64;
+                        let split = ray_cycles(p, roles, &lock, r.branching);
+                        row.cycles_per_ray = split.total() / rays;
+                        row.split = split.scaled(1.0 / rays);
+                        // Packets (or single rays) per wave: a lane average is one packet's cost ÷ them.
+                        let packets_per_wave = lanes.waves as f64 / lock.waves.max(1) as f64;
+                        row.lane_average =
+                            ray_cycles(p, roles, &lanes, r.branching).total() / (rays * packets_per_wave);
+                        row.waves = p.printed.get("num_waves").copied().unwrap_or(0.0);
+                        let cycles_per_wave = split.total() / lock.waves.max(1) as f64;
+                        let w64 = p.printed.get("wave64_per_cycle").copied().unwrap_or(0.0);
+                        row.rays_per_kclk = 1000.0 * 64.0 * w64 * p.printed_latency / cycles_per_wave.max(1.0);
+                        Ok(())
+                    };
+                    if row.status.is_ok() {
+                        if let Err(e) = weigh() {
+                            row.status = Status::Failed(format!("{family} {} on {scene} {kind}: {e}", r.kernel));
+                        }
+                    }
+                    out.push(row);
                 }
             }
-            out.push(row);
         }
     }
+    let mut out: Vec<RayRow> = per_family.into_iter().flatten().collect();
     for i in 0..out.len() {
         let f32_row = out.iter().find(|o| {
-            o.layout == "f32"
+            o.family == out[i].family
+                && o.layout == "f32"
                 && o.branching == out[i].branching
                 && o.packet == out[i].packet
                 && o.scene == out[i].scene
@@ -214,7 +220,7 @@ pub fn ray_rows(
         });
         out[i].vs_f32 = f32_row.filter(|_| out[i].status.is_ok()).map(|f| out[i].cycles_per_ray / f.cycles_per_ray);
     }
-    out
+    Ok(out)
 }
 
 #[cfg(test)]

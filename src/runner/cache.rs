@@ -9,6 +9,7 @@ use crate::base::{Counters, Hit};
 use crate::baseline::{BaselineId, BaselineScene};
 use crate::bvh::{self, BinaryBvh};
 use crate::gpu::GpuBvh;
+use crate::layout::traverse::LoopWork;
 use crate::layout::{Encoded, LayoutId};
 use crate::precision::{FloatControls, Math};
 use crate::rays::RayKind;
@@ -243,6 +244,17 @@ impl<'g> Runner<'g> {
         (r.facts.buffers, r.facts.upload_bytes) = (bvh.buffers, bvh.bytes);
         r.bvh = Some(bvh);
         Ok(())
+    }
+
+    /// How often `v`'s loops run on ray set `set`, its rays in packets of `v.packet` and waves
+    /// of `wave` lanes (the estimate's trips: [`crate::layout::traverse::loop_work`]), on the
+    /// encoding this scene keeps.
+    pub fn loop_work(&mut self, v: &Variant, set: RaySetId, wave: usize) -> anyhow::Result<(LoopWork, LoopWork)> {
+        let i = self.index(set);
+        self.encoding(v.layout, v.branching)?;
+        let s = self.scene.as_ref().expect("current");
+        let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
+        Ok(v.layout.imp().loop_work(enc, &s.sets[i].rays, v.packet, wave, v.math, v.fc))
     }
 
     /// The CPU reference of `v` on ray set `set` (the latest few are kept, unless frugal).
