@@ -1,7 +1,6 @@
 // The stack of one entry per child: a visit derives every inner child's entry and pushes all
 // but the nearest, which it enters directly. The stack interface (stack_groups.glsl has the
 // other discipline, DEFER_ENTRIES):
-//   const bool LEAVES_FIRST        the visit's leaves are tested before push_children (else after)
 //   void stack_init()
 //   bool stack_fits(uint inner)    whether the visit's inner children fit (else the ray overflows)
 //   void push_children(...)        the visit's inner children, nearest first
@@ -9,7 +8,6 @@
 //   void enter(inout uint ni, inout Entry en, RayPre r, inout Counts c)   after a pop
 // Its state is private globals (inlined into main, they are main's locals).
 
-const bool LEAVES_FIRST = true;
 uint st_node[STACK_SIZE];
 Entry st[STACK_SIZE];
 // Entries on the stack.

@@ -11,10 +11,6 @@
 // belong to nodes on the path from the root, and a node with an inner child is at most at depth
 // (STACK_SIZE - 1) / (B - 1) - 2: at most GROUPS of them. The interface is stack_entries.glsl's.
 
-// The visit's leaves are tested after the push, so that its keys and entry are not held across
-// the triangle tests (the same tests: nothing in the push depends on best_t).
-const bool LEAVES_FIRST = false;
-
 // A group's Meta: this ray's hit mask over the node's children, how many inner children are
 // left, and their slots nearest first (SB bits each). One word up to B = 8.
 #if B == 2

@@ -88,23 +88,23 @@ void main() {
                 pnodes++;
                 asum += nact;
                 if (act) c.visits++;
-                // Leaves in slot order, by the rays that hit them (any order gives the same
-                // closest hit, ties going to the lower prim, and the same counters); inner
-                // children nearest first, through the stack.
-                uint inner = 0u;
+                // Inner children nearest first, through the stack; then the leaves this ray
+                // hit, in slot order, in one loop (any order gives the same closest hit, ties
+                // going to the lower prim, and the same counters; nothing in the push depends
+                // on best_t), so that the visit's keys and child data are not held across the
+                // triangle tests.
+                uint inner = 0u, leaves = 0u;
                 [[unroll]] for (uint s = 0u; s < uint(B); s++) {
                     if ((any_mask & (1u << s)) == 0u) continue;
                     if (!is_leaf(cw[s])) inner |= 1u << s;
-                    else if (LEAVES_FIRST && (mask & (1u << s)) != 0u) test_leaf(r, cw[s], c.tri_tests);
+                    else leaves |= mask & (1u << s);
                 }
                 if (!stack_fits(inner)) {
                     overflow = true;
                     break;
                 }
                 push_children(ni, en, v, r, mask, inner, cw, key, ch, c, descend);
-                [[unroll]] for (uint s = 0u; s < uint(B); s++) {
-                    if (!LEAVES_FIRST && (mask & ~inner & (1u << s)) != 0u) test_leaf(r, cw[s], c.tri_tests);
-                }
+                test_leaves(r, leaves, cw, c.tri_tests);
             }
         }
         if (!descend) more = pop_next(ni, en);

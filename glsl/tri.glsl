@@ -217,12 +217,37 @@ void closest_init(float tmax) {
 
 bool is_leaf(uint c) { return (c & LEAF_BIT) != 0u; }
 
-// Tests the triangles of leaf child word `c` (the one leaf decode of every kernel).
+// Tests the triangles of leaf child word `c` (the leaf decode of user kernels, e.g.
+// docs/examples/unordered.comp; the skeleton tests a visit's leaves with test_leaves).
 void test_leaf(RayPre r, uint c, inout uint tri_tests) {
     uint first = c & LEAF_FIRST_MASK;
     uint count = ((c >> LEAF_COUNT_SHIFT) & LEAF_COUNT_MASK) + 1u;
     for (uint t = first; t < first + count; t++) {
         tri_tests++;
         closest_test(r, t);
+    }
+}
+
+// Tests the triangles of the leaves `leaves` (slots of child words cw) in one loop, slot by
+// slot: one pass per triangle, so a wave runs the loop as long as its busiest lane's triangles
+// of the visit (not each leaf's as long as its slowest lane), and no leaf's loop is nested in
+// the child-slot loop.
+void test_leaves(RayPre r, uint leaves, uint cw[B], inout uint tri_tests) {
+    uint t = 0u, end = 0u;
+    while (true) {
+        if (t == end) {
+            if (leaves == 0u) break;
+            uint s = uint(findLSB(leaves));
+            leaves &= leaves - 1u;
+            uint c = cw[0];
+            [[unroll]] for (uint k = 1u; k < uint(B); k++) {
+                if (s == k) c = cw[k];
+            }
+            t = c & LEAF_FIRST_MASK;
+            end = t + ((c >> LEAF_COUNT_SHIFT) & LEAF_COUNT_MASK) + 1u;
+        }
+        tri_tests++;
+        closest_test(r, t);
+        t++;
     }
 }

@@ -395,6 +395,14 @@ fn loop_work_follows_the_counters_and_lockstep_costs_more() {
                 let pc = enc.reference(rays, 8, math, FloatControls::On).1;
                 let packet_nodes: u64 = pc.iter().map(|c| c.packet_nodes as u64).sum();
                 assert_eq!(plane.visits, packet_nodes, "{what} P8: visits against the packet counters");
+                // A packet runs a visit's triangle loop as long as its busiest lane: at most its
+                // lanes' triangles together, at least their average.
+                let ptris: u64 = pc.iter().map(|c| c.tri_tests as u64).sum();
+                assert!(
+                    plane.tri_passes <= ptris && 8 * plane.tri_passes >= ptris,
+                    "{what} P8: {} triangle passes against {ptris} triangle tests",
+                    plane.tri_passes
+                );
                 assert_eq!(
                     (plane.waves, plock.waves),
                     (rays.len().div_ceil(8) as u64, rays.len().div_ceil(64) as u64),

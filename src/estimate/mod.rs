@@ -14,7 +14,10 @@
 //! between them. The CPU reference counts, per wave of the device's wave size in lockstep
 //! (single rays, or packets of P rays that step together), how often each runs
 //! ([`crate::layout::traverse::LoopWork`]): a pass per node entered, B slot passes per visit,
-//! a triangle pass per triangle of the slowest lane of each slot.
+//! and per visit a triangle pass per triangle of the lane that tests the most (the kernels run
+//! a visit's leaves through one loop, `test_leaves`). The kernels unroll their child-slot
+//! loops, so no compiler keeps one around the triangle loop today; the role stays for one that
+//! would.
 //! Every other loop (an exact division's corrections, a per-axis loop the compiler kept)
 //! keeps ACO's assumed trips relative to the nearest of those three around it, or runs as
 //! ACO assumes when outside them; branches inside a loop keep ACO's weights (0.5 for a

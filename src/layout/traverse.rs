@@ -10,8 +10,9 @@
 //! - A child is visited when any active ray hits it. Children are ordered once per packet by
 //!   the smallest key (entry distance) among the rays that hit them, ties by slot
 //!   ([`order_children`]). Leaves are tested, in that order, by the rays that hit them (the
-//!   kernels test them in slot order: the closest hit and the counters do not depend on the
-//!   order, ties going to the lower prim); inner children are pushed farthest first.
+//!   kernels test them after the push, in slot order, one loop over the triangles of all the
+//!   visit's leaves: the closest hit and the counters do not depend on the order, ties going to
+//!   the lower prim); inner children are pushed farthest first.
 //! - Each ray keeps its own closest hit and its own stack entry per level (inactive rays carry
 //!   none).
 //!
@@ -79,6 +80,8 @@ struct Scratch<L: Layout> {
     order: Vec<(f32, usize)>,
     pend: Vec<u32>,
     pend_entries: Vec<Option<L::Entry>>,
+    /// Triangles each lane tested in the current visit.
+    lane_tris: Vec<u32>,
 }
 
 impl<L: Layout> Scratch<L> {
@@ -93,6 +96,7 @@ impl<L: Layout> Scratch<L> {
             order: Vec::new(),
             pend: Vec::new(),
             pend_entries: Vec::new(),
+            lane_tris: Vec::new(),
         }
     }
 }
@@ -123,12 +127,12 @@ pub fn trace_all<L: Layout, const B: usize>(
 
 /// One pass of a packet's traversal loop (a single ray is a packet of one): one node entered, as
 /// the kernel enters it (the root, then one per pop). `visited`: a ray was active there;
-/// `tris[s]`: the triangles of the leaf in child slot `s` where a ray tested it (its lanes run
-/// that loop together).
+/// `tris`: the passes of the visit's triangle loop, which runs each lane through the triangles
+/// of every leaf it hit (trav.comp, `test_leaves`): the most any lane of the packet tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Step {
     pub visited: bool,
-    pub tris: [u8; 16],
+    pub tris: u32,
 }
 
 /// How often a kernel's loops run for a set of single rays: the traversal loop's passes
@@ -156,15 +160,15 @@ impl std::ops::AddAssign for LoopWork {
 
 impl LoopWork {
     /// One wave running `lanes` (each packet's or single ray's steps) in lockstep: the wave
-    /// makes a pass while any lane does, visits when any lane visits, and runs the triangle
-    /// loop of each slot as long as its slowest lane.
+    /// makes a pass while any lane does, visits when any lane visits, and runs a visit's
+    /// triangle loop as long as its busiest lane.
     pub fn lockstep(lanes: &[Vec<Step>]) -> LoopWork {
         let k = lanes.iter().map(Vec::len).max().unwrap_or(0);
         let mut w = LoopWork { waves: 1, rays: lanes.len() as u64, steps: k as u64, ..Default::default() };
         for i in 0..k {
             let at = || lanes.iter().filter_map(move |l| l.get(i));
             w.visits += at().any(|s| s.visited) as u64;
-            w.tri_passes += (0..16).map(|s| at().map(|x| x.tris[s] as u64).max().unwrap_or(0)).sum::<u64>();
+            w.tri_passes += at().map(|x| x.tris as u64).max().unwrap_or(0);
         }
         w
     }
@@ -245,7 +249,7 @@ fn packet<L: Layout, const B: usize>(
     mut steps: Option<&mut Vec<Step>>,
 ) {
     let p = rays.len();
-    let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries } = s;
+    let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries, lane_tris } = s;
     lanes.clear();
     stack.clear();
     entries.clear();
@@ -325,18 +329,17 @@ fn packet<L: Layout, const B: usize>(
         order_children(order);
         pend.clear();
         pend_entries.clear();
+        lane_tris.clear();
+        lane_tris.resize(p, 0);
         for &(_, slot) in order.iter() {
             let tests = &res[slot * p..slot * p + p];
             match decode_child(n.child(slot)) {
                 ChildRef::Leaf { first, count } => {
-                    for (lane, t) in lanes.iter_mut().zip(tests) {
+                    for ((lane, t), n) in lanes.iter_mut().zip(tests).zip(lane_tris.iter_mut()) {
                         if t.is_some() {
                             lane.test_leaf(tris, first, count);
+                            *n += count;
                         }
-                    }
-                    // A packet's lanes run the leaf's loop together while any of them tests it.
-                    if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
-                        st.tris[slot] = if tests.iter().any(Option::is_some) { count as u8 } else { 0 };
                     }
                 }
                 ChildRef::Inner(j) => {
@@ -358,6 +361,11 @@ fn packet<L: Layout, const B: usize>(
             if v.is_some() {
                 lane.c.nodes += 1;
             }
+        }
+        // A packet's lanes run the visit's triangle loop together while any of them has a
+        // triangle left.
+        if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
+            st.tris = lane_tris.iter().copied().max().unwrap_or(0);
         }
         for k in (0..pend.len()).rev() {
             stack.push(pend[k]);
