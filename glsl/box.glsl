@@ -8,7 +8,7 @@ vec2 slab32(RayPre r, vec3 lo, vec3 hi, float t0, float t1) {
     float far_t = t1;
     for (int a = 0; a < 3; a++) {
         float n, f;
-        if (r.d[a] == 0.0) {
+        if (ray_d_zero(r, a)) {
             bool inside = r.o[a] >= lo[a] && r.o[a] <= hi[a];
             n = inside ? -INF : INF;
             f = inside ? INF : -INF;

@@ -125,9 +125,16 @@ struct RayPre {
     vec3 inv;
     float tmin;
     float tmax;
-    int kx, ky, kz;
+    // The triangle test's axes kx, ky, kz (2 bits each, from bit 0) and which components of d
+    // are zero (bits 6 to 8): one word, so that kernels that need d only for its zeros do not
+    // hold it (nor three axis words) across the traversal loop.
+    uint axes;
     float sx, sy, sz;
 };
+int ray_kx(RayPre r) { return int(r.axes & 3u); }
+int ray_ky(RayPre r) { return int((r.axes >> 2) & 3u); }
+int ray_kz(RayPre r) { return int((r.axes >> 4) & 3u); }
+bool ray_d_zero(RayPre r, int a) { return (r.axes & (64u << uint(a))) != 0u; }
 
 RayPre ray_pre(uint i) {
     RayPre r;
@@ -148,7 +155,10 @@ RayPre ray_pre(uint i) {
     int kx = (kz + 1) % 3;
     int ky = (kx + 1) % 3;
     if (d[kz] < 0.0) { int t = kx; kx = ky; ky = t; }
-    r.kx = kx; r.ky = ky; r.kz = kz;
+    r.axes = uint(kx) | (uint(ky) << 2) | (uint(kz) << 4);
+    for (int a = 0; a < 3; a++) {
+        if (d[a] == 0.0) r.axes |= 64u << uint(a);
+    }
     // inv serves only box tests, whose widening allows 2.5 ulp: native division
     precise vec3 inv = vec3(1.0) / d;
     r.inv = inv;

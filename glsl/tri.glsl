@@ -117,12 +117,13 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float nu, out float nv, o
             C[k] *= down;
         }
     }
-    precise float ax = A[r.kx] - r.sx * A[r.kz];
-    precise float ay = A[r.ky] - r.sy * A[r.kz];
-    precise float bx = Bv[r.kx] - r.sx * Bv[r.kz];
-    precise float by = Bv[r.ky] - r.sy * Bv[r.kz];
-    precise float cx = C[r.kx] - r.sx * C[r.kz];
-    precise float cy = C[r.ky] - r.sy * C[r.kz];
+    int kx = ray_kx(r), ky = ray_ky(r), kz = ray_kz(r);
+    precise float ax = A[kx] - r.sx * A[kz];
+    precise float ay = A[ky] - r.sy * A[kz];
+    precise float bx = Bv[kx] - r.sx * Bv[kz];
+    precise float by = Bv[ky] - r.sy * Bv[kz];
+    precise float cx = C[kx] - r.sx * C[kz];
+    precise float cy = C[ky] - r.sy * C[kz];
     precise float U = cx * by - cy * bx;
     precise float V = ax * cy - ay * cx;
     precise float W = bx * ay - by * ax;
@@ -145,9 +146,9 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float nu, out float nv, o
     if ((U < 0.0 || V < 0.0 || W < 0.0) && (U > 0.0 || V > 0.0 || W > 0.0)) return false;
     precise float det = U + V + W;
     if (det == 0.0) return false;
-    precise float az = r.sz * A[r.kz];
-    precise float bz = r.sz * Bv[r.kz];
-    precise float cz = r.sz * C[r.kz];
+    precise float az = r.sz * A[kz];
+    precise float bz = r.sz * Bv[kz];
+    precise float cz = r.sz * C[kz];
     precise float T = U * az + V * bz + W * cz;
     precise float tt = div_rte(T, det) * back;
     t = tt; nu = V; nv = W; det_out = det;
@@ -179,7 +180,7 @@ bool admit(RayPre r, uint ti, float t, out float t_kept) {
         float x2 = tri_v[b + 6u + uint(a)];
         precise float lo = sel_min(sel_min(x0, x1), x2) - pc.hit_pad;
         precise float hi = sel_max(sel_max(x0, x1), x2) + pc.hit_pad;
-        if (r.d[a] == 0.0) {
+        if (ray_d_zero(r, a)) {
             if (!(r.o[a] >= lo && r.o[a] <= hi)) return false;
         } else {
             precise float x = (lo - r.o[a]) * r.inv[a];
