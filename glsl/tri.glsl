@@ -136,6 +136,23 @@ bool tri_intersect(RayPre r, uint ti, out float t, out float nu, out float nv, o
         V = float(dV);
         W = float(dW);
     }
+#elif defined(FC_OFF)
+    // One copy of the emulation, run for each edge in turn: edge k is x.z * y.y - y.z * x.y
+    // with x = (ax, bx, cx) and y = (ay, by, cy) rotated k places. On Mali-G610 (the build
+    // without float controls) one copy spills less than three (isa, f32 at B = 4: 90 spills
+    // and fills against 172); on Adreno a740, which has float controls, three copies need
+    // fewer registers (96 against 124), so they stay there.
+    if (U == 0.0 || V == 0.0 || W == 0.0) {
+        vec3 x = vec3(ax, bx, cx), y = vec3(ay, by, cy), e3 = vec3(0.0);
+        [[dont_unroll]] for (int k = 0; k < 3; k++) {
+            e3 = vec3(e3.yz, edge_f64(x.z, y.y, y.z, x.y));
+            x = x.yzx;
+            y = y.yzx;
+        }
+        U = e3.x;
+        V = e3.y;
+        W = e3.z;
+    }
 #else
     if (U == 0.0 || V == 0.0 || W == 0.0) {
         U = edge_f64(cx, by, cy, bx);

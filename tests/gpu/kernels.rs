@@ -169,3 +169,37 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
     assert_eq!(files, n, "spirv/ holds files that are not in the default matrix");
     assert_eq!(n, 2 * expected.len());
 }
+
+/// The triangle test's integer recomputation of an edge function that is zero in fp32 (the
+/// build for devices without fp64 — Adreno, Mali, Broadcom —, `edge_f64` in glsl/tri.glsl),
+/// run on this device by building the kernels as for such a device: three inlined copies with
+/// float controls, one copy in a loop without them (`FC_OFF`). Grazing rays include rays along
+/// triangle edges and axis-parallel rays through vertices, which make two of a triangle's edge
+/// functions exactly zero. Hits and counters equal the CPU reference's, which computes them in
+/// f64.
+#[test]
+fn integer_edge_recomputation_equals_the_reference() {
+    use halftrace::precision::FloatControls;
+    let g = gpu();
+    let p = prepare(&scene_path("fandisk.obj"));
+    let sets = ray_sets(&p, 32, 4000);
+    for layout in [LayoutId::f32(), layout("f16w")] {
+        let enc = encode(&p, layout, 4);
+        let gb = GpuBvh::upload(&g, &enc).unwrap();
+        for fc in [FloatControls::On, FloatControls::Off] {
+            let v = Variant::new(layout, 4, 1).with_fc(fc).with_buffers(gb.buffers);
+            let id = KernelId::new(v, PacketImpl::Single, true);
+            let mut d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
+            d.build.f64 = false;
+            let k = Kernel::build(&g, &d.with_stats(true), &Source::Builtin).unwrap_or_else(|e| panic!("{id}: {e}"));
+            for (kind, rays) in &sets {
+                let what = format!("{id} without fp64, {kind} rays");
+                let a = k.run(&g, &gb, rays, 0, 1).unwrap();
+                let (hits, counters) = enc.reference(rays, 1, v.math, fc);
+                assert_same_hits(&what, rays, &hits, &a.hits);
+                assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
+            }
+        }
+    }
+    clean(&g);
+}
