@@ -48,9 +48,12 @@ bool meta_hit(Meta m, uint s) { return (m.x & (1u << s)) != 0u; }
 #endif
 // One array of groups: compilers keep small private arrays in registers (RADV: up to 256
 // bytes), so the node and Meta go beside the entry, in memory, not in 2·GROUPS registers.
+// GROUPS_ALLOC >= GROUPS: where a compiler keeps each field's array on its own in registers
+// up to a size (turnip: 256 bytes), the array is allocated long enough that none fits there
+// (Variant::groups_alloc); only the first GROUPS are ever used.
 struct Group { Entry en; uint node; Meta meta; };
 
-Group gs[GROUPS];
+Group gs[GROUPS_ALLOC];
 int gp;
 // Children left in the groups.
 int sp;

@@ -55,6 +55,12 @@ pub struct DeviceInfo {
     /// The newest SPIR-V the device accepts, as its minor version (1.x): 5 on Vulkan 1.2 and
     /// later, 3 on 1.1 (4 with `VK_KHR_spirv_1_4`), 0 on 1.0.
     pub spirv_minor: u8,
+    /// The largest private array the driver's compiler keeps in registers rather than in
+    /// memory, in bytes, where it is known to matter: turnip (Adreno) keeps every one of up to
+    /// 256 bytes there, each field of an array of structs on its own (measured with `isa` on
+    /// a740: f16h's group stack at B = 4 needs 192 registers with 64 groups, 128 with 65).
+    /// 0: none known.
+    pub register_array_bytes: u32,
 }
 
 impl DeviceInfo {
@@ -64,6 +70,7 @@ impl DeviceInfo {
             f64: self.shader_float64,
             storage16: self.storage_16bit,
             spirv_minor: self.spirv_minor.min(5),
+            register_array_bytes: self.register_array_bytes,
         }
     }
 }
@@ -294,6 +301,7 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             max_subgroup_size: if ssc_ok { ssc.max_subgroup_size } else { sub.subgroup_size },
             pipeline_statistics: stats_ok,
             spirv_minor,
+            register_array_bytes: if drv.driver_id == vk::DriverId::MESA_TURNIP { 256 } else { 0 },
         }
     }
 }

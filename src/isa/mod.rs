@@ -249,10 +249,18 @@ struct Who {
 fn device_build(g: &Gpu) -> String {
     let b = g.info.build();
     format!(
-        "{}, {}, SPIR-V 1.{}",
+        "{}, {}, SPIR-V 1.{}{}",
         if b.f64 { "fp64" } else { "no fp64 (integer edge fallback)" },
         if b.storage16 { "16-bit storage" } else { "fp16 nodes from 32-bit words" },
-        b.spirv_minor
+        b.spirv_minor,
+        if b.register_array_bytes > 0 {
+            format!(
+                ", group stack allocated past {} B (smaller private arrays stay in registers)",
+                b.register_array_bytes
+            )
+        } else {
+            String::new()
+        }
     )
 }
 

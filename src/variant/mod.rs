@@ -164,7 +164,8 @@ impl Variant {
     ///   `STACK_SIZE`: the stack's entries ([`stack_entries`]).
     /// - `MATH_F16`, `MATH_F32` or `MATH_MIXED`: the math mode of the box tests.
     /// - `DEFER_ENTRIES` with `GROUPS` ([`stack_groups`]): the stack of one group per visit
-    ///   (`glsl/stack_groups.glsl`) instead of an entry per child (`stack_entries.glsl`).
+    ///   (`glsl/stack_groups.glsl`) instead of an entry per child (`stack_entries.glsl`), and
+    ///   `GROUPS_ALLOC`, the groups it is allocated ([`Variant::groups_alloc`]).
     /// - `PACKET_SUBGROUP` or `PACKET_HYBRID`: a packet's reductions in a subgroup, or a
     ///   subgroup then shared memory; neither: shared memory (`glsl/packet.glsl`).
     /// - `STATS`: the kernel writes the work counters.
@@ -187,6 +188,7 @@ impl Variant {
         if self.defers_entries() {
             d.push(("DEFER_ENTRIES".into(), "1".into()));
             d.push(("GROUPS".into(), stack_groups(self.branching).to_string()));
+            d.push(("GROUPS_ALLOC".into(), self.groups_alloc(dev).to_string()));
         }
         match imp {
             PacketImpl::Subgroup => d.push(("PACKET_SUBGROUP".into(), "1".into())),
@@ -209,6 +211,19 @@ impl Variant {
             d.push(("ADDRESSED".into(), "1".into()));
         }
         d
+    }
+
+    /// The groups the group stack is allocated (`GROUPS_ALLOC`): [`stack_groups`], or where the
+    /// device's compiler keeps private arrays of up to `dev.register_array_bytes` in registers,
+    /// enough that the array of the group's smallest field (an entry field, or the 4-byte node
+    /// and meta) is larger.
+    pub fn groups_alloc(&self, dev: DeviceBuild) -> usize {
+        let groups = stack_groups(self.branching);
+        if dev.register_array_bytes == 0 {
+            return groups;
+        }
+        let smallest = self.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
+        groups.max(dev.register_array_bytes as usize / smallest + 1)
     }
 
     /// The layout's stack entry fields in this variant's math.
@@ -302,9 +317,14 @@ pub struct DeviceBuild {
     /// The SPIR-V version the module is built for, 1.x: 5 (Vulkan 1.2 and later), 3 (1.1), 0
     /// (1.0). The same kernel either way; an older device is handed the version it accepts.
     pub spirv_minor: u8,
+    /// The largest private array the compiler keeps in registers (bytes; 0: none known,
+    /// [`crate::gpu::DeviceInfo::register_array_bytes`]): the group stack is then allocated
+    /// long enough that each of its fields' arrays is larger (`GROUPS_ALLOC`), so that it is
+    /// kept in memory, as on other devices. Only its length changes.
+    pub register_array_bytes: u32,
 }
 
 impl DeviceBuild {
     /// A Vulkan 1.2 device with both (the SPIR-V in `spirv/`, `halftrace shaders`).
-    pub const FULL: DeviceBuild = DeviceBuild { f64: true, storage16: true, spirv_minor: 5 };
+    pub const FULL: DeviceBuild = DeviceBuild { f64: true, storage16: true, spirv_minor: 5, register_array_bytes: 0 };
 }
