@@ -289,6 +289,27 @@ mod tests {
     }
 
     #[test]
+    fn the_group_stack_is_allocated_past_what_registers_hold() {
+        let f16h = LayoutId::parse("f16h").unwrap();
+        let poster = LayoutId::parse("f16h-poster").unwrap();
+        let turnip = DeviceBuild { register_array_bytes: 256, ..DeviceBuild::FULL };
+        for b in [2, 4, 8, 16] {
+            for v in [Variant::new(f16h, b, 1), Variant::new(poster, b, 1)] {
+                // Elsewhere the array is what the stack uses; on turnip every field's array
+                // (the smallest field: 4 bytes, or 2 for a float16_t) exceeds 256 bytes.
+                assert_eq!(v.groups_alloc(DeviceBuild::FULL), stack_groups(b), "{}", v.name(false));
+                let smallest = v.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
+                let n = v.groups_alloc(turnip);
+                assert!(
+                    n >= stack_groups(b) && n * smallest > 256 && (n - 1) * smallest <= 256,
+                    "{}: {n}",
+                    v.name(false)
+                );
+            }
+        }
+    }
+
+    #[test]
     fn kernel_names_spell_the_variant() {
         let f16h = LayoutId::parse("f16h").unwrap();
         assert_eq!(Variant::new(LayoutId::f32(), 8, 1).name(false), "trav_f32_b8_p1");
