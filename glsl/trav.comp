@@ -5,7 +5,7 @@
 // counters where STATS is defined. It mirrors src/layout/traverse.rs step for step.
 //
 // Every define a kernel is built with is listed once, in the documentation of
-// `Variant::defines` (src/variant.rs). "interface.glsl" is generated from the Rust definitions
+// `Variant::defines` (src/variant/mod.rs). "interface.glsl" is generated from the Rust definitions
 // for this variant (child word fields, push constants, Hit, Counters, the layout's stack
 // Entry); "layout.glsl" is the variant's layout hooks (glsl/layout/<name>.glsl), which provide:
 //   Node buffer `nodes[]`, declared with NODE_BUFFER(Node) (bound, or by address: ray.glsl)

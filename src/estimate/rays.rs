@@ -22,8 +22,9 @@ use std::path::PathBuf;
 pub struct Roles {
     /// The outermost loop with the largest share of the estimate.
     pub traversal: aco::Loop,
-    /// The loop between the traversal and the triangle loop, if the compiler kept the
-    /// child-slot loop a loop.
+    /// The loop between the traversal and the triangle loop, if a compiler kept a child-slot
+    /// loop around the triangle loop (none does since the kernels test a visit's leaves after
+    /// their unrolled slot loops).
     pub slots: Option<aco::Loop>,
     /// The loop inside the traversal loop with the costliest pass.
     pub triangles: aco::Loop,

@@ -128,7 +128,8 @@ pub fn trace_all<L: Layout, const B: usize>(
 /// One pass of a packet's traversal loop (a single ray is a packet of one): one node entered, as
 /// the kernel enters it (the root, then one per pop). `visited`: a ray was active there;
 /// `tris`: the passes of the visit's triangle loop, which runs each lane through the triangles
-/// of every leaf it hit (trav.comp, `test_leaves`): the most any lane of the packet tests.
+/// of every leaf it hit (trav.comp, `test_leaves`): the most any lane of the packet tests. The
+/// loop's last check, which finds no leaf left, is not counted as a pass.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Step {
     pub visited: bool,

@@ -239,10 +239,11 @@ impl Variant {
         self.layout.info().defer_entries
     }
 
-    /// Stack bytes per ray: entries × entry bytes (node index and the layout's fields, from
-    /// the same definition the kernel's `struct Entry` is generated from); for a kernel that
-    /// defers entries, groups × (node index, the layout's fields and the group's order word:
-    /// 4 bytes, 12 at B = 16).
+    /// Stack bytes per ray that the traversal can use: entries × entry bytes (node index and
+    /// the layout's fields, from the same definition the kernel's `struct Entry` is generated
+    /// from); for a kernel that defers entries, groups × (node index, the layout's fields and
+    /// the group's order word: 4 bytes, 12 at B = 16). On a device whose compiler keeps small
+    /// arrays in registers the allocation may be larger ([`Variant::groups_alloc`]).
     pub fn stack_bytes(&self) -> u64 {
         let entry = interface::stack_entry_bytes(self.stack_entry());
         if self.defers_entries() {

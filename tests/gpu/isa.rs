@@ -287,9 +287,12 @@ fn isa_builds_on_every_vendors_compiler() {
             // needed 192 registers and over a thousand private loads. The bound on
             // private loads (f32's + 10) holds, and the registers stay within f32's + 32.
             if model == "a740" {
-                let ldp = |r: &IsaRow| r.stats.get("LDP Count").copied().unwrap_or(f64::NAN);
+                let ldp = |r: &IsaRow| {
+                    *r.stats.get("LDP Count").unwrap_or_else(|| panic!("a740 {}: no LDP Count {:?}", r.kernel, r.stats))
+                };
                 assert!(ldp(h) <= ldp(f32) + 10.0, "a740 {}: {} private loads, f32 {}", h.kernel, ldp(h), ldp(f32));
-                assert!(a <= b + 32.0, "a740 {}: {a} registers against f32's {b}", h.kernel);
+                let (rh, rf) = (h.registers.expect("a740 f16h registers"), f32.registers.expect("a740 f32 registers"));
+                assert!(rh <= rf + 32.0, "a740 {}: {rh} registers against f32's {rf}", h.kernel);
             }
         }
         // Where the device has no fp16 arithmetic, the fp16-math kernels are skipped by name.
