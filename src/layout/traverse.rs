@@ -80,7 +80,7 @@ struct Scratch<L: Layout> {
     order: Vec<(f32, usize)>,
     pend: Vec<u32>,
     pend_entries: Vec<Option<L::Entry>>,
-    /// Triangles each lane tested in the current visit.
+    /// Each lane's `tri_tests` when the current visit began (only while recording steps).
     lane_tris: Vec<u32>,
 }
 
@@ -114,14 +114,12 @@ pub fn trace_all<L: Layout, const B: usize>(
     let p = p.max(1);
     let mut hits = vec![Hit::MISS; rays.len()];
     let mut counters = vec![Counters::default(); rays.len()];
-    let box_lo: [f32; 3] = enc.root_box.min.into();
-    let box_hi: [f32; 3] = enc.root_box.max.into();
-    rays.par_chunks(p).zip(hits.par_chunks_mut(p)).zip(counters.par_chunks_mut(p)).for_each_init(
-        Scratch::<L>::new,
-        |s, ((rays, hits), counters)| {
-            packet::<L, B>(nodes, root, &enc.tris, (box_lo, box_hi), rays, math, fc, s, hits, counters, None)
-        },
-    );
+    rays.par_chunks(p)
+        .zip(hits.par_chunks_mut(p))
+        .zip(counters.par_chunks_mut(p))
+        .for_each_init(Scratch::<L>::new, |s, ((rays, hits), counters)| {
+            packet::<L, B>(nodes, root, enc, rays, math, fc, s, hits, counters, None)
+        });
     (hits, counters)
 }
 
@@ -199,8 +197,6 @@ pub fn loop_work<L: Layout, const B: usize>(
     math: Math,
     fc: FloatControls,
 ) -> (LoopWork, LoopWork) {
-    let box_lo: [f32; 3] = enc.root_box.min.into();
-    let box_hi: [f32; 3] = enc.root_box.max.into();
     let p = p.max(1);
     rays.par_chunks(wave.max(p))
         .map_init(Scratch::<L>::new, |s, rays| {
@@ -209,19 +205,7 @@ pub fn loop_work<L: Layout, const B: usize>(
                 .map(|rays| {
                     let n = rays.len();
                     let (mut hit, mut c, mut steps) = (vec![Hit::MISS; n], vec![Counters::default(); n], Vec::new());
-                    packet::<L, B>(
-                        nodes,
-                        root,
-                        &enc.tris,
-                        (box_lo, box_hi),
-                        rays,
-                        math,
-                        fc,
-                        s,
-                        &mut hit,
-                        &mut c,
-                        Some(&mut steps),
-                    );
+                    packet::<L, B>(nodes, root, enc, rays, math, fc, s, &mut hit, &mut c, Some(&mut steps));
                     steps
                 })
                 .collect();
@@ -234,13 +218,12 @@ pub fn loop_work<L: Layout, const B: usize>(
         })
 }
 
-/// Traces one packet.
+/// Traces one packet of the encoded scene `enc` (`nodes` and `root` are its, typed).
 #[allow(clippy::too_many_arguments)]
 fn packet<L: Layout, const B: usize>(
     nodes: &[L::Node<B>],
     root: &L::Root,
-    tris: &TriBuffer,
-    root_box: ([f32; 3], [f32; 3]),
+    enc: &Encoded,
     rays: &[Ray],
     math: Math,
     fc: FloatControls,
@@ -250,6 +233,8 @@ fn packet<L: Layout, const B: usize>(
     mut steps: Option<&mut Vec<Step>>,
 ) {
     let p = rays.len();
+    let tris = &enc.tris;
+    let (box_lo, box_hi): ([f32; 3], [f32; 3]) = (enc.root_box.min.into(), enc.root_box.max.into());
     let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries, lane_tris } = s;
     lanes.clear();
     stack.clear();
@@ -258,7 +243,7 @@ fn packet<L: Layout, const B: usize>(
     for ray in rays {
         let r = RayPre::new(ray);
         let lr = L::ray(&r, math, fc);
-        let (near, far) = slab32(&r, root_box.0, root_box.1, r.tmin, r.tmax);
+        let (near, far) = slab32(&r, box_lo, box_hi, r.tmin, r.tmax);
         let e = (near <= far).then(|| L::root_entry(root, &r, &lr, near));
         any_root |= e.is_some();
         entries.push(e);
@@ -297,6 +282,8 @@ fn packet<L: Layout, const B: usize>(
         }
         if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
             st.visited = true;
+            lane_tris.clear();
+            lane_tris.extend(lanes.iter().map(|l| l.c.tri_tests));
         }
         packet_nodes += 1;
         active_lanes += active;
@@ -330,16 +317,13 @@ fn packet<L: Layout, const B: usize>(
         order_children(order);
         pend.clear();
         pend_entries.clear();
-        lane_tris.clear();
-        lane_tris.resize(p, 0);
         for &(_, slot) in order.iter() {
             let tests = &res[slot * p..slot * p + p];
             match decode_child(n.child(slot)) {
                 ChildRef::Leaf { first, count } => {
-                    for ((lane, t), n) in lanes.iter_mut().zip(tests).zip(lane_tris.iter_mut()) {
+                    for (lane, t) in lanes.iter_mut().zip(tests) {
                         if t.is_some() {
                             lane.test_leaf(tris, first, count);
-                            *n += count;
                         }
                     }
                 }
@@ -366,7 +350,7 @@ fn packet<L: Layout, const B: usize>(
         // A packet's lanes run the visit's triangle loop together while any of them has a
         // triangle left.
         if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
-            st.tris = lane_tris.iter().copied().max().unwrap_or(0);
+            st.tris = lanes.iter().zip(lane_tris.iter()).map(|(l, &t0)| l.c.tri_tests - t0).max().unwrap_or(0);
         }
         for k in (0..pend.len()).rev() {
             stack.push(pend[k]);
