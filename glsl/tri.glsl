@@ -235,12 +235,14 @@ void closest_init(float tmax) {
 
 bool is_leaf(uint c) { return (c & LEAF_BIT) != 0u; }
 
+// The triangles [first, end) of leaf child word `c` (the one leaf decode).
+uint leaf_first(uint c) { return c & LEAF_FIRST_MASK; }
+uint leaf_end(uint c) { return leaf_first(c) + ((c >> LEAF_COUNT_SHIFT) & LEAF_COUNT_MASK) + 1u; }
+
 // Tests the triangles of leaf child word `c` (the leaf decode of user kernels, e.g.
 // docs/examples/unordered.comp; the skeleton tests a visit's leaves with test_leaves).
 void test_leaf(RayPre r, uint c, inout uint tri_tests) {
-    uint first = c & LEAF_FIRST_MASK;
-    uint count = ((c >> LEAF_COUNT_SHIFT) & LEAF_COUNT_MASK) + 1u;
-    for (uint t = first; t < first + count; t++) {
+    for (uint t = leaf_first(c); t < leaf_end(c); t++) {
         tri_tests++;
         closest_test(r, t);
     }
@@ -261,8 +263,8 @@ void test_leaves(RayPre r, uint leaves, uint cw[B], inout uint tri_tests) {
             [[unroll]] for (uint k = 1u; k < uint(B); k++) {
                 if (s == k) c = cw[k];
             }
-            t = c & LEAF_FIRST_MASK;
-            end = t + ((c >> LEAF_COUNT_SHIFT) & LEAF_COUNT_MASK) + 1u;
+            t = leaf_first(c);
+            end = leaf_end(c);
         }
         tri_tests++;
         closest_test(r, t);
