@@ -57,9 +57,18 @@ Group gs[GROUPS_ALLOC];
 int gp;
 // Children left in the groups.
 int sp;
-// The child to enter: slot ps of node pn, under pn's entry pe; phit: this ray hit it.
+// The child to enter: slot ps of node pn, under pn's entry pe; phit: this ray hit it. With
+// PENDING_SHARED pe is kept in shared memory, one per invocation: it is written by the push or
+// the pop and read when the child is entered, so it is not held in registers across the
+// visit's triangle tests, where the register peak is (isa, B = 4: RDNA3 84 -> 72 VGPRs,
+// Mali-G610 646 -> 357 spills and fills; Variant::defines says where it is not set).
 uint pn, ps;
+#ifdef PENDING_SHARED
+shared Entry sh_pe[WG];
+#define pe sh_pe[gl_LocalInvocationID.x]
+#else
 Entry pe;
+#endif
 bool phit;
 
 void stack_init() {

@@ -61,6 +61,12 @@ pub struct DeviceInfo {
     /// a740: f16h's group stack at B = 4 needs 192 registers with 64 groups, 128 with 65).
     /// 0: none known.
     pub register_array_bytes: u32,
+    /// Whether kernels that defer entries keep the entry of the child to enter next in shared
+    /// memory rather than in registers (`PENDING_SHARED`). Everywhere but Intel's compiler,
+    /// where it costs registers (isa, lnl, f16h fp16 B = 4: 103 -> 110, and more spills at
+    /// B = 16); elsewhere it saves them (navi31 f16h B = 4: 84 -> 72 VGPRs; ga102 207 -> 186;
+    /// g610 646 -> 357 spills and fills; a740 unchanged at B = 4, 168 -> 128 at B = 8).
+    pub pending_shared: bool,
 }
 
 impl DeviceInfo {
@@ -71,6 +77,7 @@ impl DeviceInfo {
             storage16: self.storage_16bit,
             spirv_minor: self.spirv_minor.min(5),
             register_array_bytes: self.register_array_bytes,
+            pending_shared: self.pending_shared,
         }
     }
 }
@@ -302,6 +309,10 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             pipeline_statistics: stats_ok,
             spirv_minor,
             register_array_bytes: if drv.driver_id == vk::DriverId::MESA_TURNIP { 256 } else { 0 },
+            pending_shared: !matches!(
+                drv.driver_id,
+                vk::DriverId::INTEL_OPEN_SOURCE_MESA | vk::DriverId::INTEL_PROPRIETARY_WINDOWS
+            ),
         }
     }
 }

@@ -249,7 +249,7 @@ struct Who {
 fn device_build(g: &Gpu) -> String {
     let b = g.info.build();
     format!(
-        "{}, {}, SPIR-V 1.{}{}",
+        "{}, {}, SPIR-V 1.{}{}{}",
         if b.f64 { "fp64" } else { "no fp64 (integer edge fallback)" },
         if b.storage16 { "16-bit storage" } else { "fp16 nodes from 32-bit words" },
         b.spirv_minor,
@@ -260,7 +260,8 @@ fn device_build(g: &Gpu) -> String {
             )
         } else {
             String::new()
-        }
+        },
+        if b.pending_shared { "" } else { ", the next child's entry held in registers" }
     )
 }
 

@@ -165,7 +165,9 @@ impl Variant {
     /// - `MATH_F16`, `MATH_F32` or `MATH_MIXED`: the math mode of the box tests.
     /// - `DEFER_ENTRIES` with `GROUPS` ([`stack_groups`]): the stack of one group per visit
     ///   (`glsl/stack_groups.glsl`) instead of an entry per child (`stack_entries.glsl`), and
-    ///   `GROUPS_ALLOC`, the groups it is allocated ([`Variant::groups_alloc`]).
+    ///   `GROUPS_ALLOC`, the groups it is allocated ([`Variant::groups_alloc`]), and
+    ///   `PENDING_SHARED` where the device's build keeps the entry of the child to enter next
+    ///   in shared memory ([`DeviceBuild::pending_shared`]).
     /// - `PACKET_SUBGROUP` or `PACKET_HYBRID`: a packet's reductions in a subgroup, or a
     ///   subgroup then shared memory; neither: shared memory (`glsl/packet.glsl`).
     /// - `STATS`: the kernel writes the work counters.
@@ -189,6 +191,9 @@ impl Variant {
             d.push(("DEFER_ENTRIES".into(), "1".into()));
             d.push(("GROUPS".into(), stack_groups(self.branching).to_string()));
             d.push(("GROUPS_ALLOC".into(), self.groups_alloc(dev).to_string()));
+            if dev.pending_shared {
+                d.push(("PENDING_SHARED".into(), "1".into()));
+            }
         }
         match imp {
             PacketImpl::Subgroup => d.push(("PACKET_SUBGROUP".into(), "1".into())),
@@ -311,6 +316,20 @@ mod tests {
     }
 
     #[test]
+    fn only_deferring_kernels_keep_the_next_entry_in_shared_memory() {
+        let f16h = LayoutId::parse("f16h").unwrap();
+        let has = |v: Variant, dev: DeviceBuild| {
+            v.defines(PacketImpl::Subgroup, false, dev).iter().any(|(k, _)| k == "PENDING_SHARED")
+        };
+        let registers = DeviceBuild { pending_shared: false, ..DeviceBuild::FULL };
+        for b in [2, 4, 8, 16] {
+            assert!(has(Variant::new(f16h, b, 1), DeviceBuild::FULL), "f16h B = {b}");
+            assert!(!has(Variant::new(f16h, b, 1), registers), "f16h B = {b}, registers");
+            assert!(!has(Variant::new(LayoutId::f32(), b, 1), DeviceBuild::FULL), "f32 B = {b}");
+        }
+    }
+
+    #[test]
     fn kernel_names_spell_the_variant() {
         let f16h = LayoutId::parse("f16h").unwrap();
         assert_eq!(Variant::new(LayoutId::f32(), 8, 1).name(false), "trav_f32_b8_p1");
@@ -344,9 +363,15 @@ pub struct DeviceBuild {
     /// long enough that each of its fields' arrays is larger (`GROUPS_ALLOC`), so that it is
     /// kept in memory, as on other devices. Only its length changes.
     pub register_array_bytes: u32,
+    /// A kernel that defers entries keeps the entry of the child it enters next in shared
+    /// memory, one per invocation (`PENDING_SHARED`, `glsl/stack_groups.glsl`), not in
+    /// registers across the visit's triangle tests ([`crate::gpu::DeviceInfo::pending_shared`]).
+    /// Only where the entry is held changes.
+    pub pending_shared: bool,
 }
 
 impl DeviceBuild {
     /// A Vulkan 1.2 device with both (the SPIR-V in `spirv/`, `halftrace shaders`).
-    pub const FULL: DeviceBuild = DeviceBuild { f64: true, storage16: true, spirv_minor: 5, register_array_bytes: 0 };
+    pub const FULL: DeviceBuild =
+        DeviceBuild { f64: true, storage16: true, spirv_minor: 5, register_array_bytes: 0, pending_shared: true };
 }

@@ -39,7 +39,8 @@ void main() {
     // storage), in every math mode (a conversion or a bit cast per half); the latter as SPIR-V
     // 1.3, what a Vulkan 1.1 device (panvk on Mali) is handed.
     use halftrace::variant::DeviceBuild;
-    let words = DeviceBuild { f64: false, storage16: false, spirv_minor: 3, register_array_bytes: 0 };
+    let words =
+        DeviceBuild { f64: false, storage16: false, spirv_minor: 3, register_array_bytes: 0, pending_shared: true };
     let builds = LayoutId::all().flat_map(|l| {
         BRANCHINGS.into_iter().flat_map(move |b| {
             l.info().maths.iter().flat_map(move |&m| [(l, b, m, DeviceBuild::FULL), (l, b, m, words)])
