@@ -62,10 +62,12 @@ pub struct DeviceInfo {
     /// 0: none known.
     pub register_array_bytes: u32,
     /// Whether kernels that defer entries keep the entry of the child to enter next in shared
-    /// memory rather than in registers (`PENDING_SHARED`). Everywhere but Intel's compiler,
-    /// where it costs registers (isa, lnl, f16h fp16 B = 4: 103 -> 110, and more spills at
-    /// B = 16); elsewhere it saves them (navi31 f16h B = 4: 84 -> 72 VGPRs; ga102 207 -> 186;
-    /// g610 646 -> 357 spills and fills; a740 unchanged at B = 4, 168 -> 128 at B = 8).
+    /// memory rather than in registers (`PENDING_SHARED`): on GPUs it saves registers (isa,
+    /// f16h B = 4: navi31 84 -> 72 VGPRs; ga102 207 -> 186; g610 646 -> 357 spills and fills;
+    /// a740 unchanged at B = 4, 168 -> 128 at B = 8). Not on Intel's compiler, where it costs
+    /// registers (lnl f16h fp16 B = 4: 103 -> 110, and more spills at B = 16), nor on a CPU
+    /// implementation, where registers are not scarce and shared memory is memory (lavapipe,
+    /// `bench`: f16h fp32 math B = 4 0.82-0.84x the speed of the entry in registers).
     pub pending_shared: bool,
 }
 
@@ -309,10 +311,11 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             pipeline_statistics: stats_ok,
             spirv_minor,
             register_array_bytes: if drv.driver_id == vk::DriverId::MESA_TURNIP { 256 } else { 0 },
-            pending_shared: !matches!(
-                drv.driver_id,
-                vk::DriverId::INTEL_OPEN_SOURCE_MESA | vk::DriverId::INTEL_PROPRIETARY_WINDOWS
-            ),
+            pending_shared: props.device_type != vk::PhysicalDeviceType::CPU
+                && !matches!(
+                    drv.driver_id,
+                    vk::DriverId::INTEL_OPEN_SOURCE_MESA | vk::DriverId::INTEL_PROPRIETARY_WINDOWS
+                ),
         }
     }
 }
