@@ -99,7 +99,8 @@ pub struct Decision {
     pub id: KernelId,
     /// The subgroup size the pipeline is pinned to (`None`: the driver's).
     pub pin: Option<u32>,
-    /// fp64, 16-bit storage and the SPIR-V version of the device's build.
+    /// What the device's build takes from it: fp64, 16-bit storage, the SPIR-V version, the
+    /// private arrays its compiler keeps in registers and where the next entry is held.
     pub build: DeviceBuild,
 }
 

@@ -371,7 +371,8 @@ pub struct DeviceBuild {
 }
 
 impl DeviceBuild {
-    /// A Vulkan 1.2 device with both (the SPIR-V in `spirv/`, `halftrace shaders`).
+    /// A Vulkan 1.2 GPU with fp64 and 16-bit storage, whose compiler keeps no private array in
+    /// registers, the next entry in shared memory (the SPIR-V in `spirv/`, `halftrace shaders`).
     pub const FULL: DeviceBuild =
         DeviceBuild { f64: true, storage16: true, spirv_minor: 5, register_array_bytes: 0, pending_shared: true };
 }

@@ -278,11 +278,11 @@ fn isa_builds_on_every_vendors_compiler() {
         }
         let f32 = ok.iter().find(|r| r.layout == "f32").unwrap_or_else(|| panic!("{model}: f32 did not build"));
         for h in ok.iter().filter(|r| r.layout == "f16h") {
-            let (a, b) = match (h.registers, f32.registers) {
-                (Some(a), Some(b)) => (a, b),
-                _ => (h.instructions.unwrap(), f32.instructions.unwrap()),
-            };
-            assert!(a >= b, "{model} {}: {a} registers (or instructions) below f32's {b}", h.kernel);
+            // f16h's kernel holds more code than f32's (frames, fp16 conversions, the group
+            // stack); its registers need not be more (v3d-71: 62 against f32's 64, both capped
+            // near 64 and spilling the rest).
+            let (a, b) = (h.instructions.unwrap(), f32.instructions.unwrap());
+            assert!(a > b, "{model} {}: {a} instructions, not above f32's {b}", h.kernel);
             // turnip would keep f16h's group stack in registers but for GROUPS_ALLOC: then it
             // needed 192 registers and over a thousand private loads. The bound on
             // private loads (f32's + 10) holds, and the registers stay within f32's + 32.

@@ -207,32 +207,45 @@ fn integer_edge_recomputation_equals_the_reference() {
 
 /// The deferred stack's next entry in shared memory (`PENDING_SHARED`, what GPUs other than
 /// Intel's build; this CPU device keeps it in registers): f16h and f16h-poster in every math,
-/// single rays and subgroup packets, built as for such a GPU, give the CPU reference's hits and
-/// counters.
+/// single rays at every B and B = 4 packets in each implementation (subgroup; shared and
+/// hybrid, whose workgroup is the packet), built as for such a GPU, give the CPU reference's
+/// hits and counters.
 #[test]
 fn next_entry_in_shared_memory_equals_the_reference() {
     let g = gpu();
     let p = prepare(&scene_path("fandisk.obj"));
     let sets = ray_sets(&p, 32, 2000);
+    let runs = [
+        (2, 1, PacketImpl::Single),
+        (4, 1, PacketImpl::Single),
+        (8, 1, PacketImpl::Single),
+        (16, 1, PacketImpl::Single),
+        (4, 4, PacketImpl::Subgroup),
+        (4, 4, PacketImpl::Shared),
+        (4, 16, PacketImpl::Hybrid),
+    ];
     for layout in [layout("f16h"), layout("f16h-poster")] {
-        for b in [2, 4, 8] {
+        for (b, pk, imp) in runs {
             let enc = encode(&p, layout, b);
             let gb = GpuBvh::upload(&g, &enc).unwrap();
             for &math in layout.info().maths {
-                for (pk, imp) in [(1, PacketImpl::Single), (4, PacketImpl::Subgroup)] {
-                    let v = Variant::new(layout, b, pk).with_math(math).with_buffers(gb.buffers);
-                    let id = KernelId::new(v, imp, true);
-                    let mut d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
-                    d.build.pending_shared = true;
-                    let k = Kernel::build(&g, &d.with_stats(true), &Source::Builtin)
-                        .unwrap_or_else(|e| panic!("{id}: {e}"));
-                    for (kind, rays) in &sets {
-                        let what = format!("{id}, next entry in shared memory, {kind} rays");
-                        let a = k.run(&g, &gb, rays, 0, 1).unwrap();
-                        let (hits, counters) = enc.reference(rays, pk, v.math, v.fc);
-                        assert_same_hits(&what, rays, &hits, &a.hits);
-                        assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
-                    }
+                let v = Variant::new(layout, b, pk).with_math(math).with_buffers(gb.buffers);
+                let id = KernelId::new(v, imp, true);
+                let mut d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
+                d.build.pending_shared = true;
+                // The build really is the shared-memory one (lavapipe's own keeps registers).
+                assert!(
+                    d.id.variant.defines(d.id.imp, true, d.build).iter().any(|(k, _)| k == "PENDING_SHARED"),
+                    "{id}: built without PENDING_SHARED"
+                );
+                let k =
+                    Kernel::build(&g, &d.with_stats(true), &Source::Builtin).unwrap_or_else(|e| panic!("{id}: {e}"));
+                for (kind, rays) in &sets {
+                    let what = format!("{id}, next entry in shared memory, {kind} rays");
+                    let a = k.run(&g, &gb, rays, 0, 1).unwrap();
+                    let (hits, counters) = enc.reference(rays, pk, v.math, v.fc);
+                    assert_same_hits(&what, rays, &hits, &a.hits);
+                    assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
                 }
             }
         }

@@ -31,7 +31,8 @@ pub struct IsaRow {
     pub vendor: String,
     pub driver: String,
     /// What the device's build of the kernels used: fp64 or its integer fallback, 16-bit
-    /// storage or 32-bit words, the SPIR-V version (`variant::DeviceBuild`).
+    /// storage or 32-bit words, the SPIR-V version, and where it differs from the GPU default
+    /// the group stack's allocation or the next entry in registers (`variant::DeviceBuild`).
     #[serde(default)]
     pub device_build: String,
     pub version: String,
