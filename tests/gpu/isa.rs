@@ -222,7 +222,7 @@ fn null_devices_are_refused_by_the_commands_that_run() {
 /// Every other vendor's production compiler through its drm-shim (scripts/install-compilers.sh
 /// builds them): one model per vendor, f32 and f16h in each math mode the device admits at
 /// B = 4. Each model's vendor-neutral columns are filled from its driver's own statistics, and
-/// f16h needs at least f32's registers (or, where the driver reports none, its instructions).
+/// f16h compiles to more instructions than f32.
 /// On Adreno a740, f16h keeps its group stack in memory (private loads, registers).
 /// CI installs the compilers and sets HALFTRACE_REQUIRE_COMPILERS=1, so there a missing
 /// install fails; elsewhere the test says it did not run and how to make it run.

@@ -171,6 +171,27 @@ fn spirv_folder_is_fresh_valid_and_really_fp16() {
     assert_eq!(n, 2 * expected.len());
 }
 
+/// `k`'s hits and counters on each ray set equal the CPU reference's for packets of `p` rays
+/// (`what` names the build in a failure).
+fn assert_matches_reference(
+    g: &Gpu,
+    k: &Kernel,
+    gb: &GpuBvh,
+    enc: &halftrace::layout::Encoded,
+    sets: &[(String, Vec<Ray>)],
+    p: usize,
+    what: &str,
+) {
+    let v = k.id.variant;
+    for (kind, rays) in sets {
+        let what = format!("{}, {what}, {kind} rays", k.id);
+        let a = k.run(g, gb, rays, 0, 1).unwrap();
+        let (hits, counters) = enc.reference(rays, p, v.math, v.fc);
+        assert_same_hits(&what, rays, &hits, &a.hits);
+        assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
+    }
+}
+
 /// The triangle test's integer recomputation of an edge function that is zero in fp32 (the
 /// build for devices without fp64 — Adreno, Mali, Broadcom —, `edge_f64` in glsl/tri.glsl),
 /// run on this device by building the kernels as for such a device: three inlined copies with
@@ -189,17 +210,8 @@ fn integer_edge_recomputation_equals_the_reference() {
         let gb = GpuBvh::upload(&g, &enc).unwrap();
         for fc in [FloatControls::On, FloatControls::Off] {
             let v = Variant::new(layout, 4, 1).with_fc(fc).with_buffers(gb.buffers);
-            let id = KernelId::new(v, PacketImpl::Single, true);
-            let mut d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
-            d.build.f64 = false;
-            let k = Kernel::build(&g, &d.with_stats(true), &Source::Builtin).unwrap_or_else(|e| panic!("{id}: {e}"));
-            for (kind, rays) in &sets {
-                let what = format!("{id} without fp64, {kind} rays");
-                let a = k.run(&g, &gb, rays, 0, 1).unwrap();
-                let (hits, counters) = enc.reference(rays, 1, v.math, fc);
-                assert_same_hits(&what, rays, &hits, &a.hits);
-                assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
-            }
+            let k = builtin_as(&g, &v, PacketImpl::Single, true, |d| d.build.f64 = false);
+            assert_matches_reference(&g, &k, &gb, &enc, &sets, 1, "without fp64");
         }
     }
     clean(&g);
@@ -230,23 +242,16 @@ fn next_entry_in_shared_memory_equals_the_reference() {
             let gb = GpuBvh::upload(&g, &enc).unwrap();
             for &math in layout.info().maths {
                 let v = Variant::new(layout, b, pk).with_math(math).with_buffers(gb.buffers);
-                let id = KernelId::new(v, imp, true);
-                let mut d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
-                d.build.pending_shared = true;
-                // The build really is the shared-memory one (lavapipe's own keeps registers).
-                assert!(
-                    d.id.variant.defines(d.id.imp, true, d.build).iter().any(|(k, _)| k == "PENDING_SHARED"),
-                    "{id}: built without PENDING_SHARED"
-                );
-                let k =
-                    Kernel::build(&g, &d.with_stats(true), &Source::Builtin).unwrap_or_else(|e| panic!("{id}: {e}"));
-                for (kind, rays) in &sets {
-                    let what = format!("{id}, next entry in shared memory, {kind} rays");
-                    let a = k.run(&g, &gb, rays, 0, 1).unwrap();
-                    let (hits, counters) = enc.reference(rays, pk, v.math, v.fc);
-                    assert_same_hits(&what, rays, &hits, &a.hits);
-                    assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
-                }
+                let k = builtin_as(&g, &v, imp, true, |d| {
+                    d.build.pending_shared = true;
+                    // The build really is the shared-memory one (lavapipe's own keeps registers).
+                    assert!(
+                        d.id.variant.defines(d.id.imp, true, d.build).iter().any(|(k, _)| k == "PENDING_SHARED"),
+                        "{}: built without PENDING_SHARED",
+                        d.id
+                    );
+                });
+                assert_matches_reference(&g, &k, &gb, &enc, &sets, pk, "next entry in shared memory");
             }
         }
     }

@@ -43,8 +43,21 @@ pub fn clean(g: &Gpu) {
 }
 
 pub fn builtin<'g>(g: &'g Gpu, v: &Variant, imp: PacketImpl, stats: bool) -> Kernel<'g> {
+    builtin_as(g, v, imp, stats, |_| {})
+}
+
+/// The built-in kernel as the device admits it, its decision changed by `edit` first (e.g. the
+/// build of a device without fp64).
+pub fn builtin_as<'g>(
+    g: &'g Gpu,
+    v: &Variant,
+    imp: PacketImpl,
+    stats: bool,
+    edit: impl FnOnce(&mut halftrace::gpu::support::Decision),
+) -> Kernel<'g> {
     let k = KernelId::new(*v, imp, stats);
-    let d = halftrace::gpu::support::admit(&g.info, &k).unwrap_or_else(|e| panic!("{k}: {e}"));
+    let mut d = halftrace::gpu::support::admit(&g.info, &k).unwrap_or_else(|e| panic!("{k}: {e}"));
+    edit(&mut d);
     Kernel::build(g, &d.with_stats(stats), &Source::Builtin).unwrap_or_else(|e| panic!("{k}: {e}"))
 }
 
