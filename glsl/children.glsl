@@ -8,7 +8,8 @@
 uint test_children(uint ni, Entry en, Visit v, RayPre r, bool act, out uint cw[B], out float key[B],
                    out ChildHit ch[B], inout Counts c) {
     uint mask = 0u;
-    [[unroll]] for (uint s = 0u; s < uint(B); s++) key[s] = INF;
+    ChildHit no_hit = {};
+    [[unroll]] for (uint s = 0u; s < uint(B); s++) { key[s] = INF; cw[s] = CHILD_EMPTY; ch[s] = no_hit; }
 #ifdef TEST_PAIRS
     // A lone last child is tested in a pair with the (in-bounds, ignored) slot after it.
     uint nc = uint(B);
@@ -43,14 +44,15 @@ uint test_children(uint ni, Entry en, Visit v, RayPre r, bool act, out uint cw[B
     [[unroll]] for (uint s = 0u; s < uint(B); s++) {
         cw[s] = child_word(ni, s);
         if (cw[s] == CHILD_EMPTY) break;
-        if (!act) continue;
-        c.box_tests++;
-        float k;
-        ChildHit h;
-        if (test_child(ni, s, en, v, r, k, h)) {
-            mask |= 1u << s;
-            key[s] = k;
-            ch[s] = h;
+        if (act) {
+            c.box_tests++;
+            float k;
+            ChildHit h;
+            if (test_child(ni, s, en, v, r, k, h)) {
+                mask |= 1u << s;
+                key[s] = k;
+                ch[s] = h;
+            }
         }
     }
 #endif

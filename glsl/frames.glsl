@@ -5,6 +5,8 @@
 // Child frame from its stored box: centre c (fp16), ratio r, world origin w, scale k
 // (frame.rs, derive_child).
 void derive_child(vec3 pw, float pk, HVEC3 lo, HVEC3 hi, out HVEC3 c, out float r, out vec3 w, out float k) {
+    c = HVEC3(0.0);
+    w = vec3(0.0);
     precise float h = 0.0;
 #ifdef FC_OFF
     // pk is a power of two: its reciprocal from the exponent bits, exactly.

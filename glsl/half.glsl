@@ -15,6 +15,7 @@ float up32(float x) { return isinf(x) ? x : upper32(x); }
 // Origin at world parameter t in frame (w, k), fp32 then fp16, clamped to +-OCAP; returns the
 // error bound (half.rs, anchor).
 float anchor(RayPre r, vec3 w, float k, float t, out OVEC o) {
+    o = OVEC(0.0);
     float mag = 0.0;
     float clampd = 0.0;
     float lmax = 0.0;

@@ -86,10 +86,11 @@ uint packet_reduce(bool act, uint mask, inout float key[B], out uint nact) {
         nact += w >> 16;
     }
     [[unroll]] for (uint s = 0u; s < uint(B); s++) {
-        if ((any_mask & (1u << s)) == 0u) continue;
-        float mn = INF;
-        for (uint k = 0u; k < parts; k++) mn = min(mn, sh_key[2u * s * uint(P) + base + k]);
-        key[s] = mn;
+        if ((any_mask & (1u << s)) != 0u) {
+            float mn = INF;
+            for (uint k = 0u; k < parts; k++) mn = min(mn, sh_key[2u * s * uint(P) + base + k]);
+            key[s] = mn;
+        }
     }
     return any_mask;
 }

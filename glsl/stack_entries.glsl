@@ -29,21 +29,22 @@ void push_children(inout uint ni, inout Entry en, Visit v, RayPre r, uint mask, 
     uint next_node = 0u;
     Entry next_entry = no_entry();
     [[unroll]] for (uint s = 0u; s < uint(B); s++) {
-        if ((inner & (1u << s)) == 0u) continue;
-        int rank = 0;
-        [[unroll]] for (uint t = 0u; t < uint(B); t++) {
-            bool before = key[t] < key[s] || (key[t] == key[s] && t < s);
-            if ((inner & (1u << t)) != 0u && before) rank++;
-        }
-        Entry e = (mask & (1u << s)) != 0u ? child_entry(ni, s, en, v, ch[s], r, c.reanchors) : no_entry();
-        if (rank == 0) {
-            next_node = cw[s];
-            next_entry = e;
-        } else {
-            int pos = sp + n - 1 - rank;
-            if (pos < STACK_SIZE) {
-                st_node[pos] = cw[s];
-                st[pos] = e;
+        if ((inner & (1u << s)) != 0u) {
+            int rank = 0;
+            [[unroll]] for (uint t = 0u; t < uint(B); t++) {
+                bool before = key[t] < key[s] || (key[t] == key[s] && t < s);
+                if ((inner & (1u << t)) != 0u && before) rank++;
+            }
+            Entry e = (mask & (1u << s)) != 0u ? child_entry(ni, s, en, v, ch[s], r, c.reanchors) : no_entry();
+            if (rank == 0) {
+                next_node = cw[s];
+                next_entry = e;
+            } else {
+                int pos = sp + n - 1 - rank;
+                if (pos < STACK_SIZE) {
+                    st_node[pos] = cw[s];
+                    st[pos] = e;
+                }
             }
         }
     }

@@ -94,15 +94,16 @@ void push_children(inout uint ni, inout Entry en, Visit v, RayPre r, uint mask, 
     uint s0 = 0u;
     Meta gm = meta_new(mask, n - 1);
     [[unroll]] for (uint s = 0u; s < uint(B); s++) {
-        if ((inner & (1u << s)) == 0u) continue;
-        int rank = 0;
-        [[unroll]] for (uint t = 0u; t < uint(B); t++) {
-            // (key, slot) order with one comparison: t < s is known when unrolled.
-            bool before = t < s ? key[t] <= key[s] : key[t] < key[s];
-            if ((inner & (1u << t)) != 0u && before) rank++;
+        if ((inner & (1u << s)) != 0u) {
+            int rank = 0;
+            [[unroll]] for (uint t = 0u; t < uint(B); t++) {
+                // (key, slot) order with one comparison: t < s is known when unrolled.
+                bool before = t < s ? key[t] <= key[s] : key[t] < key[s];
+                if ((inner & (1u << t)) != 0u && before) rank++;
+            }
+            if (rank == 0) s0 = s;
+            else gm = meta_put(gm, rank - 1, s);
         }
-        if (rank == 0) s0 = s;
-        else gm = meta_put(gm, rank - 1, s);
     }
     if (n > 0) {
         if (n > 1) {

@@ -1,5 +1,6 @@
 #version 460
 #extension GL_EXT_control_flow_attributes : require
+#extension GL_EXT_null_initializer : require
 // The traversal skeleton of every layout and kernel family: single rays (P = 1) and packets of
 // P rays (packet.glsl: in a subgroup, a subgroup then shared memory, or shared memory), with
 // counters where STATS is defined. It mirrors src/layout/traverse.rs step for step.
@@ -95,9 +96,10 @@ void main() {
                 // triangle tests.
                 uint inner = 0u, leaves = 0u;
                 [[unroll]] for (uint s = 0u; s < uint(B); s++) {
-                    if ((any_mask & (1u << s)) == 0u) continue;
-                    if (!is_leaf(cw[s])) inner |= 1u << s;
-                    else leaves |= mask & (1u << s);
+                    if ((any_mask & (1u << s)) != 0u) {
+                        if (!is_leaf(cw[s])) inner |= 1u << s;
+                        else leaves |= mask & (1u << s);
+                    }
                 }
                 if (!stack_fits(inner)) {
                     overflow = true;

@@ -95,6 +95,7 @@ float edge_f64(float a, float b, float c, float d) {
 
 // t is exact (div_rte); the barycentrics come as numerators over det (closest_test divides).
 bool tri_intersect(RayPre r, uint ti, out float t, out float nu, out float nv, out float det_out) {
+    t = 0.0; nu = 0.0; nv = 0.0; det_out = 0.0;
     uint b = 9u * ti;
     precise float A[3];
     precise float Bv[3];
@@ -189,6 +190,7 @@ float sel_max(float x, float y) { return x < y ? y : x; }
 // t' = max(t, enter). Its argument is in hit.rs.
 bool admit(RayPre r, uint ti, float t, out float t_kept) {
     uint b = 9u * ti;
+    t_kept = t;
     float enter = r.tmin;
     float exit_t = HIT_CAP;
     for (int a = 0; a < 3; a++) {

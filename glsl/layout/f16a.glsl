@@ -23,6 +23,8 @@ void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 #include "anchored.glsl"
 
 void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
+    lo = vec3(0.0);
+    hi = vec3(0.0);
     float ik = inv_pow2(f.k);
     vec3 l = vec3(slot_lo(ni, s));
     vec3 u = vec3(slot_hi(ni, s));

@@ -69,7 +69,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
     float lower = float(v.lower);
     float tlo_c = half_child_tlo(v, en.tp, en.tlo, h.tn_lb);
     float se = max(h.tn, lower);
-    OVEC o2;
+    OVEC o2 = OVEC(0.0);
     bool fits = true;
 #if defined(FC_OFF) && !defined(MATH_F32)
     // The fp16 origin move must not overflow (hooks.rs): else re-anchor.
@@ -146,7 +146,7 @@ Entry child_entry(uint ni, uint s, Entry en, Visit v, ChildHit h, RayPre r, inou
 #else
     precise float inv_k = 1.0 / fk;
 #endif
-    vec3 blo, bhi;
+    vec3 blo = vec3(0.0), bhi = vec3(0.0);
     for (int a = 0; a < 3; a++) {
         precise float bl = fw[a] + float(lo[a]) * inv_k;
         precise float bh = fw[a] + float(hi[a]) * inv_k;

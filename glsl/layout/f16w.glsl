@@ -22,6 +22,8 @@ void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 NodeFrame load_frame(uint ni) { return NodeFrame(inv_pow2(pc.root.w)); }
 
 void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
+    lo = vec3(0.0);
+    hi = vec3(0.0);
     float ik = f.ik;
     vec3 l = vec3(slot_lo(ni, s));
     vec3 u = vec3(slot_hi(ni, s));

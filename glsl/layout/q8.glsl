@@ -29,6 +29,8 @@ uint qbyte(uint ni, uint i) { return (nodes[ni].q[i >> 2u] >> ((i & 3u) * 8u)) &
 
 // The quantized box in grid units.
 void grid_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
+    lo = vec3(0.0);
+    hi = vec3(0.0);
     for (int a = 0; a < 3; a++) {
         lo[a] = float(qbyte(ni, uint(a) * uint(B) + s));
         hi[a] = float(qbyte(ni, 3u * uint(B) + uint(a) * uint(B) + s));
@@ -50,6 +52,8 @@ void node_frame(NodeFrame f, out vec3 w, out float k) {
     k = pow2(E_SHIFT - frame_emax(f));
 }
 void local_box(NodeFrame fr, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
+    lo = HVEC3(0.0);
+    hi = HVEC3(0.0);
     vec3 l, u;
     grid_box(ni, s, l, u);
     int em = frame_emax(fr);
@@ -65,6 +69,8 @@ void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 #include "anchored.glsl"
 
 void world_box(NodeFrame fr, uint ni, uint s, out vec3 lo, out vec3 hi) {
+    lo = vec3(0.0);
+    hi = vec3(0.0);
     vec3 l, u;
     grid_box(ni, s, l, u);
     for (int a = 0; a < 3; a++) {
