@@ -161,3 +161,55 @@ pub fn compile_source(
         .map_err(|e| compile_err(e.to_string()))?;
     Ok(art.as_binary().to_vec())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::SOURCES;
+    use crate::layout::LayoutId;
+
+    /// The bodies of the `[[unroll]]` loops of GLSL source `src`: from the loop's `{` to its
+    /// matching `}` (comments removed first).
+    fn unrolled_bodies(src: &str) -> Vec<String> {
+        let code: String = src.lines().map(|l| l.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n");
+        let mut out = Vec::new();
+        for (at, _) in code.match_indices("[[unroll]]") {
+            let Some(open) = code[at..].find('{').map(|o| at + o) else { continue };
+            let mut depth = 0usize;
+            for (i, ch) in code[open..].char_indices() {
+                match ch {
+                    '{' => depth += 1,
+                    '}' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            out.push(code[open..open + i + 1].to_string());
+                            break;
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        out
+    }
+
+    /// No `continue` in an `[[unroll]]` loop of any kernel source or layout hook: Mesa's NIR does
+    /// not unroll such a loop and lowers the continue with flags that read the previous
+    /// iteration's values, which then live across the whole traversal loop (Mali-G610, f32 at
+    /// B = 4: 47 spills and fills with the continues, 6 without; see docs/architecture.md).
+    #[test]
+    fn no_unrolled_loop_continues() {
+        let mut files: Vec<(String, &str)> = SOURCES.iter().map(|(n, s)| (n.to_string(), *s)).collect();
+        files.extend(LayoutId::all().map(|l| (format!("layout/{}.glsl", l.name()), l.info().glsl)));
+        let mut bodies = 0;
+        for (name, src) in &files {
+            for body in unrolled_bodies(src) {
+                bodies += 1;
+                assert!(!body.contains("continue"), "{name}: an [[unroll]] loop continues:\n{body}");
+            }
+        }
+        assert!(bodies >= 8, "only {bodies} [[unroll]] loops found: the scan is broken");
+        // The scan finds what it looks for.
+        assert_eq!(unrolled_bodies("[[unroll]] for (;;) { if (x) { continue; } }\n").len(), 1);
+        assert!(unrolled_bodies("[[unroll]] for (;;) { if (x) { continue; } }")[0].contains("continue"));
+    }
+}
