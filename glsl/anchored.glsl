@@ -6,9 +6,10 @@
 //   void node_frame(NodeFrame f, out vec3 w, out float k)             x_local = (x - w) * k
 //   void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi)   fp16 box in it
 //   void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi)     fp32 world box
-//                                                     (decode_plane; may be declared only)
+//   void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi)
+//                     its axis a (FC_OFF) (both with decode_plane; may be declared only)
 // MATH_F32: the stored box decoded to world fp32 (still containing the true box), then the
-// robust fp32 slab test.
+// robust fp32 slab test (FC_OFF: one axis at a time).
 // Otherwise: the origin anchored in the node frame at the node's entry bound (fp32, rounded to
 // fp16, with its error bound), then the widened fp16 slab test of f16h.
 // Stack Entry (generated): t = a lower bound of the world parameter of anything that can still
@@ -62,12 +63,29 @@ Visit visit_node(uint ni, Entry en, RayPre r, float best) {
 
 // (entry parameter, its lower bound): world t in fp32 math, the node frame's s otherwise.
 struct ChildHit { float tn; float tn_lb; };
+#ifdef MATH_F32
+#define HIT_FROM_KEY(k) ChildHit(k, k)   // test_child's h in fp32 math
+#endif
 
 bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out ChildHit h) {
 #ifdef MATH_F32
+#ifdef FC_OFF
+    vec2 q = vec2(r.tmin, v.tmax);
+    // Without float controls decode_plane is an integer emulation: each axis's planes are
+    // decoded and tested in turn (slab32's steps), so that no decoded box is held whole
+    // (Mali-G610, f16w at B = 4: 63 spills and fills with the whole box, 6 this way).
+    for (int a = 0; a < 3; a++) {
+        float lo, hi;
+        world_planes(v.f, ni, s, a, lo, hi);
+        slab32_axis(r, a, lo, hi, q.x, q.y);
+    }
+#else
+    // The whole box first, its loads together (RDNA3: the axis-by-axis order costs f16w and
+    // f16a 50 % more per traversal step in ACO's model).
     vec3 lo, hi;
     world_box(v.f, ni, s, lo, hi);
     vec2 q = slab32(r, lo, hi, r.tmin, v.tmax);
+#endif
     key = q.x;
     h = ChildHit(q.x, q.x);
     return q.x <= q.y;

@@ -2,6 +2,17 @@
 // slots s and s + 1 at once, packed fp16 arithmetic; else test_child one by one), with the same
 // results and counts either way. Mirrors the child loop of src/layout/traverse.rs (`packet`).
 
+// A layout whose ChildHit is a function of the child's key alone defines HIT_FROM_KEY(k). For
+// single rays, whose keys are their own (a packet's are reduced over its rays), a visit then
+// keeps no ChildHits: VISIT_HIT(s) derives slot s's from its key (Mali-G610, f16w with fp32
+// math at B = 4: 6 spills and fills with them kept, none without).
+#if P == 1 && defined(HIT_FROM_KEY)
+#define KEY_HITS 1
+#define VISIT_HIT(s) HIT_FROM_KEY(key[s])
+#else
+#define VISIT_HIT(s) ch[s]
+#endif
+
 // The visit's child words (read once per visit; slots past the first empty one are never
 // read) and, where the ray is active, its hit mask over the children with each hit child's
 // key and ChildHit; counts the box tests.
@@ -51,7 +62,9 @@ uint test_children(uint ni, Entry en, Visit v, RayPre r, bool act, out uint cw[B
             if (test_child(ni, s, en, v, r, k, h)) {
                 mask |= 1u << s;
                 key[s] = k;
+#ifndef KEY_HITS
                 ch[s] = h;
+#endif
             }
         }
     }

@@ -35,7 +35,7 @@ void push_children(inout uint ni, inout Entry en, Visit v, RayPre r, uint mask, 
                 bool before = key[t] < key[s] || (key[t] == key[s] && t < s);
                 if ((inner & (1u << t)) != 0u && before) rank++;
             }
-            Entry e = (mask & (1u << s)) != 0u ? child_entry(ni, s, en, v, ch[s], r, c.reanchors) : no_entry();
+            Entry e = (mask & (1u << s)) != 0u ? child_entry(ni, s, en, v, VISIT_HIT(s), r, c.reanchors) : no_entry();
             if (rank == 0) {
                 next_node = cw[s];
                 next_entry = e;

@@ -19,6 +19,7 @@ void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     hi = slot_hi(ni, s);
 }
 void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
+void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi);
 
 #include "anchored.glsl"
 
@@ -33,4 +34,12 @@ void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
         lo[a] = decode_plane(w, l[a] * ik);
         hi[a] = decode_plane(w, u[a] * ik);
     }
+}
+
+// Axis a of world_box (the build without float controls tests a box axis by axis).
+void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi) {
+    float ik = inv_pow2(f.k);
+    uint i = uint(a) * uint(B) + s;
+    lo = decode_plane(f.w[a], float(NODE_LO(ni, i)) * ik);
+    hi = decode_plane(f.w[a], float(NODE_HI(ni, i)) * ik);
 }

@@ -16,6 +16,7 @@ void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     hi = slot_hi(ni, s);
 }
 void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
+void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi);
 
 #include "anchored.glsl"
 
@@ -32,4 +33,12 @@ void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
         lo[a] = decode_plane(pc.root[a], l[a] * ik);
         hi[a] = decode_plane(pc.root[a], u[a] * ik);
     }
+}
+
+// Axis a of world_box (the build without float controls tests a box axis by axis).
+void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi) {
+    uint i = uint(a) * uint(B) + s;
+    // fp16 times a power of two: exact in fp32; one rounding in the sum (decode_plane).
+    lo = decode_plane(pc.root[a], float(NODE_LO(ni, i)) * f.ik);
+    hi = decode_plane(pc.root[a], float(NODE_HI(ni, i)) * f.ik);
 }

@@ -27,6 +27,7 @@ struct Visit { float tmax; };
 Visit visit_node(uint ni, Entry e, RayPre r, float best) { return Visit(best); }
 
 struct ChildHit { float t; };
+#define HIT_FROM_KEY(k) ChildHit(k)   // test_child's h is ChildHit(key)
 
 bool test_child(uint ni, uint s, Entry e, Visit v, RayPre r, out float key, out ChildHit h) {
     vec3 lo, hi;

@@ -65,6 +65,7 @@ void local_box(NodeFrame fr, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     }
 }
 void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
+void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi);
 
 #include "anchored.glsl"
 
@@ -79,4 +80,12 @@ void world_box(NodeFrame fr, uint ni, uint s, out vec3 lo, out vec3 hi) {
         lo[a] = decode_plane(fr.p[a], l[a] * f);
         hi[a] = decode_plane(fr.p[a], u[a] * f);
     }
+}
+
+// Axis a of world_box (the build without float controls tests a box axis by axis).
+void world_planes(NodeFrame fr, uint ni, uint s, int a, out float lo, out float hi) {
+    float f = pow2(fr.e[a]);
+    // q 2^e is exact in fp32; one rounding in the sum (decode_plane).
+    lo = decode_plane(fr.p[a], float(qbyte(ni, uint(a) * uint(B) + s)) * f);
+    hi = decode_plane(fr.p[a], float(qbyte(ni, 3u * uint(B) + uint(a) * uint(B) + s)) * f);
 }
