@@ -81,7 +81,8 @@ bool test_child(uint ni, uint s, Entry en, Visit v, RayPre r, out float key, out
     }
 #else
     // The whole box first, its loads together (RDNA3: the axis-by-axis order costs f16w and
-    // f16a 50 % more per traversal step in ACO's model).
+    // f16a 50 % more per traversal step in ACO's model, teapot primary rays at B = 4: 123 → 184
+    // of 375 → 437 cycles per ray).
     vec3 lo, hi;
     world_box(v.f, ni, s, lo, hi);
     vec2 q = slab32(r, lo, hi, r.tmin, v.tmax);

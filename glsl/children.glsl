@@ -7,6 +7,9 @@
 // keeps no ChildHits: VISIT_HIT(s) derives slot s's from its key (Mali-G610, f16w with fp32
 // math at B = 4: 6 spills and fills with them kept, none without).
 #if P == 1 && defined(HIT_FROM_KEY)
+#ifdef TEST_PAIRS
+#error "HIT_FROM_KEY with TEST_PAIRS: the pair test keeps ChildHits (children.glsl)"
+#endif
 #define KEY_HITS 1
 #define VISIT_HIT(s) HIT_FROM_KEY(key[s])
 #else
@@ -15,7 +18,8 @@
 
 // The visit's child words (read once per visit; slots past the first empty one are never
 // read) and, where the ray is active, its hit mask over the children with each hit child's
-// key and ChildHit; counts the box tests.
+// key and ChildHit (with KEY_HITS no ChildHit: read a hit child's as VISIT_HIT(s), never ch[s]);
+// counts the box tests.
 uint test_children(uint ni, Entry en, Visit v, RayPre r, bool act, out uint cw[B], out float key[B],
                    out ChildHit ch[B], inout Counts c) {
     uint mask = 0u;

@@ -22,7 +22,8 @@
 //         RayPre r, out vec2 key, out ChildHit h0, out ChildHit h1): slots s and s + 1 at once
 //   Entry child_entry(uint ni, uint s, Entry e, Visit v, ChildHit h, RayPre r, inout uint reanchors)
 //   (optional) #define HIT_FROM_KEY(k): the ChildHit test_child returns with key k, where it
-//         depends on nothing else (children.glsl: single rays then keep no ChildHits)
+//         depends on nothing else (children.glsl: single rays then keep no ChildHits; not
+//         with TEST_PAIRS)
 //
 //
 // The pieces: children.glsl (a visit's child tests, singles or pairs), and one of two stack

@@ -286,15 +286,16 @@ fn isa_builds_on_every_vendors_compiler() {
             assert!(a > b, "{model} {}: {a} instructions, not above f32's {b}", h.kernel);
             // turnip would keep f16h's group stack in registers but for GROUPS_ALLOC: then it
             // needed 192 registers and over a thousand private loads. The bounds hold:
-            // private loads at most f32's + 10, and with fp16 math registers at most f32's + 8
-            // vec4 registers (+ 32 in the column's 32-bit registers).
+            // private loads at most f32's + 10, and with fp16 or mixed math registers at most
+            // f32's + 8 vec4 registers (+ 32 in the column's 32-bit registers; fp32 math needs
+            // 128 against f32's 76).
             if model == "a740" {
                 let ldp = |r: &IsaRow| {
                     *r.stats.get("LDP Count").unwrap_or_else(|| panic!("a740 {}: no LDP Count {:?}", r.kernel, r.stats))
                 };
                 assert!(ldp(h) <= ldp(f32) + 10.0, "a740 {}: {} private loads, f32 {}", h.kernel, ldp(h), ldp(f32));
                 let (rh, rf) = (h.registers.expect("a740 f16h registers"), f32.registers.expect("a740 f32 registers"));
-                if h.math == "f16" {
+                if h.math != "f32" {
                     assert!(rh <= rf + 32.0, "a740 {}: {rh} registers against f32's {rf}", h.kernel);
                 }
             }

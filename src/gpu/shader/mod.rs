@@ -167,26 +167,44 @@ mod tests {
     use super::SOURCES;
     use crate::layout::LayoutId;
 
-    /// The bodies of the `[[unroll]]` loops of GLSL source `src`: from the loop's `{` to its
-    /// matching `}` (comments removed first).
+    /// The bodies of the `[[unroll]]` loops of GLSL source `src` (comments removed first): after
+    /// the loop's parenthesised header, its `{…}` block, or its single statement up to `;`.
     fn unrolled_bodies(src: &str) -> Vec<String> {
-        let code: String = src.lines().map(|l| l.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n");
+        let mut code = String::new();
+        let mut rest = src;
+        while let Some(at) = rest.find("/*") {
+            code.push_str(&rest[..at]);
+            rest = rest[at..].find("*/").map_or("", |e| &rest[at + e + 2..]);
+        }
+        code.push_str(rest);
+        let code: String = code.lines().map(|l| l.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n");
+        // The end (exclusive) of the balanced `open`…`close` group starting at byte `from`.
+        let group_end = |from: usize, open: char, close: char| {
+            let mut depth = 0usize;
+            for (i, ch) in code[from..].char_indices() {
+                if ch == open {
+                    depth += 1;
+                } else if ch == close {
+                    depth -= 1;
+                    if depth == 0 {
+                        return Some(from + i + ch.len_utf8());
+                    }
+                }
+            }
+            None
+        };
         let mut out = Vec::new();
         for (at, _) in code.match_indices("[[unroll]]") {
-            let Some(open) = code[at..].find('{').map(|o| at + o) else { continue };
-            let mut depth = 0usize;
-            for (i, ch) in code[open..].char_indices() {
-                match ch {
-                    '{' => depth += 1,
-                    '}' => {
-                        depth -= 1;
-                        if depth == 0 {
-                            out.push(code[open..open + i + 1].to_string());
-                            break;
-                        }
-                    }
-                    _ => {}
-                }
+            let Some(header) = code[at..].find('(').map(|o| at + o) else { continue };
+            let Some(body) = group_end(header, '(', ')') else { continue };
+            let start = body + code[body..].len() - code[body..].trim_start().len();
+            let end = if code[start..].starts_with('{') {
+                group_end(start, '{', '}')
+            } else {
+                code[start..].find(';').map(|e| start + e + 1)
+            };
+            if let Some(end) = end {
+                out.push(code[start..end].to_string());
             }
         }
         out
@@ -208,8 +226,12 @@ mod tests {
             }
         }
         assert!(bodies >= 8, "only {bodies} [[unroll]] loops found: the scan is broken");
-        // The scan finds what it looks for.
-        assert_eq!(unrolled_bodies("[[unroll]] for (;;) { if (x) { continue; } }\n").len(), 1);
-        assert!(unrolled_bodies("[[unroll]] for (;;) { if (x) { continue; } }")[0].contains("continue"));
+        // The scan finds what it looks for: a block, a single statement, not a comment.
+        let block = unrolled_bodies("[[unroll]] for (uint s = 0u; s < 4u; s++) { if (x) { continue; } }\n");
+        assert!(block.len() == 1 && block[0].contains("continue"), "{block:?}");
+        let single = unrolled_bodies("[[unroll]] for (int a = 0; a < 3; a++) if (x) continue;\n{ y(); }");
+        assert!(single.len() == 1 && single[0].contains("continue") && !single[0].contains("y()"), "{single:?}");
+        let commented = unrolled_bodies("/* [[unroll]] for (;;) { continue; } */ // [[unroll]] for (;;) {}\n");
+        assert!(commented.is_empty(), "{commented:?}");
     }
 }
