@@ -5,9 +5,8 @@
 //   NodeFrame load_frame(uint ni)                     read once per visit (may be declared only)
 //   void node_frame(NodeFrame f, out vec3 w, out float k)             x_local = (x - w) * k
 //   void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi)   fp16 box in it
-//   void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi)     fp32 world box
 //   void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi)
-//                     its axis a (FC_OFF) (both with decode_plane; may be declared only)
+//                     axis a of the fp32 world box (decode_plane; may be declared only)
 // MATH_F32: the stored box decoded to world fp32 (still containing the true box), then the
 // robust fp32 slab test (FC_OFF: one axis at a time).
 // Otherwise: the origin anchored in the node frame at the node's entry bound (fp32, rounded to
@@ -59,6 +58,13 @@ Visit visit_node(uint ni, Entry en, RayPre r, float best) {
     v.h = half_visit(k, e, en.t, en.t, best);
 #endif
     return v;
+}
+
+// The fp32 world box of slot s, axis by axis.
+void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
+    lo = vec3(0.0);
+    hi = vec3(0.0);
+    for (int a = 0; a < 3; a++) world_planes(f, ni, s, a, lo[a], hi[a]);
 }
 
 // (entry parameter, its lower bound): world t in fp32 math, the node frame's s otherwise.

@@ -18,25 +18,11 @@ void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     lo = slot_lo(ni, s);
     hi = slot_hi(ni, s);
 }
-void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi);
 
 #include "anchored.glsl"
 
-void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
-    lo = vec3(0.0);
-    hi = vec3(0.0);
-    float ik = inv_pow2(f.k);
-    vec3 l = vec3(slot_lo(ni, s));
-    vec3 u = vec3(slot_hi(ni, s));
-    for (int a = 0; a < 3; a++) {
-        float w = f.w[a];
-        lo[a] = decode_plane(w, l[a] * ik);
-        hi[a] = decode_plane(w, u[a] * ik);
-    }
-}
-
-// Axis a of world_box (the build without float controls tests a box axis by axis).
+// Axis a of the fp32 world box (anchored.glsl: world_box; FC_OFF tests a box axis by axis).
 void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi) {
     float ik = inv_pow2(f.k);
     uint i = uint(a) * uint(B) + s;

@@ -15,27 +15,13 @@ void local_box(NodeFrame f, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
     lo = slot_lo(ni, s);
     hi = slot_hi(ni, s);
 }
-void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi);
 
 #include "anchored.glsl"
 
 NodeFrame load_frame(uint ni) { return NodeFrame(inv_pow2(pc.root.w)); }
 
-void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi) {
-    lo = vec3(0.0);
-    hi = vec3(0.0);
-    float ik = f.ik;
-    vec3 l = vec3(slot_lo(ni, s));
-    vec3 u = vec3(slot_hi(ni, s));
-    for (int a = 0; a < 3; a++) {
-        // fp16 times a power of two: exact in fp32; one rounding in the sum (decode_plane).
-        lo[a] = decode_plane(pc.root[a], l[a] * ik);
-        hi[a] = decode_plane(pc.root[a], u[a] * ik);
-    }
-}
-
-// Axis a of world_box (the build without float controls tests a box axis by axis).
+// Axis a of the fp32 world box (anchored.glsl: world_box; FC_OFF tests a box axis by axis).
 void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi) {
     uint i = uint(a) * uint(B) + s;
     // fp16 times a power of two: exact in fp32; one rounding in the sum (decode_plane).

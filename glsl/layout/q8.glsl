@@ -27,14 +27,17 @@ uint child_word(uint ni, uint s) {
 
 uint qbyte(uint ni, uint i) { return (nodes[ni].q[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu; }
 
+// Axis a of the quantized box in grid units.
+void grid_planes(uint ni, uint s, int a, out float lo, out float hi) {
+    lo = float(qbyte(ni, uint(a) * uint(B) + s));
+    hi = float(qbyte(ni, 3u * uint(B) + uint(a) * uint(B) + s));
+}
+
 // The quantized box in grid units.
 void grid_box(uint ni, uint s, out vec3 lo, out vec3 hi) {
     lo = vec3(0.0);
     hi = vec3(0.0);
-    for (int a = 0; a < 3; a++) {
-        lo[a] = float(qbyte(ni, uint(a) * uint(B) + s));
-        hi[a] = float(qbyte(ni, 3u * uint(B) + uint(a) * uint(B) + s));
-    }
+    for (int a = 0; a < 3; a++) grid_planes(ni, s, a, lo[a], hi[a]);
 }
 
 void child_box(uint ni, uint s, out vec3 lo, out vec3 hi) { grid_box(ni, s, lo, hi); }
@@ -64,28 +67,16 @@ void local_box(NodeFrame fr, uint ni, uint s, out HVEC3 lo, out HVEC3 hi) {
         hi[a] = HALF(u[a] * f);
     }
 }
-void world_box(NodeFrame f, uint ni, uint s, out vec3 lo, out vec3 hi);
 void world_planes(NodeFrame f, uint ni, uint s, int a, out float lo, out float hi);
 
 #include "anchored.glsl"
 
-void world_box(NodeFrame fr, uint ni, uint s, out vec3 lo, out vec3 hi) {
-    lo = vec3(0.0);
-    hi = vec3(0.0);
-    vec3 l, u;
-    grid_box(ni, s, l, u);
-    for (int a = 0; a < 3; a++) {
-        float f = pow2(fr.e[a]);
-        // q 2^e is exact in fp32; one rounding in the sum (decode_plane).
-        lo[a] = decode_plane(fr.p[a], l[a] * f);
-        hi[a] = decode_plane(fr.p[a], u[a] * f);
-    }
-}
-
-// Axis a of world_box (the build without float controls tests a box axis by axis).
+// Axis a of the fp32 world box (anchored.glsl: world_box; FC_OFF tests a box axis by axis).
 void world_planes(NodeFrame fr, uint ni, uint s, int a, out float lo, out float hi) {
     float f = pow2(fr.e[a]);
     // q 2^e is exact in fp32; one rounding in the sum (decode_plane).
-    lo = decode_plane(fr.p[a], float(qbyte(ni, uint(a) * uint(B) + s)) * f);
-    hi = decode_plane(fr.p[a], float(qbyte(ni, 3u * uint(B) + uint(a) * uint(B) + s)) * f);
+    float l, u;
+    grid_planes(ni, s, a, l, u);
+    lo = decode_plane(fr.p[a], l * f);
+    hi = decode_plane(fr.p[a], u * f);
 }

@@ -139,7 +139,7 @@ pub const STACK_ENTRY: &[(&str, &str)] = &[("t", "float")];
 
 /// What a node of an anchored layout provides; [`anchored_hooks!`] builds the layout's hooks
 /// from it (the GLSL side: `NodeFrame` and `load_frame`, read once per visit, then
-/// `node_frame`, `local_box`, `world_box` and its axis `world_planes` before `anchored.glsl`).
+/// `node_frame`, `local_box`, `world_planes` — `anchored.glsl` builds `world_box` from it).
 pub trait AnchoredNode<Root> {
     /// The frame the node's fp16 boxes are stored in.
     fn frame(&self, root: &Root) -> Frame;
