@@ -4,6 +4,7 @@
 //! [`Closest`]), agreement between results, how a measurement ended ([`Status`]), the random generator ([`Rng`]) and the Rust↔GLSL
 //! struct mechanism ([`glsl`]). Every other module builds on these.
 
+pub mod exact;
 pub mod geom;
 pub mod glsl;
 pub mod hit;
