@@ -121,6 +121,13 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
     let my = (a[ky].abs() + py[0].abs()).max(b[ky].abs() + py[1].abs()).max(c[ky].abs() + py[2].abs());
     let ex = (6.0 * U) * mx;
     let ey = (6.0 * U) * my;
+    // The exact projected triangle lies on one side of the ray: a certain miss, whatever the
+    // edge functions (a tiny or edge-on triangle beside the ray).
+    let (x0, x1) = (ax.min(bx).min(cx), ax.max(bx).max(cx));
+    let (y0, y1) = (ay.min(by).min(cy), ay.max(by).max(cy));
+    if x0 > ex || x1 < -ex || y0 > ey || y1 < -ey {
+        return Cert::Miss;
+    }
     let xm = ax.abs().max(bx.abs()).max(cx.abs());
     let ym = ay.abs().max(by.abs()).max(cy.abs());
     // One bound for the three edge functions: 2γ₂·X·Y for the rounding of the 2×2
@@ -138,14 +145,23 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
     let det = uu + vv + ww;
     let s = uu.abs() + vv.abs() + ww.abs();
     let ed = 3.0 * e + (2.5 * U) * s;
-    if !(det.abs() > 2.0 * ed) {
-        return Cert::Unsure { t: 0.0, err: f32::INFINITY };
-    }
     let az = r.sz * a[kz];
     let bz = r.sz * b[kz];
     let cz = r.sz * c[kz];
     let zm = az.abs().max(bz.abs()).max(cz.abs());
     let ez = (3.5 * U) * zm;
+    let usable = det.abs() > 2.0 * ed; // false for NaN too
+    if !usable {
+        // No usable t: a crossing, if any, is a convex combination of the vertices, so its s
+        // lies within the vertices' depths (each within ez of its computed value).
+        let (z0, z1) = (az.min(bz).min(cz), az.max(bz).max(cz));
+        let t = 0.5 * (z0 + z1);
+        let err = (0.5 * (z1 - z0) + ez + U * t.abs()) * (1.0 + 1.0 / 65_536.0);
+        if !(t.is_finite() && err.is_finite()) {
+            return Cert::Unsure { t: 0.0, err: f32::INFINITY };
+        }
+        return Cert::Unsure { t: t * back, err: err * back };
+    }
     let tt = uu * az + vv * bz + ww * cz;
     let t = tt / det;
     // s − t = Σ U*ᵢ(z*ᵢ − t) / det*: the rounding of T, of det and of the quotient; the edge
