@@ -36,9 +36,12 @@
 //! floor. With padding p the check succeeds for a ray that truly meets the box whenever
 //! p >= 1.25·2⁻²⁰·D (D: the ∞-norm distance from the ray origin to the hit), i.e. for origins
 //! within 3.2× the scene's extent of the triangle (p = 2⁻¹⁸ of the extent) — the default
-//! camera frames a scene from about 2× its extent. Farther origins stay exact; near the edges
-//! of a triangle's box they may lose a hit that fp32 cannot place inside it.
+//! camera frames a scene from about 2× its extent. Farther origins stay consistent but not
+//! true: axis-aligned triangles vanish beyond about 4× the extent, and scenes far from the
+//! origin lose every hit (`tests/truth.rs` measures it). [`ClosestTrue`] is the rule that
+//! replaces this one (docs/layouts.md, "True hits").
 
+use super::exact;
 use super::geom::Aabb;
 use super::slab::{lower32, upper32, RayPre};
 use super::tri;
@@ -218,6 +221,76 @@ impl Closest {
             Hit { t: self.t, prim: self.prim, u: self.u, v: self.v }
         }
     }
+}
+
+/// The closest hit under the **true rule** (docs/layouts.md, "True hits"), the rule that is to
+/// replace [`Closest`]'s box rule: a triangle is hit where the *exact* ray (its fp32 origin and
+/// direction as exact numbers) crosses it, closed (edges and vertices included), at an exact
+/// parameter s in `[tmin, tmax]`; the hit is kept with
+///
+/// - `t' = hi`, the upper end of [`tri::certify`]'s interval, where fp32 certifies the crossing
+///   and its interval lies in `[tmin, tmax]`;
+/// - else `t' = ` s rounded up to f32, decided and placed exactly ([`exact::crossing`]: the rare
+///   path, counted in `rare`).
+///
+/// `t'` is a function of the ray and the triangle alone, with `s ≤ t'`: every BVH node above a
+/// hit triangle contains the exact crossing point, which the exact ray reaches at `s ≤ t' ≤
+/// best`, so every conservative traversal visits it — consistent, with no padding, at any
+/// distance and offset. Ties go to the lower prim, as in [`Closest`].
+#[derive(Clone, Copy, Debug)]
+pub struct ClosestTrue {
+    pub t: f32,
+    pub prim: i32,
+    pub u: f32,
+    pub v: f32,
+    /// Triangle tests that fp32 could not decide (the exact path ran).
+    pub rare: u32,
+}
+
+impl ClosestTrue {
+    pub fn new(tmax: f32) -> ClosestTrue {
+        ClosestTrue { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0, rare: 0 }
+    }
+
+    /// The kept t' of triangle `verts` (`None`: not hit), and its barycentrics; `rare` is
+    /// raised when the exact path decides. Skips the exact path for a triangle whose crossing
+    /// cannot be closer than `(best_t, best_prim)`.
+    pub fn kept(r: &RayPre, verts: &[f32; 9], prim: i32, best: (f32, i32), rare: &mut u32) -> Option<(f32, f32, f32)> {
+        let c = tri::certify(r, verts);
+        let (lo, hi) = c.bounds();
+        if hi < r.tmin || !closer(lo, prim, best) {
+            return None;
+        }
+        if let tri::Cert::Hit { u, v, .. } = c {
+            if lo >= r.tmin && hi <= r.tmax {
+                return Some((hi, u, v));
+            }
+        }
+        *rare += 1;
+        exact::crossing_in(r, verts).map(|x| (x.s.round_up(), x.u.approx_f32(), x.v.approx_f32()))
+    }
+
+    /// Tests triangle `verts` with public id `prim` and keeps it if closer.
+    pub fn test(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
+        if let Some((t, u, v)) = Self::kept(r, verts, prim, (self.t, self.prim), &mut self.rare) {
+            if closer(t, prim, (self.t, self.prim)) {
+                *self = ClosestTrue { t, prim, u, v, rare: self.rare };
+            }
+        }
+    }
+
+    pub fn hit(&self) -> Hit {
+        if self.prim == i32::MAX {
+            Hit::MISS
+        } else {
+            Hit { t: self.t, prim: self.prim, u: self.u, v: self.v }
+        }
+    }
+}
+
+/// `(t, prim)` comes before `best` in the closest-hit order (smaller t; equal t, lower prim).
+fn closer(t: f32, prim: i32, best: (f32, i32)) -> bool {
+    t < best.0 || (t == best.0 && prim < best.1)
 }
 
 /// How many rays of one result agree with a reference: same hit/miss, and the same `prim` or,

@@ -16,8 +16,8 @@ pub mod tri;
 
 pub use geom::{max_abs_axis, Aabb};
 pub use hit::{
-    admit, agreement, hit_pad, mean_counters, padded_box, simd_utilisation, Agreement, Closest, Counters, Hit,
-    RunOutput, HIT_CAP,
+    admit, agreement, hit_pad, mean_counters, padded_box, simd_utilisation, Agreement, Closest, ClosestTrue, Counters,
+    Hit, RunOutput, HIT_CAP,
 };
 pub use ray::{validate, Ray, RayError, DIR_MAX, DIR_MIN};
 pub use rng::Rng;

@@ -109,6 +109,18 @@ impl Scene {
         best.hit()
     }
 
+    /// The closest hit of `ray` among every triangle under the true rule
+    /// ([`crate::base::ClosestTrue`]), and how many of its tests took the exact path.
+    pub fn brute_force_true(&self, ray: &Ray) -> (Hit, u32) {
+        let r = RayPre::new(ray);
+        let mut best = crate::base::ClosestTrue::new(ray.tmax);
+        for (i, t) in self.tris.iter().enumerate() {
+            let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
+            best.test(&r, &v, i as i32);
+        }
+        (best.hit(), best.rare)
+    }
+
     /// The padding of every triangle's box in the closest-hit rule (`base::hit_pad` of the
     /// scene's bounds): the BVH is built with it and every traversal's hits obey it.
     pub fn hit_pad(&self) -> f32 {
