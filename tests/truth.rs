@@ -69,10 +69,6 @@ fn sphere(rings: usize, segs: usize) -> Vec<[Vec3; 3]> {
     t
 }
 
-fn verts(t: &[Vec3; 3]) -> [f32; 9] {
-    [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z]
-}
-
 #[derive(Default, Debug)]
 struct Tally {
     rays: usize,
@@ -129,7 +125,7 @@ fn hunt(name: &str, tris: &[[Vec3; 3]], dist: f32, rng_seed: u64) -> Tally {
                 (None, true) => Some(format!("false hit {new:?}")),
                 (Some(_), true) => {
                     // The reported triangle is crossed by the exact ray at s ≤ t', within 2⁻¹⁶ of t'.
-                    let x = crossing_in(&r, &verts(&scene.tris[new.prim as usize]));
+                    let x = crossing_in(&r, &scene.verts(new.prim as usize));
                     match x {
                         None => Some(format!("hit {new:?} on a triangle the exact ray does not cross")),
                         Some(x) if x.s.cmp_f32(new.t) == Ordering::Greater => {
@@ -160,8 +156,8 @@ fn hunt(name: &str, tris: &[[Vec3; 3]], dist: f32, rng_seed: u64) -> Tally {
 fn truth(scene: &Scene, ray: &Ray) -> Option<(usize, f32)> {
     let r = RayPre::new(ray);
     let mut best: Option<(usize, halftrace::base::exact::Ratio)> = None;
-    for (i, t) in scene.tris.iter().enumerate() {
-        if let Some(x) = crossing_in(&r, &verts(t)) {
+    for i in 0..scene.len() {
+        if let Some(x) = crossing_in(&r, &scene.verts(i)) {
             let better = match &best {
                 None => true,
                 Some((_, s)) => (&x.s.n * &s.d).cmp(&(&s.n * &x.s.d)) == Ordering::Less,

@@ -212,7 +212,7 @@ impl Closest {
     }
     #[inline]
     fn closer(&self, t: f32, prim: i32) -> bool {
-        t < self.t || (t == self.t && prim < self.prim)
+        closer(t, prim, (self.t, self.prim))
     }
     pub fn hit(&self) -> Hit {
         if self.prim == i32::MAX {

@@ -7,23 +7,7 @@ use super::slab::RayPre;
 /// ray's interval), or `None`. Degenerate triangles (zero determinant) never hit.
 #[inline]
 pub fn intersect(r: &RayPre, v: &[f32; 9]) -> Option<(f32, f32, f32)> {
-    let mut a = [v[0] - r.o.x, v[1] - r.o.y, v[2] - r.o.z];
-    let mut b = [v[3] - r.o.x, v[4] - r.o.y, v[5] - r.o.z];
-    let mut c = [v[6] - r.o.x, v[7] - r.o.y, v[8] - r.o.z];
-    // Huge coordinates (beyond 2^40 from the ray origin): the edge functions (products of two
-    // coordinates) and t's numerator (of three) would overflow fp32, so the translated
-    // vertices are scaled by a power of two (exact) and t scaled back. Never taken below 2^40,
-    // so ordinary scenes compute exactly as without it.
-    let m = a.iter().chain(&b).chain(&c).fold(0f32, |m, x| m.max(x.abs()));
-    let mut back = 1.0f32;
-    if m > BIG_COORD {
-        let shift = ((m.to_bits() >> 23) & 0xff) as i32 - 127 - 39;
-        let down = f32::from_bits(((127 - shift) as u32) << 23);
-        back = f32::from_bits(((127 + shift) as u32) << 23);
-        for x in a.iter_mut().chain(b.iter_mut()).chain(c.iter_mut()) {
-            *x *= down;
-        }
-    }
+    let ([a, b, c], back) = translated(r, v);
     let (kx, ky, kz) = (r.kx, r.ky, r.kz);
     let ax = a[kx] - r.sx * a[kz];
     let ay = a[ky] - r.sy * a[kz];
@@ -97,19 +81,7 @@ const U: f32 = 1.0 / 16_777_216.0; // the unit roundoff 2⁻²⁴
 /// [`super::exact`] on adversarial cases). What it cannot decide it says ([`Cert::Unsure`]).
 #[inline]
 pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
-    let mut a = [v[0] - r.o.x, v[1] - r.o.y, v[2] - r.o.z];
-    let mut b = [v[3] - r.o.x, v[4] - r.o.y, v[5] - r.o.z];
-    let mut c = [v[6] - r.o.x, v[7] - r.o.y, v[8] - r.o.z];
-    let m = a.iter().chain(&b).chain(&c).fold(0f32, |m, x| m.max(x.abs()));
-    let mut back = 1.0f32;
-    if m > BIG_COORD {
-        let shift = ((m.to_bits() >> 23) & 0xff) as i32 - 127 - 39;
-        let down = f32::from_bits(((127 - shift) as u32) << 23);
-        back = f32::from_bits(((127 + shift) as u32) << 23);
-        for x in a.iter_mut().chain(b.iter_mut()).chain(c.iter_mut()) {
-            *x *= down;
-        }
-    }
+    let ([a, b, c], back) = translated(r, v);
     let (kx, ky, kz) = (r.kx, r.ky, r.kz);
     // Sheared coordinates, and per axis the bound of their error: |x − x*| ≤ 5.0001u·(|A_x| +
     // |sx·A_z|) (the translation, the shear's quotient, its product and difference).
@@ -179,6 +151,29 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
     } else {
         Cert::Unsure { t, err }
     }
+}
+
+/// The vertices of `v` less the ray origin, and the factor that scales a t computed from them
+/// back. Huge coordinates (beyond 2^40 from the ray origin): the edge functions (products of
+/// two coordinates) and t's numerator (of three) would overflow fp32, so the translated
+/// vertices are scaled by a power of two (exact) and t scaled back. Never taken below 2^40,
+/// so ordinary scenes compute exactly as without it.
+#[inline]
+fn translated(r: &RayPre, v: &[f32; 9]) -> ([[f32; 3]; 3], f32) {
+    let mut a = [v[0] - r.o.x, v[1] - r.o.y, v[2] - r.o.z];
+    let mut b = [v[3] - r.o.x, v[4] - r.o.y, v[5] - r.o.z];
+    let mut c = [v[6] - r.o.x, v[7] - r.o.y, v[8] - r.o.z];
+    let m = a.iter().chain(&b).chain(&c).fold(0f32, |m, x| m.max(x.abs()));
+    let mut back = 1.0f32;
+    if m > BIG_COORD {
+        let shift = ((m.to_bits() >> 23) & 0xff) as i32 - 127 - 39;
+        let down = f32::from_bits(((127 - shift) as u32) << 23);
+        back = f32::from_bits(((127 + shift) as u32) << 23);
+        for x in a.iter_mut().chain(b.iter_mut()).chain(c.iter_mut()) {
+            *x *= down;
+        }
+    }
+    ([a, b, c], back)
 }
 
 /// Translated coordinates above this are scaled down before the test (2^40).

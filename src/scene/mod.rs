@@ -102,9 +102,8 @@ impl Scene {
     pub fn brute_force(&self, ray: &Ray) -> Hit {
         let r = RayPre::new(ray);
         let mut best = Closest::new(ray.tmax, self.hit_pad());
-        for (i, t) in self.tris.iter().enumerate() {
-            let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
-            best.test(&r, &v, i as i32);
+        for i in 0..self.tris.len() {
+            best.test(&r, &self.verts(i), i as i32);
         }
         best.hit()
     }
@@ -114,9 +113,8 @@ impl Scene {
     pub fn brute_force_true(&self, ray: &Ray) -> (Hit, u32) {
         let r = RayPre::new(ray);
         let mut best = crate::base::ClosestTrue::new(ray.tmax);
-        for (i, t) in self.tris.iter().enumerate() {
-            let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
-            best.test(&r, &v, i as i32);
+        for i in 0..self.tris.len() {
+            best.test(&r, &self.verts(i), i as i32);
         }
         (best.hit(), best.rare)
     }
@@ -125,6 +123,12 @@ impl Scene {
     /// scene's bounds): the BVH is built with it and every traversal's hits obey it.
     pub fn hit_pad(&self) -> f32 {
         crate::base::hit_pad(&self.bounds)
+    }
+
+    /// Triangle `prim`'s vertices as the triangle tests take them (x, y, z of each in turn).
+    pub fn verts(&self, prim: usize) -> [f32; 9] {
+        let t = &self.tris[prim];
+        [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z]
     }
 
     /// Geometric (unnormalised) normal of triangle `prim`.
