@@ -117,6 +117,6 @@ void main() {
     }
     if (!valid) return;
     if (overflow) hits[i] = Hit(0.0, PRIM_OVERFLOW, 0.0, 0.0);
-    else write_hit(i, best_t, best_prim, best_u, best_v);
+    else write_closest(i);
     write_counters(i, c, pnodes, asum);
 }

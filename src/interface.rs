@@ -137,7 +137,10 @@ pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
     s += "#extension GL_EXT_control_flow_attributes : require\n";
     s += &format!("const uint CHILD_EMPTY = {CHILD_EMPTY:#010x}u;\nconst uint LEAF_BIT = {LEAF_BIT:#010x}u;\n");
     s += &format!("const uint LEAF_FIRST_MASK = {:#010x}u;\nconst uint LEAF_COUNT_SHIFT = {LEAF_FIRST_BITS}u;\nconst uint LEAF_COUNT_MASK = {:#x}u;\n", (1u32 << LEAF_FIRST_BITS) - 1, (1u32 << LEAF_COUNT_BITS) - 1);
-    s += &format!("const uint RAY_FLOATS = {RAY_FLOATS}u;\nconst int PRIM_OVERFLOW = {PRIM_OVERFLOW};\n");
+    s += &format!(
+        "const uint RAY_FLOATS = {RAY_FLOATS}u;\nconst int PRIM_OVERFLOW = {PRIM_OVERFLOW};\nconst int PRIM_FLAGGED = {};\n",
+        crate::base::PRIM_FLAGGED
+    );
     s += &glsl_float("MARGIN32", crate::base::slab::MARGIN32);
     s += &glsl_float("HIT_CAP", crate::base::HIT_CAP);
     for (name, value) in [

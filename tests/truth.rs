@@ -5,14 +5,17 @@
 //! rays aimed exactly at vertices, edge midpoints and face points, and tmin set at and around
 //! the front face's crossing.
 //!
-//! The true rule (`base::ClosestTrue`) must report a hit exactly where the exact ray meets the
-//! mesh, on a triangle the exact ray crosses at s ≤ t'. The box rule (`base::Closest`, what the
-//! traversals still use) is measured beside it and must be seen to fail here: that is why it is
-//! being replaced (docs/layouts.md, "True hits").
+//! The closest-hit rule (`base::ClosestTrue`) must report a hit exactly where the exact ray
+//! meets the mesh, on a triangle the exact ray crosses at s ≤ t', and every conservative
+//! layout's traversal must return its brute force's hits bit for bit. The box rule it replaced
+//! (`base::ClosestBox`) is measured beside it and must be seen to fail here (docs/layouts.md,
+//! "True hits").
 
 use glam::{Mat3, Vec3};
 use halftrace::base::exact::{crossing_in, next_down, next_up};
 use halftrace::base::{Ray, RayPre, Rng};
+use halftrace::layout::{Encoded, LayoutId};
+use halftrace::precision::FloatControls;
 use halftrace::scene::Scene;
 use rayon::prelude::*;
 use std::cmp::Ordering;
@@ -80,6 +83,11 @@ struct Tally {
     /// The largest (t' − s)·|d|∞ seen, as a share of the ∞-norm distance from the origin to
     /// the hit triangle's farthest vertex.
     worst_dt: f64,
+    /// Traversals (layout, B, P) whose hits differ from the brute force, and the rays they
+    /// flagged for the exact re-trace.
+    traversal_wrong: Vec<String>,
+    flagged: usize,
+    traversals: usize,
 }
 
 /// Every ray of one mesh placement: the truth, the true rule and the box rule.
@@ -95,6 +103,8 @@ fn hunt(name: &str, tris: &[[Vec3; 3]], dist: f32, rng_seed: u64) -> Tally {
         targets.push(t[0] * 0.2 + t[1] * 0.3 + t[2] * 0.5);
     }
     let mut tally = Tally::default();
+    let mut rays = Vec::new();
+    let mut expected = Vec::new();
     for target in targets {
         let dir = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize_or(Vec3::Z);
         let o = target - dir * (dist * extent);
@@ -110,8 +120,10 @@ fn hunt(name: &str, tris: &[[Vec3; 3]], dist: f32, rng_seed: u64) -> Tally {
             let ray = Ray::new(o, d, tmin, f32::INFINITY);
             tally.rays += 1;
             let truth = truth(&scene, &ray);
-            let (new, rare) = scene.brute_force_true(&ray);
-            let old = scene.brute_force(&ray);
+            let (new, rare) = scene.brute_force_counted(&ray);
+            rays.push(ray);
+            expected.push(new);
+            let old = scene.brute_force_box(&ray);
             tally.new_rare_rays += (rare > 0) as usize;
             tally.true_hits += truth.is_some() as usize;
             match (truth.is_some(), old.is_hit()) {
@@ -146,6 +158,30 @@ fn hunt(name: &str, tris: &[[Vec3; 3]], dist: f32, rng_seed: u64) -> Tally {
             };
             if let Some(w) = wrong {
                 tally.new_wrong.push(format!("{name} at {dist}× its extent: ray {ray:?}: {w}"));
+            }
+        }
+    }
+    // Every conservative layout's traversal (its CPU reference: fast rule, flagged rays
+    // re-traced) returns the brute force's hits bit for bit, at B = 4 and 8, single rays and
+    // packets of 8.
+    let bin = halftrace::bvh::build_binary(&scene);
+    for layout in LayoutId::all().filter(|l| l.info().conservative) {
+        for b in [4, 8] {
+            let enc = Encoded::new(&scene, &bin, layout, b).unwrap();
+            for (p, &math) in [1, 8].into_iter().zip(layout.info().maths.iter().cycle()) {
+                tally.traversals += 1;
+                let (raw, _) = enc.trace_raw(&rays, p, math, FloatControls::On);
+                tally.flagged += raw.iter().filter(|h| h.is_flagged()).count();
+                let (got, _) = enc.reference(&rays, p, math, FloatControls::On);
+                if let Some(i) = (0..rays.len()).find(|&i| !got[i].same_bits(&expected[i])) {
+                    tally.traversal_wrong.push(format!(
+                        "{name} at {dist}×, {layout} B{b} P{p} {}: ray {:?}: {:?}, brute force {:?}",
+                        math.name(),
+                        rays[i],
+                        got[i],
+                        expected[i]
+                    ));
+                }
             }
         }
     }
@@ -215,6 +251,13 @@ fn closed_meshes_are_hit_exactly_where_the_exact_ray_meets_them() {
         t0.elapsed().as_secs_f64()
     );
     assert!(wrong.is_empty(), "{} rays wrong under the true rule; first: {}", wrong.len(), wrong[0]);
+    let twrong: Vec<&String> = tallies.iter().flat_map(|t| &t.traversal_wrong).collect();
+    eprintln!(
+        "traversals: {} (conservative layouts × B 4, 8 × P 1, 8 per placement), {} rays flagged for the exact re-trace",
+        sum(|t| t.traversals),
+        sum(|t| t.flagged)
+    );
+    assert!(twrong.is_empty(), "{} traversals differ from the brute force; first: {}", twrong.len(), twrong[0]);
     // The hunt finds what the box rule gets wrong (the repros of the issue): it must.
     assert!(sum(|t| t.old_lost) > 0, "the hunt no longer finds the box rule's lost hits");
 }
@@ -228,9 +271,9 @@ fn one_triangle_column_is_hit_from_every_height() {
     let mut old_lost = Vec::new();
     for z in [1.0f32, 4.0, 4.5, 5.0, 10.0, 100.0, 1e4, 1e6] {
         let ray = Ray::new(Vec3::new(0.3, 0.2, z), Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY);
-        let (hit, _) = scene.brute_force_true(&ray);
+        let (hit, _) = scene.brute_force_counted(&ray);
         assert!(hit.is_hit() && hit.t >= z && hit.t <= z * (1.0 + 1.0 / 65_536.0), "z = {z}: {hit:?}");
-        if !scene.brute_force(&ray).is_hit() {
+        if !scene.brute_force_box(&ray).is_hit() {
             old_lost.push(z);
         }
     }

@@ -54,5 +54,5 @@ void main() {
         }
     }
     if (overflow) hits[i] = Hit(0.0, PRIM_OVERFLOW, 0.0, 0.0);
-    else write_hit(i, best_t, best_prim, best_u, best_v);
+    else write_closest(i);
 }

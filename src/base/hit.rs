@@ -1,49 +1,38 @@
 //! What a traversal returns: the closest hit of each ray ([`Hit`], the closest-hit rule in
-//! [`Closest`]), its work counters ([`Counters`]) and how far two results agree
+//! [`ClosestTrue`]), its work counters ([`Counters`]) and how far two results agree
 //! ([`agreement`]).
 //!
-//! # The closest-hit rule
+//! # The closest-hit rule (the true rule)
 //!
-//! A triangle's hit is a property of the ray and the triangle alone — never of the boxes a
-//! traversal tested, their precision, B or P — so that every conservative layout returns
-//! exactly the brute-force closest hit, bit for bit, on every scene:
+//! A triangle is hit where the *exact* ray — its fp32 origin and direction taken as exact
+//! numbers — crosses it, closed (edges and vertices included), at an exact parameter s in
+//! `[tmin, tmax]`. The hit is kept with a t' that is a function of the ray and the triangle
+//! alone, with s ≤ t' (docs/layouts.md, "True hits"):
 //!
-//! 1. The watertight test ([`tri::intersect`]) gives `t`; it must satisfy `t >= tmin`.
-//! 2. **The box rule** ([`admit`]): the exact ray must reach the triangle's *padded box*
-//!    (its vertices' box, each bound moved out by the scene's [`hit_pad`]) at some parameter
-//!    `s >= tmin`, certified in fp32 with inward rounding; the hit's t becomes
-//!    `max(t, enter)`, `enter` being the certified upper bound of where that reach can begin
-//!    (so `s <= t`). A hit the rule cannot certify is not a hit.
-//! 3. Of the admitted hits the smallest t wins; ties (bit-identical t) go to the lower `prim`,
-//!    so results never depend on traversal order.
+//! - `t' = hi`, the upper end of the interval [`tri::certify`] certifies to hold s, where fp32
+//!   decides the crossing and its interval lies in `[tmin, tmax]`;
+//! - else `t' =` s rounded up to f32, decided and placed exactly ([`exact::crossing`]).
 //!
-//! Why (docs/layouts.md, "The closest-hit rule"): the watertight test's t carries an error that
-//! grows with the triangle's extent, not with t — a huge ground quad can report a hit in front
-//! of a ray whose true crossing is behind it. Before this rule such a hit was found or not
-//! depending on whether a tight box culled its leaf, so layouts, B and P disagreed.
+//! Of the kept hits the smallest t' wins; ties (bit-identical t') go to the lower `prim`, so
+//! results never depend on traversal order. Every BVH node above a hit triangle contains the
+//! exact crossing point, which the exact ray reaches at s ≤ t' ≤ best, and a conservative box
+//! test never rejects a box the exact ray reaches inside `[tmin, best]` (every layout's bound is
+//! argued beside its test): every conservative traversal visits the winning triangle and
+//! returns the brute-force minimum — consistent and true, at any distance and scene offset.
 //!
-//! **The argument.** Let T's admitted hit have t' = max(t, enter). The exact ray meets T's
-//! padded box at s = max(tmin, exact entry) with tmin <= s <= t'. Every BVH node above T stores
-//! a box containing the padded box (the build refits with padded boxes, `bvh::build`; the
-//! encoders round outward), and a conservative box test never rejects a box that the exact ray
-//! reaches inside [tmin, best] (every layout's bound is argued beside its test). While a
-//! traversal runs, best >= the final t* >= t' for the winning triangle and every triangle tied
-//! with it, so every node above them is visited (entry bounds are <= s <= best too) and their
-//! tests compute the same t' — the traversal returns the brute-force minimum.
+//! **Fast and exact.** A traversal ([`ClosestTrue::fast`], what the kernels and the CPU
+//! references run) never takes the exact path: it keeps what fp32 certifies and notes the
+//! least possible start `lo` of the crossings it could not decide; if one of those might come
+//! before the final best, the ray is *flagged* ([`PRIM_FLAGGED`]) and re-traced with the exact
+//! path ([`ClosestTrue::new`]; [`resolve_flagged`]). A ray that is not flagged had no
+//! undecided triangle that could beat its hit, so its hit is the exact rule's.
 //!
-//! **Why padded.** An axis-aligned triangle has a flat box, reached at one exact parameter that
-//! no fp32 value equals; with no padding the inward-rounded check would reject every hit on a
-//! floor. With padding p the check succeeds for a ray that truly meets the box whenever
-//! p >= 1.25·2⁻²⁰·D (D: the ∞-norm distance from the ray origin to the hit), i.e. for origins
-//! within 3.2× the scene's extent of the triangle (p = 2⁻¹⁸ of the extent) — the default
-//! camera frames a scene from about 2× its extent. Farther origins stay consistent but not
-//! true: axis-aligned triangles vanish beyond about 4× the extent, and scenes far from the
-//! origin lose every hit (`tests/truth.rs` measures it). [`ClosestTrue`] is the rule that
-//! replaces this one (docs/layouts.md, "True hits").
+//! [`ClosestBox`] is the rule this one replaced (the box rule), kept to show what it loses.
 
 use super::exact;
 use super::geom::Aabb;
-use super::slab::{lower32, upper32, RayPre};
+use super::ray::Ray;
+use super::slab::{lower32, upper32, RayPre, HIT_CAP};
 use super::tri;
 use crate::glsl_struct;
 
@@ -65,6 +54,10 @@ impl Hit {
     pub const MISS: Hit = Hit { t: f32::INFINITY, prim: -1, u: 0.0, v: 0.0 };
     pub fn is_hit(&self) -> bool {
         self.prim >= 0
+    }
+    /// A ray the fast rule could not decide, still to be re-traced ([`PRIM_FLAGGED`]).
+    pub fn is_flagged(&self) -> bool {
+        self.prim == PRIM_FLAGGED
     }
     /// Bitwise equality of all four fields.
     pub fn same_bits(&self, o: &Hit) -> bool {
@@ -105,13 +98,9 @@ impl std::ops::AddAssign for Counters {
     }
 }
 
-/// The padding of every triangle's box in the closest-hit rule, as a share of the scene's
-/// largest extent (2⁻¹⁸; see the module docs for why this size).
+/// The padding of every triangle's box in the box rule ([`ClosestBox`]) and of the BVH's
+/// refit (`bvh::build`), as a share of the scene's largest extent (2⁻¹⁸).
 pub const HIT_PAD_SHARE: f32 = 1.0 / 262_144.0;
-
-/// Exits beyond this parameter count as this (2¹²⁷): a computed exit that overflowed to +inf
-/// then still bounds the exact one from below.
-pub const HIT_CAP: f32 = f32::from_bits(0x7f00_0000);
 
 /// The padding of a scene whose vertices span `bounds` ([`HIT_PAD_SHARE`] of its largest
 /// extent, halved before subtracting so that no extent overflows fp32).
@@ -153,7 +142,7 @@ fn sel_max(x: f32, y: f32) -> f32 {
     }
 }
 
-/// The box rule of the closest-hit rule (module docs): for a hit of triangle `v` at `t >=
+/// The box rule ([`ClosestBox`]): for a hit of triangle `v` at `t >=
 /// r.tmin`, the t it is kept with, or `None` when the exact ray's reach of the padded box at
 /// or after `tmin` cannot be certified.
 ///
@@ -182,10 +171,15 @@ pub fn admit(r: &RayPre, v: &[f32; 9], pad: f32, t: f32) -> Option<f32> {
     (enter <= exit).then(|| sel_max(t, enter))
 }
 
-/// The closest hit so far under the closest-hit rule (module docs). `prim == i32::MAX` until
-/// something is hit, so a hit exactly at `tmax` is accepted like any other (`t <= tmax`).
+/// The closest hit so far under the **box rule**, the rule [`ClosestTrue`] replaced, kept to
+/// measure what it loses (`tests/truth.rs`) and to classify changed rays: the watertight
+/// test's t ≥ tmin, admitted only where fp32, rounding inward, certifies that the exact ray
+/// reaches the triangle's box padded by [`hit_pad`] ([`admit`]), t raised to that entry.
+/// Consistent across layouts but not true: hits vanish from farther than about 4× the scene's
+/// extent and in scenes far from the origin (docs/layouts.md). `prim == i32::MAX` until
+/// something is hit.
 #[derive(Clone, Copy, Debug)]
-pub struct Closest {
+pub struct ClosestBox {
     pub t: f32,
     pub prim: i32,
     pub u: f32,
@@ -194,9 +188,9 @@ pub struct Closest {
     pub pad: f32,
 }
 
-impl Closest {
-    pub fn new(tmax: f32, pad: f32) -> Closest {
-        Closest { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0, pad }
+impl ClosestBox {
+    pub fn new(tmax: f32, pad: f32) -> ClosestBox {
+        ClosestBox { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0, pad }
     }
     /// Tests triangle `verts` with public id `prim` and keeps it if closer (ties: lower prim).
     /// The box rule only ever raises t, so it is applied only to a hit that would be kept.
@@ -205,7 +199,7 @@ impl Closest {
         if let Some((t, u, v)) = tri::intersect(r, verts) {
             if t >= r.tmin && self.closer(t, prim) {
                 if let Some(t) = admit(r, verts, self.pad, t).filter(|&t| self.closer(t, prim)) {
-                    *self = Closest { t, prim, u, v, pad: self.pad };
+                    *self = ClosestBox { t, prim, u, v, pad: self.pad };
                 }
             }
         }
@@ -223,69 +217,129 @@ impl Closest {
     }
 }
 
-/// The closest hit under the **true rule** (docs/layouts.md, "True hits"), the rule that is to
-/// replace [`Closest`]'s box rule: a triangle is hit where the *exact* ray (its fp32 origin and
-/// direction as exact numbers) crosses it, closed (edges and vertices included), at an exact
-/// parameter s in `[tmin, tmax]`; the hit is kept with
-///
-/// - `t' = hi`, the upper end of [`tri::certify`]'s interval, where fp32 certifies the crossing
-///   and its interval lies in `[tmin, tmax]`;
-/// - else `t' = ` s rounded up to f32, decided and placed exactly ([`exact::crossing`]: the rare
-///   path, counted in `rare`).
-///
-/// `t'` is a function of the ray and the triangle alone, with `s ≤ t'`: every BVH node above a
-/// hit triangle contains the exact crossing point, which the exact ray reaches at `s ≤ t' ≤
-/// best`, so every conservative traversal visits it — consistent, with no padding, at any
-/// distance and offset. Ties go to the lower prim, as in [`Closest`].
+/// The `prim` of a ray that fp32 could not decide ([`ClosestTrue::fast`]): its hit is found
+/// by the exact re-trace (module docs). A kernel writes it with t = 0, u = v = 0.
+pub const PRIM_FLAGGED: i32 = -3;
+
+/// The closest hit so far under the closest-hit rule (module docs). `prim == i32::MAX` until
+/// something is hit, so a hit exactly at `tmax` is accepted like any other (`t' <= tmax`).
 #[derive(Clone, Copy, Debug)]
 pub struct ClosestTrue {
     pub t: f32,
     pub prim: i32,
     pub u: f32,
     pub v: f32,
-    /// Triangle tests that fp32 could not decide (the exact path ran).
+    /// Triangle tests that fp32 could not decide (in exact mode, the exact path ran).
     pub rare: u32,
+    /// Fast mode ([`Self::fast`]): a test fp32 cannot decide is noted in `undecided`, not
+    /// decided.
+    pub fast: bool,
+    /// Fast mode: the least `(lo, prim)` of the undecided tests (`lo`: where the crossing, if
+    /// any, can begin; `−inf` when unknown).
+    pub undecided: (f32, i32),
+}
+
+/// What fp32 decides of one triangle for the closest-hit rule.
+enum Decision {
+    /// Not hit, or cannot be closer than the best so far.
+    No,
+    /// Hit, kept with t' and these barycentrics.
+    Kept(f32, f32, f32),
+    /// fp32 cannot decide; a crossing, if any, lies at or after `lo`.
+    Undecided(f32),
 }
 
 impl ClosestTrue {
+    /// Exact mode: every test decided, by the exact path where fp32 cannot.
     pub fn new(tmax: f32) -> ClosestTrue {
-        ClosestTrue { t: tmax, prim: i32::MAX, u: 0.0, v: 0.0, rare: 0 }
+        ClosestTrue {
+            t: tmax,
+            prim: i32::MAX,
+            u: 0.0,
+            v: 0.0,
+            rare: 0,
+            fast: false,
+            undecided: (f32::INFINITY, i32::MAX),
+        }
     }
 
-    /// The kept t' of triangle `verts` (`None`: not hit), and its barycentrics; `rare` is
-    /// raised when the exact path decides. Skips the exact path for a triangle whose crossing
-    /// cannot be closer than `(best_t, best_prim)`.
-    pub fn kept(r: &RayPre, verts: &[f32; 9], prim: i32, best: (f32, i32), rare: &mut u32) -> Option<(f32, f32, f32)> {
+    /// Fast mode, what traversals run (and `glsl/tri.glsl` mirrors operation for operation):
+    /// fp32 alone. The ray is flagged ([`Self::hit`] is [`PRIM_FLAGGED`]) when a test fp32
+    /// could not decide might come before the final best — decided at the end, so it does not
+    /// depend on the order of the triangle tests (a kernel tests a visit's leaves in slot
+    /// order, the CPU reference in key order).
+    pub fn fast(tmax: f32) -> ClosestTrue {
+        ClosestTrue { fast: true, ..ClosestTrue::new(tmax) }
+    }
+
+    /// fp32's decision on triangle `verts` against the best so far.
+    #[inline]
+    fn decide(r: &RayPre, verts: &[f32; 9], prim: i32, best: (f32, i32)) -> Decision {
         let c = tri::certify(r, verts);
         let (lo, hi) = c.bounds();
         if hi < r.tmin || !closer(lo, prim, best) {
-            return None;
+            return Decision::No;
         }
         if let tri::Cert::Hit { u, v, .. } = c {
             if lo >= r.tmin && hi <= r.tmax {
-                return Some((hi, u, v));
+                return Decision::Kept(hi, u, v);
             }
         }
-        *rare += 1;
-        exact::crossing_in(r, verts).map(|x| (x.s.round_up(), x.u.approx_f32(), x.v.approx_f32()))
+        Decision::Undecided(lo)
     }
 
     /// Tests triangle `verts` with public id `prim` and keeps it if closer.
+    #[inline]
     pub fn test(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
-        if let Some((t, u, v)) = Self::kept(r, verts, prim, (self.t, self.prim), &mut self.rare) {
-            if closer(t, prim, (self.t, self.prim)) {
-                *self = ClosestTrue { t, prim, u, v, rare: self.rare };
+        let kept = match Self::decide(r, verts, prim, (self.t, self.prim)) {
+            Decision::No => return,
+            Decision::Kept(t, u, v) => (t, u, v),
+            Decision::Undecided(lo) => {
+                self.rare += 1;
+                if self.fast {
+                    if closer(lo, prim, self.undecided) {
+                        self.undecided = (lo, prim);
+                    }
+                    return;
+                }
+                match exact::crossing_in(r, verts) {
+                    Some(x) => (x.s.round_up(), x.u.approx_f32(), x.v.approx_f32()),
+                    None => return,
+                }
             }
+        };
+        if closer(kept.0, prim, (self.t, self.prim)) {
+            (self.t, self.prim, self.u, self.v) = (kept.0, prim, kept.1, kept.2);
         }
     }
 
+    /// Fast mode: an undecided test might come before the best (the ray is to be re-traced).
+    pub fn flagged(&self) -> bool {
+        self.fast && closer(self.undecided.0, self.undecided.1, (self.t, self.prim))
+    }
+
+    /// The ray's hit: [`PRIM_FLAGGED`] for a flagged ray.
     pub fn hit(&self) -> Hit {
-        if self.prim == i32::MAX {
+        if self.flagged() {
+            Hit { t: 0.0, prim: PRIM_FLAGGED, u: 0.0, v: 0.0 }
+        } else if self.prim == i32::MAX {
             Hit::MISS
         } else {
             Hit { t: self.t, prim: self.prim, u: self.u, v: self.v }
         }
     }
+}
+
+/// Replaces each flagged hit of `hits` (`Hit::is_flagged`) by `exact` of its ray, on every
+/// core; returns how many there were.
+pub fn resolve_flagged(rays: &[Ray], hits: &mut [Hit], exact: impl Fn(&Ray) -> Hit + Sync) -> usize {
+    use rayon::prelude::*;
+    let flagged: Vec<usize> = (0..hits.len()).filter(|&i| hits[i].is_flagged()).collect();
+    let fixed: Vec<Hit> = flagged.par_iter().map(|&i| exact(&rays[i])).collect();
+    for (&i, h) in flagged.iter().zip(fixed) {
+        hits[i] = h;
+    }
+    flagged.len()
 }
 
 /// `(t, prim)` comes before `best` in the closest-hit order (smaller t; equal t, lower prim).
@@ -370,4 +424,7 @@ pub struct RunOutput {
     pub hits: Vec<Hit>,
     pub counters: Option<Vec<Counters>>,
     pub times_ms: Vec<f64>,
+    /// Rays the traversal flagged and the exact re-trace decided (0 where nothing re-traced:
+    /// a kernel's own output keeps its flags, `Hit::is_flagged`).
+    pub flagged: usize,
 }

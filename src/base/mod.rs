@@ -1,7 +1,7 @@
 //! The bottom layer, importing nothing of halftrace's: rays ([`Ray`]), boxes ([`Aabb`]), the
 //! fp32 ray set-up and slab test ([`RayPre`], [`slab32`]), the watertight triangle test
 //! ([`tri`]), hits and counters with the closest-hit rule ([`Hit`], [`Counters`],
-//! [`Closest`]), agreement between results, how a measurement ended ([`Status`]), the random generator ([`Rng`]) and the Rust↔GLSL
+//! [`ClosestTrue`]), agreement between results, how a measurement ended ([`Status`]), the random generator ([`Rng`]) and the Rust↔GLSL
 //! struct mechanism ([`glsl`]). Every other module builds on these.
 
 pub mod exact;
@@ -16,10 +16,10 @@ pub mod tri;
 
 pub use geom::{max_abs_axis, Aabb};
 pub use hit::{
-    admit, agreement, hit_pad, mean_counters, padded_box, simd_utilisation, Agreement, Closest, ClosestTrue, Counters,
-    Hit, RunOutput, HIT_CAP,
+    admit, agreement, hit_pad, mean_counters, padded_box, resolve_flagged, simd_utilisation, Agreement, ClosestBox,
+    ClosestTrue, Counters, Hit, RunOutput, PRIM_FLAGGED,
 };
 pub use ray::{validate, Ray, RayError, DIR_MAX, DIR_MIN};
 pub use rng::Rng;
-pub use slab::{lower32, slab32, upper32, RayPre};
+pub use slab::{lower32, slab32, upper32, RayPre, HIT_CAP};
 pub use status::Status;

@@ -91,6 +91,10 @@ pub fn slab32(r: &RayPre, lo: [f32; 3], hi: [f32; 3], t0: f32, t1: f32) -> (f32,
     (near, far)
 }
 
+/// Exits beyond this parameter count as this (2¹²⁷): a computed exit that overflowed to +inf
+/// then still bounds the exact one from below.
+pub const HIT_CAP: f32 = f32::from_bits(0x7f00_0000);
+
 #[cfg(test)]
 mod tests {
     use super::*;

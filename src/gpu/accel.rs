@@ -258,5 +258,5 @@ pub fn run(
     let times = dispatch_timed(gpu, pipe, bytemuck::bytes_of(&push), (n as u32).div_ceil(64), warmup, repeat)?;
     let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
     crate::digest::record("baseline", KERNEL, rays, &hits, None);
-    Ok(RunOutput { hits, counters: None, times_ms: times })
+    Ok(RunOutput { hits, counters: None, times_ms: times, flagged: 0 })
 }

@@ -75,7 +75,6 @@ impl DeviceInfo {
     /// What a kernel's build takes from this device beyond its variant.
     pub fn build(&self) -> crate::variant::DeviceBuild {
         crate::variant::DeviceBuild {
-            f64: self.shader_float64,
             storage16: self.storage_16bit,
             spirv_minor: self.spirv_minor.min(5),
             register_array_bytes: self.register_array_bytes,

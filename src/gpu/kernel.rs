@@ -139,7 +139,7 @@ impl<'g> Kernel<'g> {
         let counters: Option<Vec<Counters>> =
             if self.id.stats { Some(bytemuck::pod_collect_to_vec(&counters.download(counter_bytes)?)) } else { None };
         crate::digest::record("gpu", &self.label(), rays, &hits, counters.as_deref());
-        Ok(RunOutput { hits, counters, times_ms: times })
+        Ok(RunOutput { hits, counters, times_ms: times, flagged: 0 })
     }
 }
 

@@ -296,5 +296,5 @@ pub fn run(
     let times = timed(gpu, warmup, repeat, |cmd| pipe.trace(cmd, push, width, height), |cmd| pipe.barrier(cmd))?;
     let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
     crate::digest::record("baseline", KERNEL, rays, &hits, None);
-    Ok(RunOutput { hits, counters: None, times_ms: times })
+    Ok(RunOutput { hits, counters: None, times_ms: times, flagged: 0 })
 }

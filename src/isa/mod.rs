@@ -249,8 +249,7 @@ struct Who {
 fn device_build(g: &Gpu) -> String {
     let b = g.info.build();
     format!(
-        "{}, {}, SPIR-V 1.{}{}{}",
-        if b.f64 { "fp64" } else { "no fp64 (integer edge fallback)" },
+        "{}, SPIR-V 1.{}{}{}",
         if b.storage16 { "16-bit storage" } else { "fp16 nodes from 32-bit words" },
         b.spirv_minor,
         if b.register_array_bytes > 0 {

@@ -2,7 +2,7 @@
 //! CPU reference traverses and what the GPU backend uploads.
 
 use super::{LayoutId, Node};
-use crate::base::{Aabb, Counters, Hit, Ray};
+use crate::base::{Aabb, ClosestTrue, Counters, Hit, Ray, RayPre};
 use crate::bvh::{BinaryBvh, WideBvh};
 use crate::precision::{FloatControls, Math};
 use crate::scene::Scene;
@@ -33,6 +33,24 @@ impl TriBuffer {
 
     pub fn bytes(&self) -> usize {
         self.verts.len() * 36 + self.ids.len() * 4
+    }
+
+    /// The closest hit of `ray` among every triangle under the closest-hit rule in exact mode
+    /// (`base::ClosestTrue::new`): what `Scene::brute_force` gives (ties go to the lower
+    /// public prim, so the triangles' order does not matter).
+    pub fn brute_force(&self, ray: &Ray) -> Hit {
+        let r = RayPre::new(ray);
+        let mut best = ClosestTrue::new(ray.tmax);
+        for (v, &id) in self.verts.iter().zip(&self.ids) {
+            best.test(&r, v, id as i32);
+        }
+        best.hit()
+    }
+
+    /// Re-traces the rays a traversal flagged (`Hit::is_flagged`) with [`Self::brute_force`],
+    /// in place, on every core; returns how many there were.
+    pub fn resolve(&self, rays: &[Ray], hits: &mut [Hit]) -> usize {
+        crate::base::resolve_flagged(rays, hits, |r| self.brute_force(r))
     }
 }
 
@@ -133,16 +151,37 @@ impl Encoded {
     }
 
     /// The CPU reference of this layout: rays in packets of `p` (1: single rays) in math mode
-    /// `math`, as the kernel built with float controls `fc` traces them (their bounds differ).
+    /// `math`, as the kernel built with float controls `fc` traces them (their bounds differ),
+    /// with the rays fp32 could not decide re-traced exactly ([`Self::resolve`]): the hits
+    /// every result reports.
     pub fn reference(&self, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
-        let (hits, counters) = self.layout.imp().trace(self, rays, p, math, fc);
-        let label = format!("{} B{} P{p} {} fc-{}", self.layout, self.branching, math.name(), fc.name());
-        crate::digest::record("cpu", &label, rays, &hits, Some(&counters));
+        let (mut hits, counters) = self.trace_raw(rays, p, math, fc);
+        self.resolve(rays, &mut hits);
         (hits, counters)
     }
 
     /// Single rays in the layout's default math, float controls on.
     pub fn reference_default(&self, rays: &[Ray]) -> (Vec<Hit>, Vec<Counters>) {
         self.reference(rays, 1, self.layout.info().maths[0], FloatControls::On)
+    }
+
+    /// [`Self::reference`] before the re-trace: what a kernel writes, bit for bit, flagged
+    /// rays (`Hit::is_flagged`) included.
+    pub fn trace_raw(&self, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> (Vec<Hit>, Vec<Counters>) {
+        let (hits, counters) = self.layout.imp().trace(self, rays, p, math, fc);
+        let label = format!("{} B{} P{p} {} fc-{}", self.layout, self.branching, math.name(), fc.name());
+        crate::digest::record("cpu", &label, rays, &hits, Some(&counters));
+        (hits, counters)
+    }
+
+    /// [`Self::trace_raw`] of single rays in the layout's default math, float controls on.
+    pub fn trace_raw_default(&self, rays: &[Ray]) -> Vec<Hit> {
+        self.trace_raw(rays, 1, self.layout.info().maths[0], FloatControls::On).0
+    }
+
+    /// Re-traces the flagged rays of `hits` exactly, in place ([`TriBuffer::resolve`]);
+    /// returns how many there were.
+    pub fn resolve(&self, rays: &[Ray], hits: &mut [Hit]) -> usize {
+        self.tris.resolve(rays, hits)
     }
 }

@@ -25,7 +25,7 @@
 
 use super::{decode_child, Encoded, Layout, Node, TriBuffer};
 use crate::base::Ray;
-use crate::base::{slab32, Closest, Counters, Hit, RayPre};
+use crate::base::{slab32, ClosestTrue, Counters, Hit, RayPre};
 use crate::bvh::ChildRef;
 use crate::interface::CHILD_EMPTY;
 use crate::precision::{FloatControls, Math};
@@ -53,7 +53,7 @@ pub fn order_children(v: &mut [(f32, usize)]) {
 struct Lane<L: Layout> {
     r: RayPre,
     lr: L::Ray,
-    best: Closest,
+    best: ClosestTrue,
     c: Counters,
 }
 
@@ -250,7 +250,7 @@ fn packet<L: Layout, const B: usize>(
         lanes.push(Lane {
             r,
             lr,
-            best: Closest::new(ray.tmax, tris.pad),
+            best: ClosestTrue::fast(ray.tmax),
             c: Counters { box_tests: 1, ..Default::default() },
         });
     }

@@ -86,6 +86,8 @@ pub struct Measurement {
     pub vs_f32: Agreement,
     /// Rays whose counters differed from the reference (within the allowed slack).
     pub counter_diffs: usize,
+    /// Rays the traversal flagged for the exact re-trace (fp32 could not decide them).
+    pub flagged: usize,
 }
 
 impl Measurement {
@@ -98,6 +100,7 @@ impl Measurement {
             failure: None,
             vs_f32: agreement(&[], &[]),
             counter_diffs: 0,
+            flagged: 0,
         }
     }
 }
@@ -158,7 +161,7 @@ pub fn validate_then_time(
     // are its failure.
     let first = tracer.dispatch(rays, 0, 1)?;
     let vs_f32 = agreement(&first.hits, f32_hits);
-    let mut m = Measurement { hits: first.hits, vs_f32, ..Measurement::none() };
+    let mut m = Measurement { hits: first.hits, vs_f32, flagged: first.flagged, ..Measurement::none() };
     if let Reference::Exact { hits, counters, counter_slack, .. } = reference {
         if let Err(f) = compare(&label, "hits", CPU, rays, &m.hits, hits, 0, Hit::same_bits) {
             m.failure = Some(f);

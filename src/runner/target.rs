@@ -6,6 +6,7 @@ use crate::base::Status;
 use crate::base::{Hit, Ray, RunOutput};
 use crate::baseline::{BaselineId, BaselineScene};
 use crate::gpu::{Gpu, GpuBvh, Kernel};
+use crate::scene::Scene;
 use crate::variant::{Buffers, KernelId, KernelSpec, Variant};
 
 /// What a measurement traces with.
@@ -78,12 +79,27 @@ pub(super) fn retime(
     Ok(m)
 }
 
-/// A kernel over a BVH on the device, with its counting kernel when there is one.
+/// A kernel over a BVH on the device, with its counting kernel when there is one; the rays a
+/// kernel flags are re-traced exactly on the host ([`Scene::resolve`]), and each timed run's
+/// time includes that re-trace's.
 pub(super) struct KernelTracer<'a, 'g> {
     pub gpu: &'g Gpu,
     pub bvh: &'a GpuBvh<'g>,
     pub timed: &'a Kernel<'g>,
     pub counting: Option<&'a Kernel<'g>>,
+    pub scene: &'a Scene,
+}
+
+impl KernelTracer<'_, '_> {
+    fn resolved(&self, rays: &[Ray], mut out: RunOutput) -> RunOutput {
+        let t0 = std::time::Instant::now();
+        out.flagged = self.scene.resolve(rays, &mut out.hits);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        for t in out.times_ms.iter_mut() {
+            *t += ms;
+        }
+        out
+    }
 }
 
 impl Tracer for KernelTracer<'_, '_> {
@@ -91,10 +107,11 @@ impl Tracer for KernelTracer<'_, '_> {
         self.timed.label()
     }
     fn dispatch(&self, rays: &[Ray], warmup: usize, repeat: usize) -> anyhow::Result<RunOutput> {
-        Ok(self.timed.run(self.gpu, self.bvh, rays, warmup, repeat)?)
+        Ok(self.resolved(rays, self.timed.run(self.gpu, self.bvh, rays, warmup, repeat)?))
     }
     fn count(&self, rays: &[Ray]) -> Option<anyhow::Result<RunOutput>> {
-        self.counting.map(|k| k.run(self.gpu, self.bvh, rays, 0, 1).map_err(anyhow::Error::from))
+        self.counting
+            .map(|k| k.run(self.gpu, self.bvh, rays, 0, 1).map(|o| self.resolved(rays, o)).map_err(anyhow::Error::from))
     }
 }
 

@@ -8,7 +8,7 @@ pub mod instance;
 pub mod obj;
 pub mod ply;
 
-use crate::base::{Aabb, Closest, Hit, Ray, RayPre};
+use crate::base::{Aabb, ClosestBox, ClosestTrue, Hit, Ray, RayPre};
 use glam::Vec3;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -98,29 +98,42 @@ impl Scene {
     }
 
     /// The closest hit of `ray` among every triangle, tested one by one under the closest-hit
-    /// rule (`base::hit`): the oracle of every conservative traversal.
+    /// rule ([`ClosestTrue`], exact mode): the oracle of every conservative traversal.
     pub fn brute_force(&self, ray: &Ray) -> Hit {
-        let r = RayPre::new(ray);
-        let mut best = Closest::new(ray.tmax, self.hit_pad());
-        for i in 0..self.tris.len() {
-            best.test(&r, &self.verts(i), i as i32);
-        }
-        best.hit()
+        self.brute_force_counted(ray).0
     }
 
-    /// The closest hit of `ray` among every triangle under the true rule
-    /// ([`crate::base::ClosestTrue`]), and how many of its tests took the exact path.
-    pub fn brute_force_true(&self, ray: &Ray) -> (Hit, u32) {
+    /// [`Self::brute_force`], and how many of its tests took the exact path.
+    pub fn brute_force_counted(&self, ray: &Ray) -> (Hit, u32) {
         let r = RayPre::new(ray);
-        let mut best = crate::base::ClosestTrue::new(ray.tmax);
+        let mut best = ClosestTrue::new(ray.tmax);
         for i in 0..self.tris.len() {
             best.test(&r, &self.verts(i), i as i32);
         }
         (best.hit(), best.rare)
     }
 
-    /// The padding of every triangle's box in the closest-hit rule (`base::hit_pad` of the
-    /// scene's bounds): the BVH is built with it and every traversal's hits obey it.
+    /// The closest hit under the box rule that the true rule replaced ([`ClosestBox`]), for
+    /// showing what it loses.
+    pub fn brute_force_box(&self, ray: &Ray) -> Hit {
+        let r = RayPre::new(ray);
+        let mut best = ClosestBox::new(ray.tmax, self.hit_pad());
+        for i in 0..self.tris.len() {
+            best.test(&r, &self.verts(i), i as i32);
+        }
+        best.hit()
+    }
+
+    /// Re-traces the rays that a traversal flagged (`Hit::is_flagged`: fp32 could not decide
+    /// one of their triangles) with the exact rule, in place, on every core; returns how many
+    /// there were. The brute force gives the hit every conservative traversal's exact mode
+    /// would (the rule's hit is the brute-force minimum).
+    pub fn resolve(&self, rays: &[Ray], hits: &mut [Hit]) -> usize {
+        crate::base::resolve_flagged(rays, hits, |r| self.brute_force(r))
+    }
+
+    /// The padding of every triangle's box in the box rule (`base::hit_pad` of the scene's
+    /// bounds), which the BVH is still refitted with (`bvh::build`).
     pub fn hit_pad(&self) -> f32 {
         crate::base::hit_pad(&self.bounds)
     }

@@ -171,7 +171,6 @@ impl Variant {
     /// - `PACKET_SUBGROUP` or `PACKET_HYBRID`: a packet's reductions in a subgroup, or a
     ///   subgroup then shared memory; neither: shared memory (`glsl/packet.glsl`).
     /// - `STATS`: the kernel writes the work counters.
-    /// - `HAS_F64`: the device has fp64 (the triangle test's exact edge functions use it).
     /// - `HALF_WORDS`: no 16-bit storage; fp16 values are read from 32-bit words.
     /// - `FC_OFF`: the build without float controls (exact without RTE and inf/NaN
     ///   preservation).
@@ -202,9 +201,6 @@ impl Variant {
         }
         if stats {
             d.push(("STATS".into(), "1".into()));
-        }
-        if dev.f64 {
-            d.push(("HAS_F64".into(), "1".into()));
         }
         if !dev.storage16 {
             d.push(("HALF_WORDS".into(), "1".into()));
@@ -345,15 +341,12 @@ mod tests {
     }
 }
 
-/// What a kernel's build takes from the device beyond its variant. Neither changes a value, so
-/// neither is in the kernel's name: `f64`, the triangle test recomputes an edge function that
-/// is zero in fp32 with fp64 (`HAS_F64`), else with integer operations giving the same f32
-/// (`glsl/tri.glsl`, `edge_f64`); `storage16`, fp16 nodes are read as `float16_t`, else as
+/// What a kernel's build takes from the device beyond its variant. None changes a value, so
+/// none is in the kernel's name: `storage16`, fp16 nodes are read as `float16_t`, else as
 /// pairs of halves in 32-bit words (`HALF_WORDS`, `glsl/node16.glsl`: the same bytes; a word
 /// costs a shift or a conversion per half, so it is used only where 16-bit storage is missing).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DeviceBuild {
-    pub f64: bool,
     pub storage16: bool,
     /// The SPIR-V version the module is built for, 1.x: 5 (Vulkan 1.2 and later), 3 (1.1), 0
     /// (1.0). The same kernel either way; an older device is handed the version it accepts.
@@ -371,8 +364,8 @@ pub struct DeviceBuild {
 }
 
 impl DeviceBuild {
-    /// A Vulkan 1.2 GPU with fp64 and 16-bit storage, whose compiler keeps no private array in
+    /// A Vulkan 1.2 GPU with 16-bit storage, whose compiler keeps no private array in
     /// registers, the next entry in shared memory (the SPIR-V in `spirv/`, `halftrace shaders`).
     pub const FULL: DeviceBuild =
-        DeviceBuild { f64: true, storage16: true, spirv_minor: 5, register_array_bytes: 0, pending_shared: true };
+        DeviceBuild { storage16: true, spirv_minor: 5, register_array_bytes: 0, pending_shared: true };
 }

@@ -79,7 +79,7 @@ fn odd_ray_counts_and_all_miss_batches() {
             let r = &rays[..n];
             let a = k.run(&g, &gb, r, 1, 2).unwrap();
             assert_eq!(a.times_ms.len(), 2);
-            assert_same_hits(&format!("{layout} n={n}"), r, &enc.reference_default(r).0, &a.hits);
+            assert_same_hits(&format!("{layout} n={n}"), r, &enc.trace_raw_default(r), &a.hits);
         }
         // Rays pointing away from the scene: all misses.
         let away: Vec<Ray> = (0..100)
@@ -106,8 +106,9 @@ fn packet_edge_cases_partial_packets_and_all_misses() {
         let v = Variant::new(layout, 4, 64);
         let k = builtin(&g, &v, PacketImpl::Shared, true);
         let a = k.run(&g, &gb, r1000, 0, 1).unwrap();
-        assert_same_hits("1000 rays, P=64", r1000, &enc.reference_default(r1000).0, &a.hits);
-        assert_eq!(a.counters.unwrap(), enc.reference(r1000, 64, v.math, halftrace::precision::FloatControls::On).1);
+        let (hits, counters) = enc.trace_raw(r1000, 64, v.math, halftrace::precision::FloatControls::On);
+        assert_same_hits("1000 rays, P=64", r1000, &hits, &a.hits);
+        assert_eq!(a.counters.unwrap(), counters);
         let m = k.run(&g, &gb, &away, 0, 1).unwrap();
         assert!(m.hits.iter().all(|h| h.prim == -1));
         let c = m.counters.unwrap();

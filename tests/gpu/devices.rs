@@ -103,13 +103,15 @@ fn missing_features_fall_back_to_what_stays_exact() {
                 "{v}: subgroup size pinned only with subgroupSizeControl"
             );
             let out = k.run(&g, &gb, rays, 0, 1).unwrap();
-            let (want, counters) = enc.reference(rays, v.packet, v.math, v.fc);
+            let (want, counters) = enc.trace_raw(rays, v.packet, v.math, v.fc);
             assert_same_hits(&format!("{feature} masked: {}", k.name()), rays, &want, &out.hits);
+            let mut resolved = out.hits.clone();
+            enc.resolve(rays, &mut resolved);
             assert_same_hits(
                 &format!("{feature} masked: {} vs f32", k.name()),
                 rays,
                 &encode(&p, LayoutId::f32(), 4).reference_default(rays).0,
-                &out.hits,
+                &resolved,
             );
             assert_eq!(out.counters.unwrap(), counters, "{feature} masked: {} counters", k.name());
         }
@@ -208,7 +210,7 @@ fn scenes_beyond_one_storage_buffer_are_read_by_address() {
                 let k = builtin(&g, &v, imp, true);
                 for (kind, rays) in &sets {
                     let what = format!("{} {kind}", v.kernel_name(imp, true));
-                    let (hits, counters) = enc.reference(rays, pk, math, v.fc);
+                    let (hits, counters) = enc.trace_raw(rays, pk, math, v.fc);
                     let out = k.run(&g, &gb, rays, 0, 1).unwrap_or_else(|e| panic!("{what}: {e}"));
                     assert_same_hits(&what, rays, &hits, &out.hits);
                     assert!(out.counters.as_ref() == Some(&counters), "{what}: counters differ from the CPU reference");

@@ -39,8 +39,7 @@ void main() {
     // storage), in every math mode (a conversion or a bit cast per half); the latter as SPIR-V
     // 1.3, what a Vulkan 1.1 device (panvk on Mali) is handed.
     use halftrace::variant::DeviceBuild;
-    let words =
-        DeviceBuild { f64: false, storage16: false, spirv_minor: 3, register_array_bytes: 0, pending_shared: true };
+    let words = DeviceBuild { storage16: false, spirv_minor: 3, register_array_bytes: 0, pending_shared: true };
     let builds = LayoutId::all().flat_map(|l| {
         BRANCHINGS.into_iter().flat_map(move |b| {
             l.info().maths.iter().flat_map(move |&m| [(l, b, m, DeviceBuild::FULL), (l, b, m, words)])
@@ -186,34 +185,37 @@ fn assert_matches_reference(
     for (kind, rays) in sets {
         let what = format!("{}, {what}, {kind} rays", k.id);
         let a = k.run(g, gb, rays, 0, 1).unwrap();
-        let (hits, counters) = enc.reference(rays, p, v.math, v.fc);
+        let (hits, counters) = enc.trace_raw(rays, p, v.math, v.fc);
         assert_same_hits(&what, rays, &hits, &a.hits);
         assert_eq!(a.counters.unwrap(), counters, "{what}: counters");
     }
 }
 
-/// The triangle test's integer recomputation of an edge function that is zero in fp32 (the
-/// build for devices without fp64 — Adreno, Mali, Broadcom —, `edge_f64` in glsl/tri.glsl),
-/// run on this device by building the kernels as for such a device: three inlined copies with
-/// float controls, one copy in a loop without them (`FC_OFF`). Grazing rays include rays along
-/// triangle edges and axis-parallel rays through vertices, which make two of a triangle's edge
-/// functions exactly zero. Hits and counters equal the CPU reference's, which computes them in
-/// f64.
+/// The certified triangle test (glsl/tri.glsl, `tri_certify`) with and without float controls
+/// (`FC_OFF`, the build for Mali): grazing rays include rays along triangle edges and
+/// axis-parallel rays through vertices, which fp32 cannot decide, so the kernels flag them
+/// (`PRIM_FLAGGED`) exactly where the CPU reference does; hits and counters equal the
+/// reference's, flags included, and some rays are flagged.
 #[test]
-fn integer_edge_recomputation_equals_the_reference() {
+fn certified_triangle_test_flags_as_the_reference_does() {
     use halftrace::precision::FloatControls;
     let g = gpu();
     let p = prepare(&scene_path("fandisk.obj"));
     let sets = ray_sets(&p, 32, 4000);
+    let mut flagged = 0;
     for layout in [LayoutId::f32(), layout("f16w")] {
         let enc = encode(&p, layout, 4);
         let gb = GpuBvh::upload(&g, &enc).unwrap();
         for fc in [FloatControls::On, FloatControls::Off] {
             let v = Variant::new(layout, 4, 1).with_fc(fc).with_buffers(gb.buffers);
-            let k = builtin_as(&g, &v, PacketImpl::Single, true, |d| d.build.f64 = false);
-            assert_matches_reference(&g, &k, &gb, &enc, &sets, 1, "without fp64");
+            let k = builtin_as(&g, &v, PacketImpl::Single, true, |_| {});
+            assert_matches_reference(&g, &k, &gb, &enc, &sets, 1, "flags");
+            for (_, rays) in &sets {
+                flagged += enc.trace_raw(rays, 1, v.math, fc).0.iter().filter(|h| h.is_flagged()).count();
+            }
         }
     }
+    assert!(flagged > 0, "no grazing ray was flagged: the test checks no flag");
     clean(&g);
 }
 
