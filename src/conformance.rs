@@ -40,6 +40,8 @@ pub struct Check {
     pub rays: usize,
     /// Rays whose counters differed from the reference (allowed only with float controls off).
     pub counter_diffs: usize,
+    /// Rays the kernel flagged for the exact re-trace (fp32 could not decide them).
+    pub flagged: usize,
     pub secs: f64,
 }
 
@@ -141,7 +143,7 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
             let (variant, imp) = (k.variant, k.imp.expect("planned exactly"));
             let status =
                 support::admit(&g.info, &KernelId::new(variant, imp, false)).err().map_or(Status::Ok, Status::Skipped);
-            Check { variant, imp, status, rays: 0, counter_diffs: 0, secs: 0.0 }
+            Check { variant, imp, status, rays: 0, counter_diffs: 0, flagged: 0, secs: 0.0 }
         })
         .collect();
     progress(&format!("{} kernels on {}", checks.len(), g.info.name));
@@ -179,6 +181,7 @@ pub fn run(opts: &Options, mut progress: impl FnMut(&str)) -> anyhow::Result<Out
                             Status::Ok => {
                                 c.rays += runner.rays(*set).rays.len();
                                 c.counter_diffs += o.m.counter_diffs;
+                                c.flagged += o.m.flagged;
                             }
                             Status::Failed(f) => c.status = Status::Failed(format!("{what}: {f}")),
                             Status::Skipped(why) => c.status = Status::Skipped(why),
@@ -239,11 +242,11 @@ pub fn markdown(o: &Outcome, quick: bool) -> String {
         "(and equal to the f32 reference's), counters exactly with float controls on, on all but 1% of rays with ",
         "them off.\n\n"
     );
-    md += "| kernel | layout | math | B | P | implementation | float controls | rays | counter diffs | s | status |\n|---|---|---|---:|---:|---|---|---:|---:|---:|---|\n";
+    md += "| kernel | layout | math | B | P | implementation | float controls | rays | counter diffs | flagged | s | status |\n|---|---|---|---:|---:|---|---|---:|---:|---:|---:|---|\n";
     for c in &o.checks {
         let v = c.variant;
         md += &format!(
-            "| {} | {} | {} | {} | {} | {:?} | {} | {} | {} | {:.1} | {} |\n",
+            "| {} | {} | {} | {} | {} | {:?} | {} | {} | {} | {} | {:.1} | {} |\n",
             v.kernel_name(c.imp, false),
             v.layout,
             v.math.name(),
@@ -253,6 +256,7 @@ pub fn markdown(o: &Outcome, quick: bool) -> String {
             v.fc.name(),
             c.rays,
             c.counter_diffs,
+            c.flagged,
             c.secs,
             c.status.to_string().replace('|', "/")
         );
@@ -278,6 +282,7 @@ pub fn write(o: &Outcome, quick: bool, dir: &Path) -> anyhow::Result<()> {
         "float_controls",
         "rays",
         "counter_diffs",
+        "flagged",
         "seconds",
         "status",
         "device",
@@ -295,6 +300,7 @@ pub fn write(o: &Outcome, quick: bool, dir: &Path) -> anyhow::Result<()> {
             v.fc.name().into(),
             c.rays.to_string(),
             c.counter_diffs.to_string(),
+            c.flagged.to_string(),
             format!("{:.3}", c.secs),
             c.status.to_string(),
             o.device.clone(),

@@ -166,6 +166,7 @@ fn trace_gpu(
     if variant.layout != LayoutId::f32() {
         outln!("against f32: {} rays differ, {} false misses", o.m.vs_f32.differs(), o.m.vs_f32.false_misses);
     }
+    outln!("flagged: {} rays fp32 could not decide, re-traced exactly on the host", o.m.flagged);
     print_timing(o.m.timing.as_ref().expect("validated and timed"), a.warmup, n)?;
     Ok(o.m)
 }

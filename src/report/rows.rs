@@ -109,6 +109,10 @@ pub struct Row {
     pub differs_from_f32: usize,
     pub false_misses: usize,
     pub max_abs_dt: f64,
+    /// Rays the kernel flagged because fp32 could not decide one of their triangles, re-traced
+    /// exactly on the host (their time is in the timings). 0 in rows of older versions.
+    #[serde(default)]
+    pub flagged_rays: usize,
     /// The device's raw fp16:fp32 arithmetic throughput ratio (`devices --arith`, geometric
     /// mean over sub, mul, min, max, compare), measured once per sweep.
     pub device_fp16_ratio: f64,

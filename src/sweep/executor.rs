@@ -300,6 +300,7 @@ impl Executor<'_> {
         let (m, f) = (&o.m, &o.facts);
         (row.differs_from_f32, row.false_misses, row.max_abs_dt) =
             (m.vs_f32.differs(), m.vs_f32.false_misses, m.vs_f32.max_abs_dt);
+        row.flagged_rays = m.flagged;
         if let Some(t) = &m.timing {
             (row.mrays_median, row.mrays_min, row.mrays_max) = t.mrays(row.ray_count);
             (row.ms_median, row.ms_min, row.ms_max, row.timed_dispatches) = (t.median, t.min, t.max, t.count);
