@@ -88,6 +88,8 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
         err = div_rte(et, abs(det) - ed) * SLACK16;
         nu = vv; nv = ww; det_out = det;
     }
+    // a certified interval stays within 2^-10 of the farthest vertex's depth (tri.rs)
+    if (!(err <= zm * (1.0 / 1024.0))) sure = false;
     t *= back;
     err *= back;
     // (finite: err is never negative, so err < +inf tests both; NaN fails)

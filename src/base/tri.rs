@@ -139,12 +139,16 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
         let et = (3.5 * U) * s * zm + U * tt.abs() + (2.5 * U) * t.abs() * s + e * (spread + 3.0 * ez) + s * ez;
         (t, et / (det.abs() - ed) * (1.0 + 1.0 / 65_536.0))
     };
+    // A certified hit's interval stays within 2⁻¹⁰ of the farthest vertex's depth, so t' − s is
+    // bounded in the geometry's terms; a looser one (a ray grazing a large triangle) is left to
+    // the exact path.
+    let tight = err <= zm * (1.0 / 1024.0);
     let (t, err) = (t * back, err * back);
     // Beyond 2¹²⁷ (or NaN) nothing is claimed: kernels without infinities compute the same.
     if !(t.abs() <= HIT_CAP && err <= HIT_CAP) {
         return Cert::Unsure { t: 0.0, err: f32::INFINITY };
     }
-    if usable && sure {
+    if usable && sure && tight {
         Cert::Hit { t, err, u: vv / det, v: ww / det }
     } else {
         Cert::Unsure { t, err }
