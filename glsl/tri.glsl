@@ -46,6 +46,10 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     precise float py0 = r.sy * A[kz], py1 = r.sy * Bv[kz], py2 = r.sy * C[kz];
     precise float ax = A[kx] - px0, bx = Bv[kx] - px1, cx = C[kx] - px2;
     precise float ay = A[ky] - py0, by = Bv[ky] - py1, cy = C[ky] - py2;
+    // the depths now, so that the translated vertices are dead past the bounds below
+    precise float az = r.sz * A[kz];
+    precise float bz = r.sz * Bv[kz];
+    precise float cz = r.sz * C[kz];
     precise float mx = max(max(abs(A[kx]) + abs(px0), abs(Bv[kx]) + abs(px1)), abs(C[kx]) + abs(px2));
     precise float my = max(max(abs(A[ky]) + abs(py0), abs(Bv[ky]) + abs(py1)), abs(C[ky]) + abs(py2));
     precise float ex = (6.0 * U24) * mx;
@@ -66,9 +70,6 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     precise float det = uu + vv + ww;
     precise float s = abs(uu) + abs(vv) + abs(ww);
     precise float ed = 3.0 * e + (2.5 * U24) * s;
-    precise float az = r.sz * A[kz];
-    precise float bz = r.sz * Bv[kz];
-    precise float cz = r.sz * C[kz];
     precise float zm = max(max(abs(az), abs(bz)), abs(cz));
     precise float ez = (3.5 * U24) * zm;
     precise float t;
@@ -85,7 +86,11 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
         precise float spread = abs(az - t) + abs(bz - t) + abs(cz - t);
         precise float et = (3.5 * U24) * s * zm + U24 * abs(tt) + (2.5 * U24) * abs(t) * s + e * (spread + 3.0 * ez)
             + s * ez;
-        err = div_rte(et, abs(det) - ed) * SLACK16;
+        // et / (|det| - ed) bounded by et * 2^(127 - E) (E: the divisor's exponent), exactly (tri.rs)
+        precise float q = abs(det) - ed;
+        int qe = int(floatBitsToUint(q) >> 23);
+        precise float inv = uintBitsToFloat(uint(254 - qe) << 23);
+        err = (qe >= 1 && qe <= 253) ? et * inv * SLACK16 : uintBitsToFloat(0x7f7fffffu);
         nu = vv; nv = ww; det_out = det;
     }
     // a certified interval stays within 2^-10 of the farthest vertex's depth (tri.rs)
