@@ -2,6 +2,7 @@
 //! ([`wide`]), with statistics ([`stats`]). Encoders turn a [`WideBvh`] into GPU layouts.
 
 pub mod build;
+pub mod exact;
 pub mod stats;
 pub mod wide;
 

@@ -192,7 +192,14 @@ impl<'g> Runner<'g> {
         let bvh = s.encodings[&(v.layout, v.branching)].bvh.as_ref().expect("uploaded");
         let timed = self.kernels[&(id, k.source.clone())].as_ref().expect("a timed kernel is always built");
         let counting = self.kernels.get(&(id.with_stats(true), k.source.clone())).and_then(Option::as_ref);
-        let tracer = KernelTracer { gpu, bvh, timed, counting: counting.filter(|_| plan.count), scene: &s.scene };
+        let tracer = KernelTracer {
+            gpu,
+            bvh,
+            timed,
+            counting: counting.filter(|_| plan.count),
+            scene: &s.scene,
+            bin: s.bin.as_ref(),
+        };
         let m = match (validated, reference) {
             (Some(hits), _) => retime(&tracer, &rs.rays, &hits, f32_hits, plan)?,
             (None, Some((hits, counters))) => {

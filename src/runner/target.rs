@@ -5,6 +5,7 @@ use super::measure::{self, Measurement, Plan, Tracer};
 use crate::base::Status;
 use crate::base::{Hit, Ray, RunOutput};
 use crate::baseline::{BaselineId, BaselineScene};
+use crate::bvh::BinaryBvh;
 use crate::gpu::{Gpu, GpuBvh, Kernel};
 use crate::scene::Scene;
 use crate::variant::{Buffers, KernelId, KernelSpec, Variant};
@@ -80,20 +81,25 @@ pub(super) fn retime(
 }
 
 /// A kernel over a BVH on the device, with its counting kernel when there is one; the rays a
-/// kernel flags are re-traced exactly on the host ([`Scene::resolve`]), and each timed run's
-/// time includes that re-trace's.
+/// kernel flags are re-traced exactly on the host (through the scene's binary BVH where the
+/// runner holds it, `BinaryBvh::resolve`, else by brute force, [`Scene::resolve`]), and each
+/// timed run's time includes that re-trace's.
 pub(super) struct KernelTracer<'a, 'g> {
     pub gpu: &'g Gpu,
     pub bvh: &'a GpuBvh<'g>,
     pub timed: &'a Kernel<'g>,
     pub counting: Option<&'a Kernel<'g>>,
     pub scene: &'a Scene,
+    pub bin: Option<&'a BinaryBvh>,
 }
 
 impl KernelTracer<'_, '_> {
     fn resolved(&self, rays: &[Ray], mut out: RunOutput) -> RunOutput {
         let t0 = std::time::Instant::now();
-        out.flagged = self.scene.resolve(rays, &mut out.hits);
+        out.flagged = match self.bin {
+            Some(b) => b.resolve(self.scene, rays, &mut out.hits),
+            None => self.scene.resolve(rays, &mut out.hits),
+        };
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         for t in out.times_ms.iter_mut() {
             *t += ms;
