@@ -86,11 +86,7 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
         precise float spread = abs(az - t) + abs(bz - t) + abs(cz - t);
         precise float et = (3.5 * U24) * s * zm + U24 * abs(tt) + (2.5 * U24) * abs(t) * s + e * (spread + 3.0 * ez)
             + s * ez;
-        // et / (|det| - ed) bounded by et * 2^(127 - E) (E: the divisor's exponent), exactly (tri.rs)
-        precise float q = abs(det) - ed;
-        int qe = int(floatBitsToUint(q) >> 23);
-        precise float inv = uintBitsToFloat(uint(254 - qe) << 23);
-        err = (qe >= 1 && qe <= 253) ? et * inv * SLACK16 : uintBitsToFloat(0x7f7fffffu);
+        err = div_rte(et, abs(det) - ed) * SLACK16;
         nu = vv; nv = ww; det_out = det;
     }
     // a certified interval stays within 2^-10 of the farthest vertex's depth (tri.rs)
@@ -106,10 +102,12 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     return sure ? CERT_HIT : CERT_UNSURE;
 }
 
-// The closest hit so far under the closest-hit rule (hit.rs, ClosestTrue::fast): the smallest
-// kept t', ties (equal t') to the lower prim; (und_t, und_prim): the least (lo, prim) of the
-// tests fp32 could not decide — the ray is flagged if it comes before the final best.
+// The closest hit so far under the closest-hit rule (hit.rs, ClosestTrue::fast): a hit is kept
+// only where its certified interval [lo, t'] lies wholly before the best's (best_lo); (und_t,
+// und_prim): the least (lo, prim) of the tests fp32 could not decide (or order) — the ray is
+// flagged if it comes before the final best.
 float best_t;
+float best_lo;
 int best_prim;
 float best_u;
 float best_v;
@@ -126,10 +124,8 @@ void closest_test(RayPre r, uint ti) {
     int prim = int(tri_id[ti]);
     if (!bounded) lo = -INF;
     if ((bounded && hi < r.tmin) || !closer(lo, prim)) return;
-    if (c == CERT_HIT && lo >= r.tmin && hi <= r.tmax) {
-        if (closer(hi, prim)) {
-            best_t = hi; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
-        }
+    if (c == CERT_HIT && lo >= r.tmin && hi <= r.tmax && hi < best_lo) {
+        best_t = hi; best_lo = lo; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
         return;
     }
     if (lo < und_t || (lo == und_t && prim < und_prim)) {
@@ -139,7 +135,7 @@ void closest_test(RayPre r, uint ti) {
 }
 
 void closest_init(float tmax) {
-    best_t = tmax; best_prim = NO_PRIM; best_u = 0.0; best_v = 0.0; und_t = INF; und_prim = NO_PRIM;
+    best_t = tmax; best_lo = INF; best_prim = NO_PRIM; best_u = 0.0; best_v = 0.0; und_t = INF; und_prim = NO_PRIM;
 }
 
 // Writes ray i's closest hit: a miss, the hit, or PRIM_FLAGGED for a ray to re-trace.

@@ -144,6 +144,10 @@ fn hunt(name: &str, tris: &[[Vec3; 3]], dist: f32, rng_seed: u64) -> Tally {
                         Some(x) if x.s.cmp_f32(new.t) == Ordering::Greater => {
                             Some(format!("t' {} below the exact crossing {}", new.t, x.s.to_f64()))
                         }
+                        // The nearest exact crossing: no surface in front of it is passed through.
+                        Some(x) if Some(x.s.round_up()) != truth.map(|(_, s)| s) => {
+                            Some(format!("hit {new:?} at {} is not the nearest exact crossing {truth:?}", x.s.to_f64()))
+                        }
                         Some(x) => {
                             // t' − s in world units, against the triangle's farthest vertex from o
                             let t = &scene.tris[new.prim as usize];

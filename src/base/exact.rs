@@ -77,6 +77,11 @@ impl Ratio {
         }
     }
     /// The f32 nearest this ratio, through f64 (within one f32 ulp).
+    /// The order of two exact values.
+    pub fn cmp_ratio(&self, o: &Ratio) -> Ordering {
+        (&self.n * &o.d).cmp(&(&o.n * &self.d))
+    }
+
     pub fn approx_f32(&self) -> f32 {
         self.to_f64() as f32
     }

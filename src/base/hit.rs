@@ -223,43 +223,50 @@ pub const PRIM_FLAGGED: i32 = -3;
 
 /// The closest hit so far under the closest-hit rule (module docs). `prim == i32::MAX` until
 /// something is hit, so a hit exactly at `tmax` is accepted like any other (`t' <= tmax`).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct ClosestTrue {
+    /// The best hit's t' (the culling bound: at least its exact crossing).
     pub t: f32,
     pub prim: i32,
     pub u: f32,
     pub v: f32,
+    /// A lower bound of the best hit's exact crossing (`+inf` before any hit).
+    pub lo: f32,
     /// Triangle tests that fp32 could not decide (in exact mode, the exact path ran).
     pub rare: u32,
-    /// Fast mode ([`Self::fast`]): a test fp32 cannot decide is noted in `undecided`, not
-    /// decided.
+    /// Fast mode ([`Self::fast`]): a test fp32 cannot decide is noted in `undecided`.
     pub fast: bool,
     /// Fast mode: the least `(lo, prim)` of the undecided tests (`lo`: where the crossing, if
     /// any, can begin; `−inf` when unknown).
     pub undecided: (f32, i32),
+    /// Exact mode: the best triangle's vertices, for an exact comparison of crossings.
+    best_verts: [f32; 9],
 }
 
 /// What fp32 decides of one triangle for the closest-hit rule.
 enum Decision {
-    /// Not hit, or cannot be closer than the best so far.
+    /// Not hit, or certainly not before the best so far.
     No,
-    /// Hit, kept with t' and these barycentrics.
-    Kept(f32, f32, f32),
-    /// fp32 cannot decide; a crossing, if any, lies at or after `lo`.
+    /// Hit, certainly before the best so far: kept with t' = `hi`, `lo` ≤ s, barycentrics.
+    Kept { lo: f32, hi: f32, u: f32, v: f32 },
+    /// fp32 cannot decide whether it is hit before the best; a crossing, if any, lies at or
+    /// after `lo`.
     Undecided(f32),
 }
 
 impl ClosestTrue {
-    /// Exact mode: every test decided, by the exact path where fp32 cannot.
+    /// Exact mode: every test decided, by exact arithmetic where fp32 cannot.
     pub fn new(tmax: f32) -> ClosestTrue {
         ClosestTrue {
             t: tmax,
             prim: i32::MAX,
             u: 0.0,
             v: 0.0,
+            lo: f32::INFINITY,
             rare: 0,
             fast: false,
             undecided: (f32::INFINITY, i32::MAX),
+            best_verts: [0.0; 9],
         }
     }
 
@@ -272,44 +279,70 @@ impl ClosestTrue {
         ClosestTrue { fast: true, ..ClosestTrue::new(tmax) }
     }
 
-    /// fp32's decision on triangle `verts` against the best so far.
+    /// fp32's decision on triangle `verts` against the best so far: kept only where its
+    /// certified interval lies wholly before the best's (`hi < lo_best`), so that the kept
+    /// hit is the nearest exact crossing, not only the smallest upper bound.
     #[inline]
-    fn decide(r: &RayPre, verts: &[f32; 9], prim: i32, best: (f32, i32)) -> Decision {
+    fn decide(&self, r: &RayPre, verts: &[f32; 9], prim: i32) -> Decision {
         let c = tri::certify(r, verts);
         let (lo, hi) = c.bounds();
-        if hi < r.tmin || !closer(lo, prim, best) {
+        if hi < r.tmin || !closer(lo, prim, (self.t, self.prim)) {
             return Decision::No;
         }
         if let tri::Cert::Hit { u, v, .. } = c {
-            if lo >= r.tmin && hi <= r.tmax {
-                return Decision::Kept(hi, u, v);
+            if lo >= r.tmin && hi <= r.tmax && hi < self.lo {
+                return Decision::Kept { lo, hi, u, v };
             }
         }
         Decision::Undecided(lo)
     }
 
-    /// Tests triangle `verts` with public id `prim` and keeps it if closer.
+    /// Tests triangle `verts` with public id `prim` and keeps it if nearer.
     #[inline]
     pub fn test(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
-        let kept = match Self::decide(r, verts, prim, (self.t, self.prim)) {
-            Decision::No => return,
-            Decision::Kept(t, u, v) => (t, u, v),
+        match self.decide(r, verts, prim) {
+            Decision::No => {}
+            Decision::Kept { lo, hi, u, v } => self.keep(verts, prim, lo, hi, u, v),
             Decision::Undecided(lo) => {
                 self.rare += 1;
                 if self.fast {
                     if closer(lo, prim, self.undecided) {
                         self.undecided = (lo, prim);
                     }
-                    return;
-                }
-                match exact::crossing_in(r, verts) {
-                    Some(x) => (x.s.round_up(), x.u.approx_f32(), x.v.approx_f32()),
-                    None => return,
+                } else {
+                    self.decide_exactly(r, verts, prim);
                 }
             }
-        };
-        if closer(kept.0, prim, (self.t, self.prim)) {
-            (self.t, self.prim, self.u, self.v) = (kept.0, prim, kept.1, kept.2);
+        }
+    }
+
+    fn keep(&mut self, verts: &[f32; 9], prim: i32, lo: f32, hi: f32, u: f32, v: f32) {
+        (self.t, self.lo, self.prim, self.u, self.v) = (hi, lo, prim, u, v);
+        self.best_verts = *verts;
+    }
+
+    /// Exact mode: the triangle's exact crossing in `[tmin, tmax]`, against the best's; kept
+    /// if nearer (equal: lower prim), with t' = the certified upper bound where fp32 certifies
+    /// its crossing in range, else s rounded up.
+    fn decide_exactly(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
+        let Some(x) = exact::crossing_in(r, verts) else { return };
+        if self.prim != i32::MAX {
+            let best = exact::crossing_in(r, &self.best_verts).expect("the best hit is crossed");
+            match x.s.cmp_ratio(&best.s) {
+                std::cmp::Ordering::Less => {}
+                std::cmp::Ordering::Equal if prim < self.prim => {}
+                _ => return,
+            }
+        }
+        let c = tri::certify(r, verts);
+        let (lo, hi) = c.bounds();
+        match c {
+            tri::Cert::Hit { u, v, .. } if lo >= r.tmin && hi <= r.tmax => self.keep(verts, prim, lo, hi, u, v),
+            _ => {
+                let t = x.s.round_up();
+                let lo = super::exact::next_down(t);
+                self.keep(verts, prim, lo, t, x.u.approx_f32(), x.v.approx_f32());
+            }
         }
     }
 

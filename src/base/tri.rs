@@ -137,17 +137,7 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
         // errors, common to the numerator and det, cancel); the depths' own errors.
         let spread = (az - t).abs() + (bz - t).abs() + (cz - t).abs();
         let et = (3.5 * U) * s * zm + U * tt.abs() + (2.5 * U) * t.abs() * s + e * (spread + 3.0 * ez) + s * ez;
-        // et / (|det| − ed), bounded above by et times the power of two 2^(127 − E) ≥ 1/q
-        // (E: q's biased exponent): exact, so no second correctly rounded division; at most
-        // twice the quotient. q's exponent out of range leaves nothing claimed.
-        let q = det.abs() - ed;
-        let qe = (q.to_bits() >> 23) as i32;
-        let err = if (1..=253).contains(&qe) {
-            et * f32::from_bits(((254 - qe) as u32) << 23) * (1.0 + 1.0 / 65_536.0)
-        } else {
-            f32::MAX
-        };
-        (t, err)
+        (t, et / (det.abs() - ed) * (1.0 + 1.0 / 65_536.0))
     };
     // A certified hit's interval stays within 2⁻¹⁰ of the farthest vertex's depth, so t' − s is
     // bounded in the geometry's terms; a looser one (a ray grazing a large triangle) is left to

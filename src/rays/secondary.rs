@@ -22,7 +22,11 @@ pub fn secondary(scene: &Scene, primary: &[Ray], hits: &[Hit], seed: u64, length
         if h.prim < 0 {
             continue;
         }
-        let p = r.o() + r.d() * h.t;
+        // The hit point from its barycentrics, on the triangle: the hit's t' is an upper bound
+        // of the crossing (docs/layouts.md, "The closest-hit rule"), so o + t'·d may lie behind
+        // the surface by more than the offset below.
+        let tri = &scene.tris[h.prim as usize];
+        let p = tri[0] * (1.0 - h.u - h.v) + tri[1] * h.u + tri[2] * h.v;
         let mut n = scene.normal(h.prim as usize).normalize_or_zero();
         if n == Vec3::ZERO {
             continue;

@@ -68,7 +68,8 @@ pub fn make(scene: &Scene, bin: &BinaryBvh, spec: &RaySpec) -> anyhow::Result<Ve
     match spec.kind {
         RayKind::Ao | RayKind::Diffuse => {
             let prim = generate(scene, bin, &RaySpec { kind: RayKind::Primary, params: spec.params.clone() }, None)?;
-            let hits = Encoded::new(scene, bin, LayoutId::f32(), 4)?.reference_default(&prim).0;
+            let mut hits = Encoded::new(scene, bin, LayoutId::f32(), 4)?.trace_raw_default(&prim);
+            bin.resolve(scene, &prim, &mut hits);
             generate(scene, bin, spec, Some((&prim, &hits)))
         }
         _ => generate(scene, bin, spec, None),
