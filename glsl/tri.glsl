@@ -1,5 +1,5 @@
 // The certified watertight triangle test and the closest-hit rule (src/base/hit.rs, module
-// docs; docs/layouts.md, "True hits"). Mirrors tri.rs (certify) and ClosestTrue's fast mode
+// docs; docs/layouts.md, "The closest-hit rule"). Mirrors tri.rs (certify) and ClosestTrue's fast mode
 // operation for operation (no contraction): fp32 only, no fp64, no fused multiply-add. What
 // fp32 cannot decide may flag the ray (PRIM_FLAGGED); the host re-traces flagged rays exactly.
 

@@ -1,7 +1,7 @@
 //! Exact geometry on fp32 inputs: where the *exact* ray `o + s·d` (its fp32 origin and
 //! direction taken as exact numbers) meets a closed triangle given by its fp32 vertices,
 //! decided and placed with integer arithmetic — no rounding anywhere. The oracle of "true"
-//! hits (docs/layouts.md, "True hits") and the rare path of the certified triangle test
+//! hits (docs/layouts.md, "The closest-hit rule") and the rare path of the certified triangle test
 //! ([`super::tri::certify`]), which defers to it whenever fp32 cannot decide.
 //!
 //! Every fp32 value is an integer multiple of 2⁻¹⁴⁹, so each is held as that integer

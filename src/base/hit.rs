@@ -7,14 +7,14 @@
 //! A triangle is hit where the *exact* ray — its fp32 origin and direction taken as exact
 //! numbers — crosses it, closed (edges and vertices included), at an exact parameter s in
 //! `[tmin, tmax]`. The hit is kept with a t' that is a function of the ray and the triangle
-//! alone, with s ≤ t' (docs/layouts.md, "True hits"):
+//! alone, with s ≤ t' (docs/layouts.md, "The closest-hit rule"):
 //!
 //! - `t' = hi`, the upper end of the interval [`tri::certify`] certifies to hold s, where fp32
 //!   decides the crossing and its interval lies in `[tmin, tmax]`;
 //! - else `t' =` s rounded up to f32, decided and placed exactly ([`exact::crossing`]).
 //!
-//! Of the kept hits the smallest t' wins; ties (bit-identical t') go to the lower `prim`, so
-//! results never depend on traversal order. Every BVH node above a hit triangle contains the
+//! The nearest exact crossing wins (the smallest s; equal s go to the lower `prim`), reported
+//! with its t', so results never depend on traversal order. Every BVH node above a hit triangle contains the
 //! exact crossing point, which the exact ray reaches at s ≤ t' ≤ best, and a conservative box
 //! test never rejects a box the exact ray reaches inside `[tmin, best]` (every layout's bound is
 //! argued beside its test): every conservative traversal visits the winning triangle and

@@ -77,7 +77,7 @@ const U: f32 = 1.0 / 16_777_216.0; // the unit roundoff 2⁻²⁴
 /// sheared coordinates: an edge function is trusted only where it lies farther from zero than
 /// its bound, and the hit's t comes with a bound on its distance from the exact crossing. No
 /// fp64 and no fused multiply-add: the bounds are those of round-to-nearest fp32 operations
-/// (the argument is in docs/layouts.md, "True hits"; [`tests`] check it against
+/// (the argument is in docs/layouts.md, "The closest-hit rule"; [`tests`] check it against
 /// [`super::exact`] on adversarial cases). What it cannot decide it says ([`Cert::Unsure`]).
 #[inline]
 pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
