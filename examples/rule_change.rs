@@ -57,8 +57,8 @@ fn main() -> anyhow::Result<()> {
                     let c = (&xn.s.n * &xo.s.d).cmp(&(&xo.s.n * &xn.s.d));
                     match c {
                         Ordering::Less => "nearer hit the box rule lost",
-                        Ordering::Equal => "tie at one exact crossing (shared edge or vertex): lower t', then prim",
-                        Ordering::Greater => "near-coincident surfaces: t' order differs from exact order",
+                        Ordering::Equal => "tie at one exact crossing (shared edge or vertex): the lower prim wins",
+                        Ordering::Greater => "WRONG: a farther triangle won",
                     }
                 }
                 (Some(_), None) => unreachable!("checked above"),
