@@ -270,6 +270,17 @@ impl ClosestTrue {
         }
     }
 
+    /// Exact mode over every triangle of `tris` (vertices and public prim, in any order: ties go
+    /// to the lower prim): the brute force every conservative traversal is held to.
+    pub fn brute_force(ray: &Ray, tris: impl IntoIterator<Item = ([f32; 9], i32)>) -> ClosestTrue {
+        let r = RayPre::new(ray);
+        let mut best = ClosestTrue::new(ray.tmax);
+        for (v, prim) in tris {
+            best.test(&r, &v, prim);
+        }
+        best
+    }
+
     /// Fast mode, what traversals run (and `glsl/tri.glsl` mirrors operation for operation):
     /// fp32 alone. The ray is flagged ([`Self::hit`] is [`PRIM_FLAGGED`]) when a test fp32
     /// could not decide might come before the final best — decided at the end, so it does not

@@ -42,6 +42,15 @@ impl BinaryBvh {
     }
 }
 
+/// Re-traces the flagged rays of `hits` exactly: through `bin` where there is one, else by
+/// the scene's brute force (the same hits either way); returns how many there were.
+pub fn resolve(scene: &Scene, bin: Option<&BinaryBvh>, rays: &[Ray], hits: &mut [Hit]) -> usize {
+    match bin {
+        Some(b) => b.resolve(scene, rays, hits),
+        None => scene.resolve(rays, hits),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use crate::base::{Ray, Rng};

@@ -2,7 +2,7 @@
 //! CPU reference traverses and what the GPU backend uploads.
 
 use super::{LayoutId, Node};
-use crate::base::{Aabb, ClosestTrue, Counters, Hit, Ray, RayPre};
+use crate::base::{Aabb, ClosestTrue, Counters, Hit, Ray};
 use crate::bvh::{BinaryBvh, WideBvh};
 use crate::precision::{FloatControls, Math};
 use crate::scene::Scene;
@@ -39,12 +39,7 @@ impl TriBuffer {
     /// (`base::ClosestTrue::new`): what `Scene::brute_force` gives (ties go to the lower
     /// public prim, so the triangles' order does not matter).
     pub fn brute_force(&self, ray: &Ray) -> Hit {
-        let r = RayPre::new(ray);
-        let mut best = ClosestTrue::new(ray.tmax);
-        for (v, &id) in self.verts.iter().zip(&self.ids) {
-            best.test(&r, v, id as i32);
-        }
-        best.hit()
+        ClosestTrue::brute_force(ray, self.verts.iter().zip(&self.ids).map(|(v, &id)| (*v, id as i32))).hit()
     }
 
     /// Re-traces the rays a traversal flagged (`Hit::is_flagged`) with [`Self::brute_force`],

@@ -161,7 +161,7 @@ impl<'g> Runner<'g> {
         let s = self.state();
         let enc = s.f32_ref.as_ref().expect("just made");
         let mut hits = enc.trace_raw_default(&s.sets[i].rays);
-        resolve(s, enc, i, &mut hits);
+        crate::bvh::exact::resolve(&s.scene, s.bin.as_ref(), &s.sets[i].rays, &mut hits);
         s.sets[i].f32_hits = Some(hits);
         if self.opts.frugal {
             self.release_f32_reference();
@@ -271,7 +271,7 @@ impl<'g> Runner<'g> {
         let s = self.state();
         let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
         let (mut hits, counters) = enc.trace_raw(&s.sets[i].rays, v.packet, v.math, v.fc);
-        resolve(s, enc, i, &mut hits);
+        crate::bvh::exact::resolve(&s.scene, s.bin.as_ref(), &s.sets[i].rays, &mut hits);
         let r = (hits, counters);
         if !frugal {
             if s.refs.len() == KEPT_REFERENCES {
@@ -281,14 +281,4 @@ impl<'g> Runner<'g> {
         }
         Ok(r)
     }
-}
-
-/// Re-traces the rays of ray set `i` that a CPU reference flagged: through the scene's binary
-/// BVH where the runner holds it, else by `enc`'s brute force (the same hits either way).
-fn resolve(s: &SceneState, enc: &Encoded, i: usize, hits: &mut [Hit]) {
-    let rays = &s.sets[i].rays;
-    match s.bin.as_ref() {
-        Some(b) => b.resolve(&s.scene, rays, hits),
-        None => enc.resolve(rays, hits),
-    };
 }

@@ -96,10 +96,7 @@ pub(super) struct KernelTracer<'a, 'g> {
 impl KernelTracer<'_, '_> {
     fn resolved(&self, rays: &[Ray], mut out: RunOutput) -> RunOutput {
         let t0 = std::time::Instant::now();
-        out.flagged = match self.bin {
-            Some(b) => b.resolve(self.scene, rays, &mut out.hits),
-            None => self.scene.resolve(rays, &mut out.hits),
-        };
+        out.flagged = crate::bvh::exact::resolve(self.scene, self.bin, rays, &mut out.hits);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         for t in out.times_ms.iter_mut() {
             *t += ms;

@@ -105,11 +105,7 @@ impl Scene {
 
     /// [`Self::brute_force`], and how many of its tests took the exact path.
     pub fn brute_force_counted(&self, ray: &Ray) -> (Hit, u32) {
-        let r = RayPre::new(ray);
-        let mut best = ClosestTrue::new(ray.tmax);
-        for i in 0..self.tris.len() {
-            best.test(&r, &self.verts(i), i as i32);
-        }
+        let best = ClosestTrue::brute_force(ray, (0..self.tris.len()).map(|i| (self.verts(i), i as i32)));
         (best.hit(), best.rare)
     }
 
