@@ -2,7 +2,7 @@
 //! `layout/mod.rs` lists one line per layout) and the object-safe face every layout gets
 //! ([`DynLayout`], through [`Plug`]).
 
-use super::traverse::LoopWork;
+use super::traverse::{LoopWork, Reads};
 use super::{EncodeError, Encoded, Layout, LayoutInfo, TriBuffer, REGISTRY};
 use crate::base::{Counters, Hit, Ray};
 use crate::bvh::WideBvh;
@@ -48,6 +48,12 @@ impl LayoutId {
     /// The fp32 layout every other is compared with.
     pub fn f32() -> LayoutId {
         Self::of::<super::f32::F32>()
+    }
+
+    /// The poster's layout in the poster's math (fp16 box tests): the headline's numerator.
+    pub fn poster() -> (LayoutId, Math) {
+        let l = Self::of::<super::f16h::F16h>();
+        (l, l.default_math())
     }
 
     /// "f32, f16h or q8".
@@ -110,6 +116,8 @@ pub trait DynLayout: Send + Sync {
         math: Math,
         fc: FloatControls,
     ) -> (LoopWork, LoopWork);
+    /// Every packet's reads of the scene's buffers, pass by pass: [`super::traverse::mem_reads`].
+    fn mem_reads(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> Vec<Vec<Reads>>;
 }
 
 /// The [`DynLayout`] of a [`Layout`] (`layout/mod.rs`'s `layouts!` list makes one per layout).
@@ -173,6 +181,17 @@ fn loop_work_b<L: Layout, const B: usize>(
     super::traverse::loop_work::<L, B>(nodes, root, enc, rays, p, wave, math, fc)
 }
 
+fn mem_reads_b<L: Layout, const B: usize>(
+    enc: &Encoded,
+    rays: &[Ray],
+    p: usize,
+    math: Math,
+    fc: FloatControls,
+) -> Vec<Vec<Reads>> {
+    let (nodes, root) = enc.typed::<L, B>().expect("Encoded of another layout or B");
+    super::traverse::mem_reads::<L, B>(nodes, root, enc, rays, p, math, fc)
+}
+
 impl<L: Layout> DynLayout for Plug<L> {
     fn info(&self) -> &'static LayoutInfo {
         &L::INFO
@@ -195,6 +214,9 @@ impl<L: Layout> DynLayout for Plug<L> {
     ) -> (LoopWork, LoopWork) {
         assert!(L::INFO.maths.contains(&math), "{}: math {} is not one of its modes", L::INFO.name, math.name());
         with_branching!(enc.branching, loop_work_b, enc, rays, p, wave, math, fc)
+    }
+    fn mem_reads(&self, enc: &Encoded, rays: &[Ray], p: usize, math: Math, fc: FloatControls) -> Vec<Vec<Reads>> {
+        with_branching!(enc.branching, mem_reads_b, enc, rays, p, math, fc)
     }
 }
 

@@ -82,6 +82,9 @@ struct Scratch<L: Layout> {
     pend_entries: Vec<Option<L::Entry>>,
     /// Each lane's `tri_tests` when the current visit began (only while recording steps).
     lane_tris: Vec<u32>,
+    /// Each lane's leaves hit in the current visit, (slot, first, count) (only while recording
+    /// reads).
+    lane_leaves: Vec<Vec<(usize, u32, u32)>>,
 }
 
 impl<L: Layout> Scratch<L> {
@@ -97,6 +100,7 @@ impl<L: Layout> Scratch<L> {
             pend: Vec::new(),
             pend_entries: Vec::new(),
             lane_tris: Vec::new(),
+            lane_leaves: Vec::new(),
         }
     }
 }
@@ -118,7 +122,7 @@ pub fn trace_all<L: Layout, const B: usize>(
         .zip(hits.par_chunks_mut(p))
         .zip(counters.par_chunks_mut(p))
         .for_each_init(Scratch::<L>::new, |s, ((rays, hits), counters)| {
-            packet::<L, B>(nodes, root, enc, rays, math, fc, s, hits, counters, None)
+            packet::<L, B>(nodes, root, enc, rays, math, fc, s, hits, counters, None, None)
         });
     (hits, counters)
 }
@@ -132,6 +136,19 @@ pub fn trace_all<L: Layout, const B: usize>(
 pub struct Step {
     pub visited: bool,
     pub tris: u32,
+}
+
+/// One lane's reads of the scene's buffers in one pass of the traversal loop (recorded for
+/// the memory model, [`mem_reads`]): the node it entered (when it was active there: the kernel
+/// reads the node for its box tests), the triangles its visit tested in the kernel's order
+/// (leaves in slot order, each leaf's triangles in order, `test_leaves`) with whether the test
+/// read the triangle's id (`closest_test` reads it unless the certified test is a miss), and
+/// the stack entries it pushed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Reads {
+    pub node: Option<u32>,
+    pub tris: Vec<(u32, bool)>,
+    pub pushes: u32,
 }
 
 /// How often a kernel's loops run for a set of single rays: the traversal loop's passes
@@ -205,7 +222,7 @@ pub fn loop_work<L: Layout, const B: usize>(
                 .map(|rays| {
                     let n = rays.len();
                     let (mut hit, mut c, mut steps) = (vec![Hit::MISS; n], vec![Counters::default(); n], Vec::new());
-                    packet::<L, B>(nodes, root, enc, rays, math, fc, s, &mut hit, &mut c, Some(&mut steps));
+                    packet::<L, B>(nodes, root, enc, rays, math, fc, s, &mut hit, &mut c, Some(&mut steps), None);
                     steps
                 })
                 .collect();
@@ -216,6 +233,30 @@ pub fn loop_work<L: Layout, const B: usize>(
             a.1 += b.1;
             a
         })
+}
+
+/// Every packet's reads, pass by pass: for packets of `p` consecutive rays (1: single rays),
+/// per packet its passes × its lanes (pass-major), as the kernel makes them. Hits and counters
+/// are those of [`trace_all`] (not returned).
+#[allow(clippy::too_many_arguments)]
+pub fn mem_reads<L: Layout, const B: usize>(
+    nodes: &[L::Node<B>],
+    root: &L::Root,
+    enc: &Encoded,
+    rays: &[Ray],
+    p: usize,
+    math: Math,
+    fc: FloatControls,
+) -> Vec<Vec<Reads>> {
+    let p = p.max(1);
+    rays.par_chunks(p)
+        .map_init(Scratch::<L>::new, |s, rays| {
+            let n = rays.len();
+            let (mut hit, mut c, mut reads) = (vec![Hit::MISS; n], vec![Counters::default(); n], Vec::new());
+            packet::<L, B>(nodes, root, enc, rays, math, fc, s, &mut hit, &mut c, None, Some(&mut reads));
+            reads
+        })
+        .collect()
 }
 
 /// Traces one packet of the encoded scene `enc` (`nodes` and `root` are its, typed).
@@ -231,11 +272,15 @@ fn packet<L: Layout, const B: usize>(
     hits: &mut [Hit],
     counters: &mut [Counters],
     mut steps: Option<&mut Vec<Step>>,
+    mut reads: Option<&mut Vec<Reads>>,
 ) {
     let p = rays.len();
     let tris = &enc.tris;
     let (box_lo, box_hi): ([f32; 3], [f32; 3]) = (enc.root_box.min.into(), enc.root_box.max.into());
-    let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries, lane_tris } = s;
+    let Scratch { lanes, stack, entries, cur, visits, res, order, pend, pend_entries, lane_tris, lane_leaves } = s;
+    if reads.is_some() {
+        lane_leaves.resize(p, Vec::new());
+    }
     lanes.clear();
     stack.clear();
     entries.clear();
@@ -263,6 +308,9 @@ fn packet<L: Layout, const B: usize>(
     while let Some(ni) = stack.pop() {
         if let Some(st) = steps.as_mut() {
             st.push(Step::default());
+        }
+        if let Some(rd) = reads.as_mut() {
+            rd.extend(std::iter::repeat_with(Reads::default).take(p));
         }
         cur.clear();
         cur.extend(entries.drain(entries.len() - p..));
@@ -321,9 +369,12 @@ fn packet<L: Layout, const B: usize>(
             let tests = &res[slot * p..slot * p + p];
             match decode_child(n.child(slot)) {
                 ChildRef::Leaf { first, count } => {
-                    for (lane, t) in lanes.iter_mut().zip(tests) {
+                    for (l, (lane, t)) in lanes.iter_mut().zip(tests).enumerate() {
                         if t.is_some() {
                             lane.test_leaf(tris, first, count);
+                            if reads.is_some() {
+                                lane_leaves[l].push((slot, first, count));
+                            }
                         }
                     }
                 }
@@ -351,6 +402,26 @@ fn packet<L: Layout, const B: usize>(
         // triangle left.
         if let Some(st) = steps.as_mut().and_then(|st| st.last_mut()) {
             st.tris = lanes.iter().zip(lane_tris.iter()).map(|(l, &t0)| l.c.tri_tests - t0).max().unwrap_or(0);
+        }
+        if let Some(rd) = reads.as_mut() {
+            let at = rd.len() - p;
+            for (l, lane) in lanes.iter().enumerate() {
+                let r = &mut rd[at + l];
+                r.node = visits[l].is_some().then_some(ni);
+                r.pushes = (0..pend.len()).filter(|k| pend_entries[k * p + l].is_some()).count() as u32;
+                let leaves = &mut lane_leaves[l];
+                leaves.sort_by_key(|x| x.0);
+                for &(_, first, count) in leaves.iter() {
+                    for i in first..first + count {
+                        let miss = matches!(
+                            crate::base::tri::certify(&lane.r, &tris.verts[i as usize]),
+                            crate::base::tri::Cert::Miss
+                        );
+                        r.tris.push((i, !miss));
+                    }
+                }
+                leaves.clear();
+            }
         }
         for k in (0..pend.len()).rev() {
             stack.push(pend[k]);
