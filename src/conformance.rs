@@ -267,47 +267,48 @@ pub fn markdown(o: &Outcome, quick: bool) -> String {
     md
 }
 
+/// One line of `conformance.csv`.
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    kernel: String,
+    layout: &'a str,
+    math: &'a str,
+    branching: usize,
+    packet: usize,
+    implementation: String,
+    float_controls: &'a str,
+    rays: usize,
+    counter_diffs: usize,
+    flagged: usize,
+    #[serde(serialize_with = "crate::report::csvx::fixed::<3, _>")]
+    seconds: f64,
+    #[serde(serialize_with = "crate::report::csvx::display")]
+    status: &'a Status,
+    device: &'a str,
+    driver: &'a str,
+}
+
 /// Writes `conformance.md` and `conformance.csv` into `dir` (each through a temporary file
 /// renamed into place).
 pub fn write(o: &Outcome, quick: bool, dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut csv = csv::Writer::from_writer(Vec::new());
-    csv.write_record([
-        "kernel",
-        "layout",
-        "math",
-        "branching",
-        "packet",
-        "implementation",
-        "float_controls",
-        "rays",
-        "counter_diffs",
-        "flagged",
-        "seconds",
-        "status",
-        "device",
-        "driver",
-    ])?;
-    for c in &o.checks {
-        let v = c.variant;
-        csv.write_record([
-            v.kernel_name(c.imp, false),
-            v.layout.to_string(),
-            v.math.name().into(),
-            v.branching.to_string(),
-            v.packet.to_string(),
-            format!("{:?}", c.imp),
-            v.fc.name().into(),
-            c.rays.to_string(),
-            c.counter_diffs.to_string(),
-            c.flagged.to_string(),
-            format!("{:.3}", c.secs),
-            c.status.to_string(),
-            o.device.clone(),
-            o.driver.clone(),
-        ])?;
-    }
-    let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let records = o.checks.iter().map(|c| Record {
+        kernel: c.variant.kernel_name(c.imp, false),
+        layout: c.variant.layout.name(),
+        math: c.variant.math.name(),
+        branching: c.variant.branching,
+        packet: c.variant.packet,
+        implementation: format!("{:?}", c.imp),
+        float_controls: c.variant.fc.name(),
+        rays: c.rays,
+        counter_diffs: c.counter_diffs,
+        flagged: c.flagged,
+        seconds: c.secs,
+        status: &c.status,
+        device: &o.device,
+        driver: &o.driver,
+    });
+    let bytes = crate::report::csvx::to_bytes(records)?;
     for (name, data) in [("conformance.csv", bytes), ("conformance.md", markdown(o, quick).into_bytes())] {
         crate::fsx::write_atomic(&dir.join(name), &data)?;
     }

@@ -33,6 +33,7 @@ use crate::base::Status;
 use crate::gpu::null;
 use crate::isa::{self, aco, Matrix};
 use crate::layout::LayoutId;
+use crate::report::csvx::{display, opt_display};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -72,6 +73,9 @@ pub struct Row {
     /// Waves per SIMD ACO gives the kernel (`num_waves`).
     pub waves: Option<f64>,
     pub loops: Vec<LoopCost>,
+    /// The kernel, typed: its isa row's.
+    #[serde(skip)]
+    pub what: crate::report::What,
 }
 
 /// How far the rebuilt figure may be from the printed one: ACO prints it with `%f`.
@@ -89,6 +93,7 @@ fn row(family: &str, generation: &str, r: &crate::report::isa::IsaRow, p: Result
         packet: r.packet,
         status: r.status.clone(),
         aco_latency: r.stats.get("Latency").copied(),
+        what: r.what.clone(),
         ..Row::default()
     };
     let p = match p {
@@ -214,56 +219,64 @@ pub fn markdown(rows: &[Row]) -> String {
     md
 }
 
+/// One line of `estimate.csv`.
+#[derive(Serialize)]
+struct Record<'a> {
+    family: &'a str,
+    generation: &'a str,
+    kernel: &'a str,
+    layout: &'a str,
+    math: &'a str,
+    #[serde(rename = "B")]
+    branching: usize,
+    #[serde(rename = "P")]
+    packet: usize,
+    #[serde(serialize_with = "display")]
+    status: &'a Status,
+    #[serde(serialize_with = "opt_display")]
+    aco_latency: Option<f64>,
+    #[serde(serialize_with = "opt_display")]
+    rebuilt: Option<f64>,
+    #[serde(serialize_with = "opt_display")]
+    waves: Option<f64>,
+    #[serde(rename = "loop")]
+    name: String,
+    depth: u32,
+    #[serde(rename = "cycles_per_pass", serialize_with = "display")]
+    cycles_per_trip: f64,
+    #[serde(serialize_with = "display")]
+    aco_passes: f64,
+    #[serde(serialize_with = "display")]
+    share: f64,
+}
+
 /// estimate.csv: one line per kernel and loop (`outside` for the blocks outside every loop).
 pub fn csv(rows: &[Row]) -> anyhow::Result<Vec<u8>> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record([
-        "family",
-        "generation",
-        "kernel",
-        "layout",
-        "math",
-        "B",
-        "P",
-        "status",
-        "aco_latency",
-        "rebuilt",
-        "waves",
-        "loop",
-        "depth",
-        "cycles_per_pass",
-        "aco_passes",
-        "share",
-    ])?;
-    let num = |x: Option<f64>| x.map(|v| v.to_string()).unwrap_or_default();
-    for r in rows {
-        let empty = [LoopCost::default()];
+    let empty = [LoopCost::default()];
+    let records = rows.iter().flat_map(|r| {
         let loops: &[LoopCost] = if r.loops.is_empty() { &empty } else { &r.loops };
-        for l in loops {
-            let name = match l.header {
+        loops.iter().map(move |l| Record {
+            family: &r.family,
+            generation: &r.generation,
+            kernel: &r.kernel,
+            layout: &r.layout,
+            math: &r.math,
+            branching: r.branching,
+            packet: r.packet,
+            status: &r.status,
+            aco_latency: r.aco_latency,
+            rebuilt: r.rebuilt,
+            waves: r.waves,
+            name: match l.header {
                 Some(h) => format!("BB{h}"),
                 None if r.loops.is_empty() => String::new(),
                 None => "outside".into(),
-            };
-            w.write_record([
-                r.family.clone(),
-                r.generation.clone(),
-                r.kernel.clone(),
-                r.layout.clone(),
-                r.math.clone(),
-                r.branching.to_string(),
-                r.packet.to_string(),
-                r.status.to_string(),
-                num(r.aco_latency),
-                num(r.rebuilt),
-                num(r.waves),
-                name,
-                l.depth.to_string(),
-                l.cycles_per_trip.to_string(),
-                l.aco_passes.to_string(),
-                l.share.to_string(),
-            ])?;
-        }
-    }
-    Ok(w.into_inner()?)
+            },
+            depth: l.depth,
+            cycles_per_trip: l.cycles_per_trip,
+            aco_passes: l.aco_passes,
+            share: l.share,
+        })
+    });
+    crate::report::csvx::to_bytes(records)
 }

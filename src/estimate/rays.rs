@@ -6,13 +6,11 @@ use crate::base::Status;
 use crate::gpu::null;
 use crate::isa::aco;
 use crate::layout::traverse::LoopWork;
-use crate::layout::LayoutId;
-use crate::precision::FloatControls;
 use crate::rays::RayKind;
 pub use crate::report::estimate::{RayRow, Split};
 use crate::runner::rays::RaySpec;
 use crate::runner::Runner;
-use crate::variant::Variant;
+use crate::variant::{Buffers, Variant};
 use anyhow::Context as _;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -169,13 +167,13 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                         ray_count: ray_count as u64,
                         wave: r.subgroup_size,
                         status: r.status.clone(),
+                        what: r.what.clone(),
                         ..RayRow::default()
                     };
                     let mut weigh = || -> Result<(), String> {
                         let (p, roles) = (p.as_ref().map_err(String::clone)?, roles.as_ref().map_err(String::clone)?);
-                        let layout = LayoutId::parse(&r.layout).map_err(|e| e.to_string())?;
-                        let fc = if r.float_controls == "off" { FloatControls::Off } else { FloatControls::On };
-                        let v = Variant::new(layout, r.branching, r.packet).with_math(r.math.parse()?).with_fc(fc);
+                        let k = r.what.kernel().ok_or_else(|| format!("{}: not a kernel of a layout", r.kernel))?;
+                        let v = k.variant.with_buffers(Buffers::Bound);
                         let wave = (r.subgroup_size as usize).max(1);
                         let (lock, lanes) = match work.get(&(v, wave)) {
                             Some(w) => *w,
@@ -209,18 +207,7 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
         }
     }
     let mut out: Vec<RayRow> = per_family.into_iter().flatten().collect();
-    for i in 0..out.len() {
-        let f32_row = out.iter().find(|o| {
-            o.family == out[i].family
-                && o.layout == "f32"
-                && o.branching == out[i].branching
-                && o.packet == out[i].packet
-                && o.scene == out[i].scene
-                && o.rays == out[i].rays
-                && o.status.is_ok()
-        });
-        out[i].vs_f32 = f32_row.filter(|_| out[i].status.is_ok()).map(|f| out[i].cycles_per_ray / f.cycles_per_ray);
-    }
+    crate::report::estimate::set_ratios(&mut out);
     Ok(out)
 }
 

@@ -17,6 +17,7 @@ use crate::gpu::{support, ContextOptions, Gpu, GpuError, Kernel};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
 use crate::report::isa::IsaRow;
+use crate::report::What;
 pub use crate::variant::Matrix;
 use crate::variant::{self, KernelId, KernelSpec, Source};
 use std::collections::BTreeMap;
@@ -215,7 +216,8 @@ pub fn aco_programs(
         let tail: Vec<&str> = stderr.lines().filter(|l| !l.starts_with('\t')).rev().take(3).collect();
         anyhow::bail!("--family {family}: the compiler's process failed ({status}): {}", tail.join(" | "));
     }
-    let rows: Vec<IsaRow> = stdout.lines().map(serde_json::from_str).collect::<Result<_, _>>()?;
+    let rows: Vec<IsaRow> =
+        stdout.lines().map(|l| serde_json::from_str(l).map(IsaRow::typed)).collect::<Result<_, _>>()?;
     // Each kernel's printout runs from its marker to the next one.
     let mut sections: BTreeMap<String, &str> = BTreeMap::new();
     let mut parts = stderr.split(vendors::MARKER).skip(1);
@@ -301,14 +303,15 @@ fn build_one(
         Err(why) => {
             // Named as asked: --full asks for both float-control modes of a layout.
             let asked = v.with_fc(if b.fc == FcChoice::Off { FloatControls::Off } else { FloatControls::On });
-            row.kernel = KernelId::new(asked, imp, false).name();
+            let id = KernelId::new(asked, imp, false);
+            (row.kernel, row.what) = (id.name(), What::Builtin(id));
             row.float_controls = asked.fc.name().into();
             row.status = Status::Skipped(why);
             return Ok(row);
         }
     };
     let k = d.id;
-    row.kernel = k.name();
+    (row.kernel, row.what) = (k.name(), What::Builtin(k.with_stats(false)));
     row.float_controls = k.variant.fc.name().into();
     before(&row.kernel);
     let t0 = Instant::now();

@@ -224,7 +224,7 @@ pub fn run_model(
     let mut bad_lines = 0;
     for line in stdout.lines() {
         match serde_json::from_str::<IsaRow>(line) {
-            Ok(r) => rows.push(r),
+            Ok(r) => rows.push(IsaRow::typed(r)),
             Err(_) => bad_lines += 1,
         }
     }
@@ -277,9 +277,10 @@ pub fn run_model(
         });
         for b in &builds[rows.len()..] {
             let v = b.variant;
+            let id = crate::variant::KernelId::new(v, b.imp.unwrap_or(crate::variant::PacketImpl::Single), false);
             rows.push(IsaRow {
-                kernel: crate::variant::KernelId::new(v, b.imp.unwrap_or(crate::variant::PacketImpl::Single), false)
-                    .name(),
+                kernel: id.name(),
+                what: crate::report::What::Builtin(id),
                 layout: v.layout.name().into(),
                 math: v.math.name().into(),
                 branching: v.branching,

@@ -1,6 +1,8 @@
 //! The estimate's rows as the report reads them (`halftrace estimate` writes them:
 //! `estimate-rays.json`, `estimate-rays.csv`), its section of the report and its plot.
 
+use super::csvx::{display, opt_display};
+use super::key::{f32_peer, Columns, Keyed, What};
 use super::plots;
 use super::rows::Status;
 use anyhow::Context as _;
@@ -62,8 +64,50 @@ pub struct RayRow {
     /// Rays per 1000 clocks per SIMD: ACO's throughput (`wave64_per_cycle`, its waves per SIMD
     /// hiding latency) scaled by its latency ÷ the rays' cycles per wave.
     pub rays_per_kclk: f64,
-    /// cycles_per_ray ÷ f32's at the same B, family, scene and rays.
+    /// cycles_per_ray ÷ f32's peer's ([`f32_peer`]) on the same family, scene and rays.
     pub vs_f32: Option<f64>,
+    /// The kernel, typed: its isa row's, parsed once where rows are read.
+    #[serde(skip)]
+    pub what: What,
+}
+
+impl Keyed for RayRow {
+    fn what(&self) -> &What {
+        &self.what
+    }
+    fn place(&self) -> [&str; 4] {
+        [&self.family, "", &self.scene, &self.rays]
+    }
+    fn ok(&self) -> bool {
+        self.status.is_ok()
+    }
+}
+
+impl RayRow {
+    /// The row with [`RayRow::what`] parsed from its identity columns ([`What::read`]).
+    pub fn typed(mut self) -> RayRow {
+        self.what = What::read(Columns {
+            layout: &self.layout,
+            math: &self.math,
+            branching: self.branching,
+            packet: self.packet,
+            float_controls: "",
+            kernel: &self.kernel,
+            packet_impl: Some(&self.packet_impl),
+        });
+        self
+    }
+}
+
+/// Sets each row's ratio to its f32 peer's cycles per ray.
+pub fn set_ratios(rows: &mut [RayRow]) {
+    let ratios: Vec<Option<f64>> = rows
+        .iter()
+        .map(|r| f32_peer(r, rows).filter(|_| r.status.is_ok()).map(|f| r.cycles_per_ray / f.cycles_per_ray))
+        .collect();
+    for (r, q) in rows.iter_mut().zip(ratios) {
+        r.vs_f32 = q;
+    }
 }
 
 /// The report's section (and estimate.md's second part): per family and ray set, each
@@ -113,60 +157,71 @@ pub fn section(rows: &[RayRow]) -> String {
     md
 }
 
+/// One line of `estimate-rays.csv`.
+#[derive(Serialize)]
+struct RayRecord<'a> {
+    family: &'a str,
+    generation: &'a str,
+    kernel: &'a str,
+    layout: &'a str,
+    math: &'a str,
+    #[serde(rename = "B")]
+    branching: usize,
+    #[serde(rename = "P")]
+    packet: usize,
+    packet_impl: &'a str,
+    scene: &'a str,
+    rays: &'a str,
+    ray_count: u64,
+    wave: u32,
+    #[serde(serialize_with = "display")]
+    status: &'a Status,
+    #[serde(serialize_with = "display")]
+    cycles_per_ray: f64,
+    #[serde(serialize_with = "opt_display")]
+    vs_f32: Option<f64>,
+    #[serde(serialize_with = "display")]
+    lane_average: f64,
+    #[serde(serialize_with = "display")]
+    setup: f64,
+    #[serde(serialize_with = "display")]
+    step: f64,
+    #[serde(serialize_with = "display")]
+    slots: f64,
+    #[serde(serialize_with = "display")]
+    triangles: f64,
+    #[serde(serialize_with = "display")]
+    waves: f64,
+    #[serde(serialize_with = "display")]
+    rays_per_kclk: f64,
+}
+
 /// estimate-rays.csv: one line per kernel, family and ray set.
 pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record([
-        "family",
-        "generation",
-        "kernel",
-        "layout",
-        "math",
-        "B",
-        "P",
-        "packet_impl",
-        "scene",
-        "rays",
-        "ray_count",
-        "wave",
-        "status",
-        "cycles_per_ray",
-        "vs_f32",
-        "lane_average",
-        "setup",
-        "step",
-        "slots",
-        "triangles",
-        "waves",
-        "rays_per_kclk",
-    ])?;
-    for r in rows {
-        w.write_record([
-            r.family.clone(),
-            r.generation.clone(),
-            r.kernel.clone(),
-            r.layout.clone(),
-            r.math.clone(),
-            r.branching.to_string(),
-            r.packet.to_string(),
-            r.packet_impl.clone(),
-            r.scene.clone(),
-            r.rays.clone(),
-            r.ray_count.to_string(),
-            r.wave.to_string(),
-            r.status.to_string(),
-            r.cycles_per_ray.to_string(),
-            r.vs_f32.map(|v| v.to_string()).unwrap_or_default(),
-            r.lane_average.to_string(),
-            r.split.setup.to_string(),
-            r.split.step.to_string(),
-            r.split.slots.to_string(),
-            r.split.triangles.to_string(),
-            r.waves.to_string(),
-            r.rays_per_kclk.to_string(),
-        ])?;
-    }
-    Ok(w.into_inner()?)
+    super::csvx::to_bytes(rows.iter().map(|r| RayRecord {
+        family: &r.family,
+        generation: &r.generation,
+        kernel: &r.kernel,
+        layout: &r.layout,
+        math: &r.math,
+        branching: r.branching,
+        packet: r.packet,
+        packet_impl: &r.packet_impl,
+        scene: &r.scene,
+        rays: &r.rays,
+        ray_count: r.ray_count,
+        wave: r.wave,
+        status: &r.status,
+        cycles_per_ray: r.cycles_per_ray,
+        vs_f32: r.vs_f32,
+        lane_average: r.lane_average,
+        setup: r.split.setup,
+        step: r.split.step,
+        slots: r.split.slots,
+        triangles: r.split.triangles,
+        waves: r.waves,
+        rays_per_kclk: r.rays_per_kclk,
+    }))
 }
 
 /// What each vendor's whole-shader cycle figure assumes (docs/vendors.md), by the driver's
@@ -241,9 +296,9 @@ pub fn read(dir: &Path) -> anyhow::Result<Option<Vec<RayRow>>> {
         return Ok(None);
     }
     let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
-    let rows = serde_json::from_str(&text)
+    let rows: Vec<RayRow> = serde_json::from_str(&text)
         .with_context(|| format!("{}: not the rows `halftrace estimate` writes", p.display()))?;
-    Ok(Some(rows))
+    Ok(Some(rows.into_iter().map(RayRow::typed).collect()))
 }
 
 /// `estimate.png` (and `.svg`): one panel per family, scene and ray kind; x = B, one line per

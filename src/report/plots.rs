@@ -1,8 +1,9 @@
 //! The report's plots, each as PNG and SVG: f16h ÷ f32 by B and by P, Mrays/s per variant,
 //! node memory per layout, and every layout ÷ f32 by B.
 
-use super::rows::{has_counters, layouts_in, Row};
+use super::rows::{layouts_in, Row};
 use super::tables::{layout_label, LayoutPoint};
+use crate::layout::LayoutId;
 use plotters::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -265,20 +266,21 @@ fn ratio_lines(s: &Series) -> Vec<(String, Vec<(usize, f64)>)> {
 }
 
 pub fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::Result<()> {
+    let ratio = format!("{} / {}", LayoutId::poster().0, LayoutId::f32());
     line_chart(
         out,
         "ratio_vs_b",
-        "f16h / f32 by branching factor (P = 1)",
+        &format!("{ratio} by branching factor (P = 1)"),
         "branching factor B",
-        "f16h / f32",
+        &ratio,
         &ratio_lines(by_b),
     )?;
     line_chart(
         out,
         "ratio_vs_p",
-        "f16h / f32 by packet size (B = 4)",
+        &format!("{ratio} by packet size (B = 4)"),
         "packet size P",
-        "f16h / f32",
+        &ratio,
         &ratio_lines(by_p),
     )?;
     // Mrays/s per variant: one panel per series (by B at P = 1, by P at the packet B), one
@@ -289,7 +291,7 @@ pub fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::
     let mut by_b_lines = Vec::new();
     let mut by_p_lines = Vec::new();
     let mut labels: Vec<String> = Vec::new();
-    for r in ok.iter().filter(|r| has_counters(&r.layout) && r.kernel.starts_with("trav_")) {
+    for r in ok.iter().filter(|r| r.what.builtin().is_some()) {
         let l = layout_label(r);
         if !labels.contains(&l) {
             labels.push(l);
@@ -298,7 +300,7 @@ pub fn plots(rows: &[Row], by_b: &Series, by_p: &Series, out: &Path) -> anyhow::
     for label in &labels {
         let mean = |f: &dyn Fn(&Row) -> bool, key: &dyn Fn(&Row) -> usize| -> Line {
             let mut m: BTreeMap<usize, ([f64; 3], usize)> = BTreeMap::new();
-            for r in ok.iter().filter(|r| layout_label(r) == *label && r.kernel.starts_with("trav_") && f(r)) {
+            for r in ok.iter().filter(|r| layout_label(r) == *label && r.what.builtin().is_some() && f(r)) {
                 let e = m.entry(key(r)).or_insert(([0.0; 3], 0));
                 e.0[0] += r.mrays_median;
                 e.0[1] += r.mrays_min;

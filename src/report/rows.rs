@@ -2,6 +2,7 @@
 //! identity ([`RowId`]) and status ([`Status`], from [`crate::base`]), and their storage as `results.csv` and
 //! `results.json`, written as they come.
 
+use super::key::{Columns, Keyed, What};
 pub use crate::base::Status;
 use crate::baseline::BaselineId;
 use crate::layout::LayoutId;
@@ -116,6 +117,10 @@ pub struct Row {
     /// The device's raw fp16:fp32 arithmetic throughput ratio (`devices --arith`, geometric
     /// mean over sub, mul, min, max, compare), measured once per sweep.
     pub device_fp16_ratio: f64,
+    /// What the row measured, typed: set from the kernel where the row is made, parsed once
+    /// from the identity columns where a file is read ([`Row::typed`]).
+    #[serde(skip)]
+    pub what: What,
 }
 
 /// Keeps `results.csv` and `results.json` current: after each row both are rewritten through a
@@ -224,12 +229,7 @@ pub fn sorted(rows: &[Row]) -> Vec<Row> {
 /// Writes `results.csv` and `results.json` of `rows` into `dir` (atomically each).
 pub fn write_rows(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut csv = csv::Writer::from_writer(Vec::new());
-    for r in rows {
-        csv.serialize(r)?;
-    }
-    let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
-    crate::fsx::write_atomic(&dir.join("results.csv"), &bytes)?;
+    crate::fsx::write_atomic(&dir.join("results.csv"), &super::csvx::to_bytes(rows)?)?;
     crate::fsx::write_atomic(&dir.join("results.json"), serde_json::to_string_pretty(rows)?.as_bytes())
 }
 
@@ -259,7 +259,7 @@ pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
             Ok(row)
         })
         .collect::<anyhow::Result<_>>()?;
-    Ok(rows.into_iter().map(current_names).collect())
+    Ok(rows.into_iter().map(current_names).map(Row::typed).collect())
 }
 
 /// A row's values in their domains: a known layout or baseline, B and P that exist for it,
@@ -314,14 +314,36 @@ fn current_names(mut r: Row) -> Row {
 
 /// The columns of `results.csv` this version writes.
 pub fn columns() -> Vec<String> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let _ = w.serialize(Row::default());
-    let bytes = w.into_inner().unwrap_or_default();
-    let text = String::from_utf8_lossy(&bytes);
-    text.lines().next().unwrap_or("").split(',').map(String::from).collect()
+    super::csvx::header_of(Row::default())
+}
+
+impl Keyed for Row {
+    fn what(&self) -> &What {
+        &self.what
+    }
+    fn place(&self) -> [&str; 4] {
+        [&self.device, &self.driver, &self.scene, &self.rays]
+    }
+    fn ok(&self) -> bool {
+        self.status.is_ok()
+    }
 }
 
 impl Row {
+    /// The row with [`Row::what`] parsed from its identity columns ([`What::read`]).
+    pub fn typed(mut self) -> Row {
+        self.what = What::read(Columns {
+            layout: &self.layout,
+            math: &self.math,
+            branching: self.branching,
+            packet: self.packet,
+            float_controls: &self.float_controls,
+            kernel: &self.kernel,
+            packet_impl: None,
+        });
+        self
+    }
+
     /// The row's identity.
     pub fn id(&self) -> RowId {
         RowId {

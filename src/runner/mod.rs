@@ -108,13 +108,13 @@ impl<'g> Runner<'g> {
         Some(d.entry(k.clone()).or_insert_with(|| support::decide(&g.info, k)).clone())
     }
 
-    /// The name a kernel's results go under (the built-in kernel's name in the packet
-    /// implementation the device uses, reading the scene bound) and the float controls the
-    /// device builds it with (`None`: the device cannot run it).
-    pub fn name(&self, k: &KernelSpec) -> (String, Option<FloatControls>) {
+    /// The kernel a kernel's results go under (the built-in kernel in the packet
+    /// implementation the device uses, reading the scene bound; its name is the row's) and
+    /// whether the device can build it (`false`: it cannot run it, the portable kernel).
+    pub fn kernel_id(&self, k: &KernelSpec) -> (KernelId, bool) {
         match self.decide(k) {
-            Some(Ok(d)) => (d.id.name(), Some(d.id.variant.fc)),
-            _ => (k.variant.name(false), None),
+            Some(Ok(d)) => (d.id.with_stats(false), true),
+            _ => (KernelId::new(k.variant, k.variant.portable_impl(), false), false),
         }
     }
 

@@ -12,7 +12,7 @@ use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
 use crate::outdir::{Claimed, Outputs};
 use crate::rays::RayKind;
-use crate::report::{self, Row, RowId};
+use crate::report::{self, Row, RowId, What};
 use crate::runner::{Outcome, Plan, RaySetId, Runner, Target};
 use anyhow::Context;
 use std::collections::HashSet;
@@ -243,13 +243,20 @@ impl Executor<'_> {
                 let v = k.variant;
                 (row.layout, row.math, row.branching, row.packet) =
                     (v.layout.name().into(), v.math.name().into(), v.branching, v.packet);
-                let (name, fc) = self.runner.name(k);
-                row.kernel = job.user.clone().unwrap_or(name);
-                if let Some(fc) = fc {
-                    row.float_controls = fc.name().into();
+                let (id, built) = self.runner.kernel_id(k);
+                row.kernel = job.user.clone().unwrap_or(id.name());
+                if built {
+                    row.float_controls = id.variant.fc.name().into();
                 }
+                row.what = match &job.user {
+                    Some(name) => What::User(name.clone(), id),
+                    None => What::Builtin(id),
+                };
             }
-            Target::Baseline(b) => (row.layout, row.kernel) = (b.name().into(), b.imp().kernel().into()),
+            Target::Baseline(b) => {
+                (row.layout, row.kernel) = (b.name().into(), b.imp().kernel().into());
+                row.what = What::Baseline(*b);
+            }
         }
         row
     }

@@ -2,73 +2,164 @@
 //! statistics).
 
 use super::IsaRow;
+use crate::base::Status;
+use crate::report::csvx::{display, fixed, header_of, to_bytes_with};
 use anyhow::Context;
+use serde::{Serialize, Serializer};
 use std::collections::BTreeSet;
 use std::path::Path;
 
-/// Columns of `isa.csv` before the driver's own statistics.
-const CSV_COLUMNS: &[&str] = &[
-    "device",
-    "family",
-    "generation",
-    "vendor",
-    "driver",
-    "device_build",
-    "version",
-    "commit",
-    "kernel",
-    "layout",
-    "math",
-    "branching",
-    "packet",
-    "packet_impl",
-    "float_controls",
-    "status",
-    "subgroup_size",
-    "build_ms",
-    "vgprs",
-    "sgprs",
-    "spilled_vgprs",
-    "spilled_sgprs",
-    "scratch_bytes",
-    "lds_bytes",
-    "code_bytes",
-    "instructions",
-    "valu",
-    "waves_per_simd",
-    "registers",
-    "private_bytes",
-    "spills",
-    "occupancy",
-    "occupancy_unit",
-    "cycles",
-    "asm_instructions",
-    "asm_valu",
-    "asm_packed_f16",
-    "asm_scalar_f16",
-    "asm_f32",
-    "asm_conversions",
-    "asm_scratch_loads",
-    "asm_scratch_stores",
-    "asm_undecoded",
-    "packed_f16_share",
-    "vgprs_vs_f32",
-    "scratch_vs_f32",
-    "instructions_vs_f32",
-    "valu_vs_f32",
-    "waves_vs_f32",
-    "registers_vs_f32",
-    "occupancy_vs_f32",
-    "cycles_vs_f32",
-];
-
-fn cell(x: Option<f64>) -> String {
-    x.map(|v| if v.fract() == 0.0 && v.abs() < 1e15 { format!("{v:.0}") } else { format!("{v:.4}") })
-        .unwrap_or_default()
+/// A statistic's cell: whole numbers without decimals, others with four; empty when absent.
+fn cell<S: Serializer>(x: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match x {
+        Some(v) if v.fract() == 0.0 && v.abs() < 1e15 => s.serialize_str(&format!("{v:.0}")),
+        Some(v) => s.serialize_str(&format!("{v:.4}")),
+        None => s.serialize_str(""),
+    }
 }
 
-fn ucell(x: Option<u64>) -> String {
-    x.map(|v| v.to_string()).unwrap_or_default()
+/// One line of `isa.csv` before the drivers' own statistics.
+#[derive(Serialize)]
+struct Record<'a> {
+    device: &'a str,
+    family: &'a str,
+    generation: &'a str,
+    vendor: &'a str,
+    driver: &'a str,
+    device_build: &'a str,
+    version: &'a str,
+    commit: &'a str,
+    kernel: &'a str,
+    layout: &'a str,
+    math: &'a str,
+    branching: usize,
+    packet: usize,
+    packet_impl: &'a str,
+    float_controls: &'a str,
+    #[serde(serialize_with = "display")]
+    status: &'a Status,
+    subgroup_size: u32,
+    #[serde(serialize_with = "fixed::<1, _>")]
+    build_ms: f64,
+    #[serde(serialize_with = "cell")]
+    vgprs: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    sgprs: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    spilled_vgprs: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    spilled_sgprs: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    scratch_bytes: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    lds_bytes: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    code_bytes: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    instructions: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    valu: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    waves_per_simd: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    registers: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    private_bytes: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    spills: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    occupancy: Option<f64>,
+    occupancy_unit: &'a str,
+    #[serde(serialize_with = "cell")]
+    cycles: Option<f64>,
+    asm_instructions: Option<u64>,
+    asm_valu: Option<u64>,
+    asm_packed_f16: Option<u64>,
+    asm_scalar_f16: Option<u64>,
+    asm_f32: Option<u64>,
+    asm_conversions: Option<u64>,
+    asm_scratch_loads: Option<u64>,
+    asm_scratch_stores: Option<u64>,
+    asm_undecoded: Option<u64>,
+    #[serde(serialize_with = "cell")]
+    packed_f16_share: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    vgprs_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    scratch_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    instructions_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    valu_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    waves_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    registers_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    occupancy_vs_f32: Option<f64>,
+    #[serde(serialize_with = "cell")]
+    cycles_vs_f32: Option<f64>,
+}
+
+impl<'a> Record<'a> {
+    fn of(r: &'a IsaRow) -> Record<'a> {
+        let a = r.asm.as_ref();
+        let q = r.vs_f32.unwrap_or_default();
+        Record {
+            device: &r.device,
+            family: &r.family,
+            generation: &r.generation,
+            vendor: &r.vendor,
+            driver: &r.driver,
+            device_build: &r.device_build,
+            version: &r.version,
+            commit: &r.commit,
+            kernel: &r.kernel,
+            layout: &r.layout,
+            math: &r.math,
+            branching: r.branching,
+            packet: r.packet,
+            packet_impl: &r.packet_impl,
+            float_controls: &r.float_controls,
+            status: &r.status,
+            subgroup_size: r.subgroup_size,
+            build_ms: r.build_ms,
+            vgprs: r.vgprs,
+            sgprs: r.sgprs,
+            spilled_vgprs: r.spilled_vgprs,
+            spilled_sgprs: r.spilled_sgprs,
+            scratch_bytes: r.scratch_bytes,
+            lds_bytes: r.lds_bytes,
+            code_bytes: r.code_bytes,
+            instructions: r.instructions,
+            valu: r.valu,
+            waves_per_simd: r.waves_per_simd,
+            registers: r.registers,
+            private_bytes: r.private_bytes,
+            spills: r.spills,
+            occupancy: r.occupancy,
+            occupancy_unit: &r.occupancy_unit,
+            cycles: r.cycles,
+            asm_instructions: a.map(|a| a.instructions),
+            asm_valu: a.map(|a| a.valu),
+            asm_packed_f16: a.map(|a| a.packed_f16),
+            asm_scalar_f16: a.map(|a| a.scalar_f16),
+            asm_f32: a.map(|a| a.f32),
+            asm_conversions: a.map(|a| a.conversions),
+            asm_scratch_loads: a.and_then(|a| a.scratch_loads),
+            asm_scratch_stores: a.and_then(|a| a.scratch_stores),
+            asm_undecoded: a.map(|a| a.undecoded),
+            packed_f16_share: a.and_then(|a| a.packed_share()),
+            vgprs_vs_f32: q.vgprs,
+            scratch_vs_f32: q.scratch,
+            instructions_vs_f32: q.instructions,
+            valu_vs_f32: q.valu,
+            waves_vs_f32: q.waves,
+            registers_vs_f32: q.registers,
+            occupancy_vs_f32: q.occupancy,
+            cycles_vs_f32: q.cycles,
+        }
+    }
 }
 
 /// Writes `isa.json` (every field) and `isa.csv` (one column per field, then one `stat: NAME`
@@ -76,65 +167,16 @@ fn ucell(x: Option<u64>) -> String {
 pub fn write(dir: &Path, rows: &[IsaRow]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let names: BTreeSet<&String> = rows.iter().flat_map(|r| r.stats.keys()).collect();
-    let mut csv = csv::Writer::from_writer(Vec::new());
+    let template = IsaRow::default();
     let header: Vec<String> =
-        CSV_COLUMNS.iter().map(|c| c.to_string()).chain(names.iter().map(|n| format!("stat: {n}"))).collect();
-    csv.write_record(&header)?;
-    for r in rows {
-        let a = r.asm.unwrap_or_default();
-        let has = r.asm.is_some();
-        let u = |x: u64| if has { x.to_string() } else { String::new() };
-        let q = r.vs_f32.unwrap_or_default();
-        let mut rec: Vec<String> = vec![
-            r.device.clone(),
-            r.family.clone(),
-            r.generation.clone(),
-            r.vendor.clone(),
-            r.driver.clone(),
-            r.device_build.clone(),
-            r.version.clone(),
-            r.commit.clone(),
-            r.kernel.clone(),
-            r.layout.clone(),
-            r.math.clone(),
-            r.branching.to_string(),
-            r.packet.to_string(),
-            r.packet_impl.clone(),
-            r.float_controls.clone(),
-            r.status.to_string(),
-            r.subgroup_size.to_string(),
-            format!("{:.1}", r.build_ms),
-        ];
-        rec.extend(
-            [
-                r.vgprs,
-                r.sgprs,
-                r.spilled_vgprs,
-                r.spilled_sgprs,
-                r.scratch_bytes,
-                r.lds_bytes,
-                r.code_bytes,
-                r.instructions,
-                r.valu,
-                r.waves_per_simd,
-                r.registers,
-                r.private_bytes,
-                r.spills,
-                r.occupancy,
-            ]
-            .map(cell),
-        );
-        rec.push(r.occupancy_unit.clone());
-        rec.push(cell(r.cycles));
-        rec.extend([u(a.instructions), u(a.valu), u(a.packed_f16), u(a.scalar_f16), u(a.f32), u(a.conversions)]);
-        rec.extend([ucell(r.asm.and_then(|a| a.scratch_loads)), ucell(r.asm.and_then(|a| a.scratch_stores))]);
-        rec.push(u(a.undecoded));
-        rec.push(cell(r.asm.and_then(|a| a.packed_share())));
-        rec.extend([q.vgprs, q.scratch, q.instructions, q.valu, q.waves, q.registers, q.occupancy, q.cycles].map(cell));
-        rec.extend(names.iter().map(|n| cell(r.stats.get(*n).copied())));
-        csv.write_record(&rec)?;
-    }
-    let bytes = csv.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?;
+        header_of(Record::of(&template)).into_iter().chain(names.iter().map(|n| format!("stat: {n}"))).collect();
+    let stat = |r: &IsaRow, n: &String| match r.stats.get(n) {
+        Some(v) if v.fract() == 0.0 && v.abs() < 1e15 => format!("{v:.0}"),
+        Some(v) => format!("{v:.4}"),
+        None => String::new(),
+    };
+    let records = rows.iter().map(|r| (Record::of(r), names.iter().map(|n| stat(r, n)).collect::<Vec<_>>()));
+    let bytes = to_bytes_with(&header, records)?;
     crate::fsx::write_atomic(&dir.join("isa.csv"), &bytes)?;
     crate::fsx::write_atomic(&dir.join("isa.json"), serde_json::to_string_pretty(rows)?.as_bytes())
 }
@@ -148,5 +190,5 @@ pub fn read(dir: &Path) -> anyhow::Result<Option<Vec<IsaRow>>> {
     let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
     let rows: Vec<IsaRow> =
         serde_json::from_str(&text).with_context(|| format!("{}: not the rows `halftrace isa` writes", p.display()))?;
-    Ok(Some(rows))
+    Ok(Some(rows.into_iter().map(IsaRow::typed).collect()))
 }

@@ -11,8 +11,8 @@ pub use columns::{vendor_of, COLUMN_NAMES, VENDORS};
 pub use files::{read, write};
 pub use tables::{headline, plot, render, section};
 
+use super::key::{f32_peer, Columns, Keyed, What};
 use super::rows::{order, Status};
-use crate::layout::LayoutId;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -90,6 +90,22 @@ pub struct IsaRow {
     pub vs_f32: Option<VsF32>,
     /// Every statistic as the driver names it.
     pub stats: BTreeMap<String, f64>,
+    /// The kernel, typed: set where the row is built, parsed once where rows are read
+    /// ([`IsaRow::typed`]).
+    #[serde(skip)]
+    pub what: What,
+}
+
+impl Keyed for IsaRow {
+    fn what(&self) -> &What {
+        &self.what
+    }
+    fn place(&self) -> [&str; 4] {
+        [&self.device, &self.driver, "", ""]
+    }
+    fn ok(&self) -> bool {
+        self.status.is_ok()
+    }
 }
 
 /// Counts of the disassembly ([`crate::isa::counts`] makes them).
@@ -146,6 +162,20 @@ pub const KNOWN_STATS: &[(&str, &str)] = &[
 ];
 
 impl IsaRow {
+    /// The row with [`IsaRow::what`] parsed from its identity columns ([`What::read`]).
+    pub fn typed(mut self) -> IsaRow {
+        self.what = What::read(Columns {
+            layout: &self.layout,
+            math: &self.math,
+            branching: self.branching,
+            packet: self.packet,
+            float_controls: &self.float_controls,
+            kernel: &self.kernel,
+            packet_impl: Some(&self.packet_impl),
+        });
+        self
+    }
+
     /// Fills the named columns from [`IsaRow::stats`] (RADV's names), then the vendor-neutral
     /// ones from whichever driver's names the row has.
     pub fn fill_known(&mut self) {
@@ -161,8 +191,8 @@ impl IsaRow {
     /// `layout` or `layout math` for layouts with several math modes, then `fc off` for a
     /// kernel built without float controls.
     pub fn label(&self) -> String {
-        let l = match LayoutId::parse(&self.layout) {
-            Ok(l) if l.info().maths.len() == 1 => self.layout.clone(),
+        let l = match self.what.layout() {
+            Some(l) if l.info().maths.len() == 1 => self.layout.clone(),
             _ => format!("{} {}", self.layout, self.math),
         };
         if self.float_controls == "off" {
@@ -184,28 +214,17 @@ impl IsaRow {
     }
 }
 
-/// Sets every ok row's ratios to its f32 kernel (same device, driver, B, P, packet
-/// implementation and float controls).
+/// Sets every ok row's ratios to its f32 kernel ([`f32_peer`]: same device, driver, B, P,
+/// packet implementation and float controls, else the other float controls).
 pub fn set_ratios(rows: &mut [IsaRow]) {
-    let key = |r: &IsaRow| {
-        (r.device.clone(), r.driver.clone(), r.branching, r.packet, r.packet_impl.clone(), r.float_controls.clone())
-    };
-    let base: BTreeMap<_, IsaRow> =
-        rows.iter().filter(|r| r.layout == "f32" && r.status.is_ok()).map(|r| (key(r), r.clone())).collect();
-    // An fp16 layout may build without float controls where f32 builds with them (or the
-    // other way round): then the f32 kernel of the other mode.
-    let other = |r: &IsaRow| {
-        let mut k = key(r);
-        k.5 = if k.5 == "off" { "on".into() } else { "off".into() };
-        k
-    };
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         (Some(0.0), Some(_)) => Some(1.0),
         _ => None,
     };
-    for r in rows.iter_mut() {
-        r.vs_f32 = match base.get(&key(r)).or_else(|| base.get(&other(r))) {
+    let ratios: Vec<Option<VsF32>> = rows
+        .iter()
+        .map(|r| match f32_peer(r, rows) {
             Some(f) if r.status.is_ok() => Some(VsF32 {
                 vgprs: ratio(r.vgprs, f.vgprs),
                 scratch: ratio(r.scratch_bytes, f.scratch_bytes),
@@ -217,7 +236,10 @@ pub fn set_ratios(rows: &mut [IsaRow]) {
                 cycles: ratio(r.cycles, f.cycles),
             }),
             _ => None,
-        };
+        })
+        .collect();
+    for (r, q) in rows.iter_mut().zip(ratios) {
+        r.vs_f32 = q;
     }
 }
 

@@ -7,7 +7,8 @@ use super::*;
 pub fn against_baselines(rows: &[Row]) -> String {
     let mut md = String::new();
     for b in BaselineId::all() {
-        let base: Vec<&Row> = rows.iter().filter(|r| r.layout == b.name() && r.status.is_ok()).collect();
+        let base: Vec<&Row> =
+            rows.iter().filter(|r| r.what == crate::report::What::Baseline(b) && r.status.is_ok()).collect();
         if base.is_empty() {
             continue;
         }

@@ -18,7 +18,7 @@ pub struct LayoutPoint {
 
 /// A row's layout label: the layout, its math mode where it has several, `fc off` builds marked.
 pub fn layout_label(r: &Row) -> String {
-    let several = LayoutId::parse(&r.layout).map(|l| l.info().maths.len() > 1).unwrap_or(true);
+    let several = r.what.layout().map(|l| l.info().maths.len() > 1).unwrap_or(true);
     let mut s = if several { format!("{}/{}", r.layout, r.math) } else { r.layout.clone() };
     if r.float_controls == "off" {
         s += " (fc off)";
@@ -31,15 +31,8 @@ pub fn layout_label(r: &Row) -> String {
 pub fn layout_points(rows: &[Row]) -> BTreeMap<(String, usize, String, usize), LayoutPoint> {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && has_counters(&r.layout)).collect();
     let mut acc: BTreeMap<(String, usize, String, usize), LayoutPoint> = BTreeMap::new();
-    for h in ok.iter().filter(|r| LayoutId::parse(&r.layout).is_ok() && !r.kernel.is_empty()) {
-        let Some(f) = ok.iter().find(|f| {
-            f.layout == "f32"
-                && f.float_controls == h.float_controls
-                && f.device == h.device
-                && f.scene == h.scene
-                && f.rays == h.rays
-                && f.branching == h.branching
-        }) else {
+    for h in ok.iter().filter(|r| r.what.kernel().is_some()) {
+        let Some(f) = crate::report::key::f32_peer_of(*h, &ok) else {
             continue;
         };
         let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };

@@ -2,6 +2,8 @@
 //! arithmetic, and the device report's headline.
 
 use super::*;
+use crate::precision::Math;
+use crate::report::key::{f32_peer_of, What};
 
 /// f16h ÷ f32 ratios of one (device, scene, rays, B, P) pair of rows.
 #[derive(Clone, Debug, PartialEq)]
@@ -24,15 +26,8 @@ pub struct Ratio {
 pub fn ratios(rows: &[Row]) -> Vec<Ratio> {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok()).collect();
     let mut out = Vec::new();
-    for h in ok.iter().filter(|r| r.layout == "f16h" && r.math == "f16") {
-        if let Some(f) = ok.iter().find(|f| {
-            f.layout == "f32"
-                && f.device == h.device
-                && f.scene == h.scene
-                && f.rays == h.rays
-                && f.branching == h.branching
-                && f.packet == h.packet
-        }) {
+    for h in ok.iter().filter(|r| r.what.is_poster()) {
+        if let Some(f) = f32_peer_of(*h, &ok) {
             let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
             out.push(Ratio {
                 device: h.device.clone(),
@@ -109,15 +104,14 @@ pub fn separated_effects(rows: &[Row]) -> String {
     let mut acc: Sums = BTreeMap::new();
     let mut bytes: BTreeMap<(String, usize, usize, String), (f64, usize)> = BTreeMap::new();
     let mut raw: BTreeMap<String, f64> = BTreeMap::new();
-    for h in ok.iter().filter(|r| r.layout == "f16h") {
-        if let Some(f) = ok.iter().find(|f| {
-            f.layout == "f32"
-                && f.device == h.device
-                && f.scene == h.scene
-                && f.rays == h.rays
-                && f.branching == h.branching
-                && f.packet == h.packet
-        }) {
+    let (poster, _) = LayoutId::poster();
+    let label = |r: &Row| match r.what.builtin() {
+        Some(k) if r.what.is_f32() => k.variant.layout.name().to_string(),
+        Some(k) => format!("{}/{}", k.variant.layout, k.variant.math.name()),
+        None => String::new(),
+    };
+    for h in ok.iter().filter(|r| r.what.layout() == Some(poster) && r.what.builtin().is_some()) {
+        if let Some(f) = f32_peer_of(*h, &ok) {
             let e = acc
                 .entry((h.device.clone(), h.branching, h.packet))
                 .or_default()
@@ -125,13 +119,8 @@ pub fn separated_effects(rows: &[Row]) -> String {
                 .or_insert((0.0, 0));
             e.0 += h.mrays_median / f.mrays_median;
             e.1 += 1;
-            for r in [h, f] {
-                let k = (
-                    r.device.clone(),
-                    r.branching,
-                    r.packet,
-                    if r.layout == "f32" { "f32".to_string() } else { format!("f16h/{}", r.math) },
-                );
+            for r in [*h, f] {
+                let k = (r.device.clone(), r.branching, r.packet, label(r));
                 let b = bytes.entry(k).or_insert((0.0, 0));
                 b.0 += r.node_bytes_per_ray;
                 b.1 += 1;
@@ -149,34 +138,42 @@ pub fn separated_effects(rows: &[Row]) -> String {
         "Node bytes per ray = nodes visited × node bytes. Raw fp16:fp32 = the device's own arithmetic ratio ",
         "(`halftrace devices --arith`).\n\n",
     ));
+    let f32_name = LayoutId::f32().name();
+    let vs = |m: Math| format!("{} ÷ {f32_name}", m.name());
+    let (bytes_f32, of16, of32) = (
+        format!("node bytes/ray {f32_name}"),
+        format!("{poster}/{}", Math::F16.name()),
+        format!("{poster}/{}", Math::F32.name()),
+    );
+    let (v16, v32, vmix) = (vs(Math::F16), vs(Math::F32), vs(Math::Mixed));
     md += &header(&[
         ("device", false),
         ("B", true),
         ("P", true),
-        ("f16 ÷ f32", true),
-        ("f32 ÷ f32", true),
-        ("mixed ÷ f32", true),
-        ("node bytes/ray f32", true),
-        ("f16h/f16", true),
-        ("f16h/f32", true),
+        (&v16, true),
+        (&v32, true),
+        (&vmix, true),
+        (&bytes_f32, true),
+        (&of16, true),
+        (&of32, true),
         ("raw fp16:fp32", true),
     ]);
     for ((d, b, p), m) in &acc {
-        let get = |k: &str| m.get(k).map(|(s, n)| fmt(s / *n as f64)).unwrap_or_else(|| "–".into());
-        let by = |k: &str| {
+        let get = |k: Math| m.get(k.name()).map(|(s, n)| fmt(s / *n as f64)).unwrap_or_else(|| "–".into());
+        let by = |k: String| {
             bytes
-                .get(&(d.clone(), *b, *p, k.to_string()))
+                .get(&(d.clone(), *b, *p, k))
                 .map(|(s, n)| format!("{:.0}", s / *n as f64))
                 .unwrap_or_else(|| "–".into())
         };
         md += &format!(
             "| {d} | {b} | {p} | {} | {} | {} | {} | {} | {} | {} |\n",
-            get("f16"),
-            get("f32"),
-            get("mixed"),
-            by("f32"),
-            by("f16h/f16"),
-            by("f16h/f32"),
+            get(Math::F16),
+            get(Math::F32),
+            get(Math::Mixed),
+            by(f32_name.into()),
+            by(of16.clone()),
+            by(of32.clone()),
             fmt(raw[d])
         );
     }
@@ -197,9 +194,13 @@ pub fn device_headline(rows: &[Row]) -> String {
     let points = layout_points(rows);
     let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok() && r.mrays_median > 0.0).collect();
+    let f32_name = LayoutId::f32().name();
     for dev in devices {
-        let mut labels: Vec<(usize, String)> =
-            points.keys().filter(|(d, _, l, _)| d == dev && l != "f32").map(|(_, o, l, _)| (*o, l.clone())).collect();
+        let mut labels: Vec<(usize, String)> = points
+            .keys()
+            .filter(|(d, _, l, _)| d == dev && l != f32_name)
+            .map(|(_, o, l, _)| (*o, l.clone()))
+            .collect();
         labels.dedup();
         if !labels.is_empty() {
             md += &format!("Mrays/s ÷ f32 on {dev} (above 1: faster than f32; means over scenes and ray kinds):\n\n");
@@ -214,19 +215,13 @@ pub fn device_headline(rows: &[Row]) -> String {
         // f32's packets at B = 4: each P ÷ P = 1 for the same scene and rays.
         let f32_at = |p: usize, s: &str, r: &str| {
             ok.iter().find(|x| {
-                x.device == dev
-                    && x.layout == "f32"
-                    && x.branching == 4
-                    && x.packet == p
-                    && x.scene == s
-                    && x.rays == r
-                    && x.kernel.starts_with("trav_")
+                x.device == dev && x.what.is_f32() && x.branching == 4 && x.packet == p && x.scene == s && x.rays == r
             })
         };
         let singles: Vec<&&Row> =
-            ok.iter().filter(|x| x.device == dev && x.layout == "f32" && x.branching == 4 && x.packet == 1).collect();
+            ok.iter().filter(|x| x.device == dev && x.what.is_f32() && x.branching == 4 && x.packet == 1).collect();
         let mut packets: Vec<usize> =
-            ok.iter().filter(|x| x.device == dev && x.layout == "f32" && x.packet > 1).map(|x| x.packet).collect();
+            ok.iter().filter(|x| x.device == dev && x.what.is_f32() && x.packet > 1).map(|x| x.packet).collect();
         packets.sort();
         packets.dedup();
         if !packets.is_empty() {
@@ -251,12 +246,14 @@ pub fn device_headline(rows: &[Row]) -> String {
                 .iter()
                 .filter_map(|s| {
                     ok.iter()
-                        .find(|q| q.device == dev && q.layout == b.name() && q.scene == s.scene && q.rays == s.rays)
+                        .find(|q| {
+                            q.device == dev && q.what == What::Baseline(b) && q.scene == s.scene && q.rays == s.rays
+                        })
                         .map(|q| s.mrays_median / q.mrays_median)
                 })
                 .collect();
             if !v.is_empty() {
-                base.push(format!("f32 (B = 4) ÷ `{b}` {}", fmt(mean(&v))));
+                base.push(format!("{f32_name} (B = 4) ÷ `{b}` {}", fmt(mean(&v))));
             }
         }
         if !base.is_empty() {
