@@ -65,6 +65,13 @@ pub enum Cmd {
     /// its loops' trips taken from real rays in lockstep waves (estimate.md, estimate.csv,
     /// estimate-rays.csv). The compiler's model, not a measurement; nothing runs.
     Estimate(EstimateArgs),
+    /// The memory side of a ray on GPU models: bytes each kernel requests per ray (nodes,
+    /// triangles, ids, stack), the distinct cache lines per ray and per lockstep wave, and a
+    /// cache model of each GPU (an L1 per unit, the L2, a last-level cache, DRAM) fed by the
+    /// waves it runs at once: bytes and hit rates at each level, DRAM bytes, energy and the
+    /// DRAM-bound rays/s per ray, every layout ÷ f32, one verdict per GPU (memory.md,
+    /// memory.csv, memory.json). From the CPU reference's exact walk; nothing runs on a GPU.
+    Memory(MemoryArgs),
     /// Print the RADV null devices listed with RADV_FORCE_FAMILY as set (how `isa` and `devices`
     /// learn which families the installed RADV knows: RADV aborts on the others).
     #[command(hide = true)]
@@ -359,6 +366,40 @@ pub struct EstimateArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Replace the estimate files in --out.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::Args)]
+pub struct MemoryArgs {
+    /// GPU models, comma-separated (navi31, navi21, vega10, g610, a740, lnl, ga102, h100, h200;
+    /// default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub gpu: Vec<String>,
+    /// Only these layouts (and f32, the reference); every math of each.
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    /// Branching factors, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "4,8")]
+    pub branchings: Vec<usize>,
+    /// Scenes (OBJ, glTF or PLY; repeatable).
+    #[arg(long, default_value = "scenes/teapot.obj")]
+    pub scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing or a .npy file).
+    #[arg(long, value_delimiter = ',', default_value = "primary,ao,diffuse")]
+    pub rays: Vec<String>,
+    /// Image side of the primary rays (ao and diffuse start from their hits).
+    #[arg(long, default_value_t = 256)]
+    pub res: u32,
+    /// A folder of `halftrace estimate` (its estimate-rays.json): the issue cycles of the AMD
+    /// families it estimated bound their rays/s beside DRAM's (the roofline).
+    #[arg(long)]
+    pub estimate: Option<PathBuf>,
+    /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
+    /// refused unless --force; other files there are left alone.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace the memory files in --out.
     #[arg(long)]
     pub force: bool,
 }

@@ -34,6 +34,7 @@ pub mod images;
 pub mod interface;
 pub mod isa;
 pub mod layout;
+pub mod memory;
 pub mod npy;
 pub mod outdir;
 pub mod precision;

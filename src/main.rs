@@ -23,6 +23,7 @@ fn main() {
         Cmd::Conformance(a) => commands::conformance(a),
         Cmd::Isa(a) => commands::isa(a),
         Cmd::Estimate(a) => commands::estimate(a),
+        Cmd::Memory(a) => commands::memory(a),
         Cmd::DeviceReport(a) => commands::device_report(a),
         Cmd::ProbeFamily => commands::probe_family(),
         Cmd::IsaModel(a) => commands::isa_model(a),

@@ -61,9 +61,14 @@ pub fn render_with(
         md += &format!("Skipped: {l}\n\n");
     }
     let mut estimates = Vec::new();
+    let mut memory = Vec::new();
     for s in sources {
         estimates.extend(super::estimate::read(s)?.unwrap_or_default());
+        memory.extend(super::memory::read(s)?.unwrap_or_default());
     }
+    // The answer the harness exists for, first: which layout wins on each GPU's memory.
+    let verdict = super::memory::verdict_section(&memory);
+    md += &verdict;
     let estimate_section = |md: &mut String| -> anyhow::Result<()> {
         if !estimates.is_empty() {
             *md += "\n";
@@ -80,7 +85,7 @@ pub fn render_with(
         md += &super::isa::section(isa_rows, 2);
         estimate_section(&mut md)?;
         crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
-        write_headline(out, &devices, "", isa_rows)?;
+        write_headline(out, &devices, &verdict, isa_rows)?;
         return isa_files(isa_rows, out);
     }
     md += &tables::headline(&by_b, &by_p);
@@ -98,7 +103,7 @@ pub fn render_with(
     }
     estimate_section(&mut md)?;
     crate::fsx::write_atomic(&out.join("report.md"), md.as_bytes())?;
-    write_headline(out, &devices, &tables::headline(&by_b, &by_p), isa_rows)?;
+    write_headline(out, &devices, &(verdict + &tables::headline(&by_b, &by_p)), isa_rows)?;
     plots::plots(rows, &by_b, &by_p, out)?;
     plots::layouts_plot(&points, out)
 }

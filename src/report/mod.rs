@@ -8,6 +8,7 @@ pub mod estimate;
 pub mod isa;
 pub mod key;
 pub mod markdown;
+pub mod memory;
 pub mod merge;
 pub mod plots;
 pub mod rows;

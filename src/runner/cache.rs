@@ -9,7 +9,7 @@ use crate::base::{Counters, Hit};
 use crate::baseline::{BaselineId, BaselineScene};
 use crate::bvh::{self, BinaryBvh};
 use crate::gpu::GpuBvh;
-use crate::layout::traverse::LoopWork;
+use crate::layout::traverse::{LoopWork, Reads};
 use crate::layout::{Encoded, LayoutId};
 use crate::precision::{FloatControls, Math};
 use crate::rays::RayKind;
@@ -257,6 +257,18 @@ impl<'g> Runner<'g> {
         let s = self.scene.as_ref().expect("current");
         let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
         Ok(v.layout.imp().loop_work(enc, &s.sets[i].rays, v.packet, wave, v.math, v.fc))
+    }
+
+    /// Every packet's reads of the scene's buffers for `v` on ray set `set`, pass by pass
+    /// ([`crate::layout::traverse::mem_reads`]), with the encoding's node size, node count
+    /// and triangle count.
+    pub fn mem_reads(&mut self, v: &Variant, set: RaySetId) -> anyhow::Result<(Vec<Vec<Reads>>, [usize; 3])> {
+        let i = self.index(set);
+        self.encoding(v.layout, v.branching)?;
+        let s = self.scene.as_ref().expect("current");
+        let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
+        let sizes = [enc.node_size(), enc.nodes.len(), enc.tris.verts.len()];
+        Ok((v.layout.imp().mem_reads(enc, &s.sets[i].rays, v.packet, v.math, v.fc), sizes))
     }
 
     /// The CPU reference of `v` on ray set `set` (the latest few are kept, unless frugal).

@@ -1,0 +1,74 @@
+//! `halftrace memory`: bytes and cache lines per ray from the CPU reference's exact walk, and a
+//! cache model of each GPU; writes memory.md, memory.csv and memory.json.
+
+use super::outln;
+use crate::cli::MemoryArgs;
+use crate::memory::{self, gpus};
+use crate::outdir::{OutDir, OutMode, Outputs};
+use std::time::Instant;
+
+const FILES: &[&str] = &["memory.md", "memory.csv", "memory.json"];
+
+/// Like `estimate`'s, the folder may be another command's: only its own files are refused.
+const OUTPUTS: Outputs =
+    Outputs { command: "memory", owns: |n| FILES.contains(&n), folders: &[], alone: false, resume: None, force: true };
+
+pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
+    let t0 = Instant::now();
+    let gpus: Vec<&'static gpus::Gpu> = if a.gpu.is_empty() {
+        gpus::GPUS.iter().collect()
+    } else {
+        a.gpu
+            .iter()
+            .map(|g| {
+                gpus::gpu(&g.to_lowercase()).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--gpu '{g}': not a modelled GPU (use {})",
+                        gpus::GPUS.iter().map(|g| g.id).collect::<Vec<_>>().join(", ")
+                    )
+                })
+            })
+            .collect::<anyhow::Result<_>>()?
+    };
+    for &b in &a.branchings {
+        crate::bvh::check_branching(b).map_err(|e| anyhow::anyhow!("--branchings: {e}"))?;
+    }
+    let kinds: Vec<crate::rays::RayKind> = a
+        .rays
+        .iter()
+        .map(|k| k.parse().map_err(|e| anyhow::anyhow!("--rays {k}: {e}")))
+        .collect::<anyhow::Result<_>>()?;
+    anyhow::ensure!(a.res > 0, "--res must be at least 1");
+    for scene in &a.scene {
+        anyhow::ensure!(scene.exists(), "--scene {}: no such file", scene.display());
+    }
+    let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("memory")));
+    let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
+    let cfg = memory::Config {
+        scenes: a.scene.clone(),
+        kinds,
+        res: a.res,
+        gpus: gpus.clone(),
+        variants: memory::default_variants(&a.branchings, &a.layouts),
+        estimates: match &a.estimate {
+            None => Vec::new(),
+            Some(d) => crate::report::estimate::read(d)?
+                .ok_or_else(|| anyhow::anyhow!("--estimate {}: no estimate-rays.json there", d.display()))?,
+        },
+    };
+    let rows = memory::run(&cfg, |_| {})?;
+    let md = crate::report::memory::markdown(&rows, &gpus::table(&gpus));
+    crate::fsx::write_atomic(&out.join("memory.csv"), &crate::report::memory::csv(&rows)?)?;
+    crate::fsx::write_atomic(&out.join("memory.json"), serde_json::to_string_pretty(&rows)?.as_bytes())?;
+    crate::fsx::write_atomic(&out.join("memory.md"), md.as_bytes())?;
+    for v in crate::report::memory::verdicts(&rows) {
+        outln!("{v}");
+    }
+    outln!(
+        "{} rows in {:.1} s; written to {}",
+        rows.len(),
+        t0.elapsed().as_secs_f64(),
+        out.join("memory.md").display()
+    );
+    Ok(())
+}

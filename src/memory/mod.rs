@@ -1,0 +1,290 @@
+//! `halftrace memory`: the memory side of a ray — what each kernel reads, from the CPU
+//! reference's exact walk (lanes in lockstep), in three tiers:
+//!
+//! 1. **requested bytes per ray** (exact): nodes (the node record of every node a ray is
+//!    active in), triangle vertices (36 bytes per test), triangle ids (4 bytes per test the
+//!    certified test does not reject: `closest_test` reads it then), and the stack entries
+//!    pushed and popped (entry bytes × 2 per push — what the stack would move were it in
+//!    memory; the compilers keep it in registers, scratch or shared memory: `isa` says);
+//! 2. **distinct cache lines** (exact) of 32, 64 and 128 bytes, per ray alone and per wave in
+//!    lockstep (at each step the union over the wave's lanes: what coalescing leaves);
+//! 3. **a cache model** ([`cache`]): each GPU's hierarchy ([`gpus`]) fed by the waves it runs
+//!    at once, giving bytes and hit rates at each level and DRAM bytes per ray (a model).
+//!
+//! Addresses are those of the kernels' buffers: node `i` at `i × node size` in the node
+//! buffer, triangle `i`'s vertices at `36 i` in the vertex buffer and its id at `4 i` in the id
+//! buffer; the three buffers are placed one after another, each at a 64 KiB boundary (the
+//! driver's placement is not known; 64 KiB keeps set indices as a fresh allocation would).
+
+pub mod cache;
+pub mod gpus;
+
+use crate::layout::traverse::Reads;
+
+/// A byte range a lane reads: (address, length).
+pub type Range = (u64, u32);
+
+/// A wave's reads in lockstep: per step, the ranges its lanes read in it (a traversal pass
+/// reads the entered nodes, then each pass of the triangle loop a triangle per lane).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WaveTrace {
+    pub steps: Vec<Vec<Range>>,
+    pub rays: usize,
+}
+
+/// Where the scene's buffers lie.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Buffers {
+    pub node_size: u64,
+    pub nodes: u64,
+    pub tris: u64,
+}
+
+const ALIGN: u64 = 64 * 1024;
+
+impl Buffers {
+    pub fn new([node_size, nodes, tris]: [usize; 3]) -> Buffers {
+        Buffers { node_size: node_size as u64, nodes: nodes as u64, tris: tris as u64 }
+    }
+    /// Where the node buffer ends (its bytes are the nodes').
+    pub fn nodes_end(&self) -> u64 {
+        self.nodes * self.node_size
+    }
+    fn verts_base(&self) -> u64 {
+        self.nodes_end().div_ceil(ALIGN) * ALIGN
+    }
+    fn ids_base(&self) -> u64 {
+        (self.verts_base() + 36 * self.tris).div_ceil(ALIGN) * ALIGN
+    }
+    pub fn node(&self, i: u32) -> Range {
+        (i as u64 * self.node_size, self.node_size as u32)
+    }
+    pub fn verts(&self, i: u32) -> Range {
+        (self.verts_base() + 36 * i as u64, 36)
+    }
+    pub fn id(&self, i: u32) -> Range {
+        (self.ids_base() + 4 * i as u64, 4)
+    }
+}
+
+/// The distinct lines of `line` bytes that `ranges` touch, appended to `out` (sorted).
+pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
+    let start = out.len();
+    for &(a, n) in ranges {
+        out.extend(a / line..=(a + n.max(1) as u64 - 1) / line);
+    }
+    out[start..].sort_unstable();
+    let mut v = out.split_off(start);
+    v.dedup();
+    out.extend(v);
+}
+
+/// The waves of `reads` (each packet's passes × lanes, [`crate::layout::traverse::mem_reads`],
+/// of `rays` rays in packets of `p`: the last may hold fewer) in waves of `wave` lanes:
+/// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its node
+/// step, then its triangle steps.
+pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffers) -> Vec<WaveTrace> {
+    let p = p.max(1);
+    let per_wave = (wave / p).max(1);
+    let lanes = |k: usize| p.min(rays - k * p);
+    let mut out = Vec::new();
+    for (w, packets) in reads.chunks(per_wave).enumerate() {
+        let first = w * per_wave;
+        let pass = |k: usize, i: usize| {
+            let n = lanes(first + k);
+            packets[k].get(i * n..(i + 1) * n)
+        };
+        let passes = (0..packets.len()).map(|k| packets[k].len() / lanes(first + k)).max().unwrap_or(0);
+        let mut steps = Vec::new();
+        for i in 0..passes {
+            let mut node = Vec::new();
+            let mut most = 0;
+            for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
+                node.extend(x.node.map(|n| b.node(n)));
+                most = most.max(x.tris.len());
+            }
+            steps.push(node);
+            for j in 0..most {
+                let mut t = Vec::new();
+                for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
+                    if let Some(&(i, id)) = x.tris.get(j) {
+                        t.push(b.verts(i));
+                        if id {
+                            t.push(b.id(i));
+                        }
+                    }
+                }
+                steps.push(t);
+            }
+        }
+        out.push(WaveTrace { steps, rays: (0..packets.len()).map(|k| lanes(first + k)).sum() });
+    }
+    out
+}
+
+/// Requested bytes, summed over rays: nodes, triangle vertices, triangle ids, stack.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Requested {
+    pub nodes: u64,
+    pub verts: u64,
+    pub ids: u64,
+    pub stack: u64,
+    /// Node visits and triangle tests, summed over rays (the counters' `nodes`, `tri_tests`).
+    pub visits: u64,
+    pub tests: u64,
+}
+
+/// The bytes every lane of `reads` requests; `entry`: a stack entry's bytes.
+pub fn requested(reads: &[Vec<Reads>], b: &Buffers, entry: u64) -> Requested {
+    let mut q = Requested::default();
+    for x in reads.iter().flatten() {
+        q.visits += x.node.is_some() as u64;
+        q.tests += x.tris.len() as u64;
+        q.ids += 4 * x.tris.iter().filter(|t| t.1).count() as u64;
+        q.stack += 2 * entry * x.pushes as u64;
+    }
+    q.nodes = q.visits * b.node_size;
+    q.verts = 36 * q.tests;
+    q
+}
+
+/// Lines of `line` bytes summed over the waves' steps (each step its distinct lines).
+pub fn wave_lines(waves: &[WaveTrace], line: u64) -> u64 {
+    let mut v = Vec::new();
+    let mut n = 0;
+    for w in waves {
+        for s in &w.steps {
+            v.clear();
+            lines_of(s, line, &mut v);
+            n += v.len() as u64;
+        }
+    }
+    n
+}
+
+/// What `memory` runs.
+pub struct Config {
+    pub scenes: Vec<std::path::PathBuf>,
+    pub kinds: Vec<crate::rays::RayKind>,
+    /// Side of the primary rays' image.
+    pub res: u32,
+    pub gpus: Vec<&'static gpus::Gpu>,
+    pub variants: Vec<crate::variant::Variant>,
+    /// `estimate`'s rows (`estimate-rays.json`): where one names a GPU's family, scene, ray
+    /// set and kernel, its issue cycles bound the rays/s beside DRAM's.
+    pub estimates: Vec<crate::report::estimate::RayRow>,
+}
+
+/// Every variant of `cfg` on every scene and ray set, each on every GPU model: its rows, with
+/// their ratios to f32.
+pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<crate::report::memory::MemRow>> {
+    use crate::report::memory::MemRow;
+    use crate::report::What;
+    use crate::runner::{rays::RaySpec, Runner};
+    use crate::variant::KernelId;
+    use anyhow::Context as _;
+    use rayon::prelude::*;
+    let mut rows = Vec::new();
+    let mut runner = Runner::new(None, &[], Default::default())?;
+    for path in &cfg.scenes {
+        let (scene, triangles) = {
+            let s = runner.scene(path).with_context(|| path.display().to_string())?.0;
+            (s.name.clone(), s.len())
+        };
+        for kind in &cfg.kinds {
+            let params = crate::rays::RayParams { width: cfg.res, height: cfg.res, ..Default::default() };
+            let set = runner
+                .ray_set(&RaySpec { kind: kind.clone(), params })
+                .with_context(|| format!("{} {kind} rays", path.display()))?;
+            let n = runner.rays(set).rays.len();
+            for v in &cfg.variants {
+                let id = KernelId::new(*v, v.portable_impl(), false);
+                progress(&format!("{scene} {kind} {}", id.name()));
+                let (reads, sizes) = runner.mem_reads(v, set)?;
+                let b = Buffers::new(sizes);
+                let entry = crate::interface::stack_entry_bytes(v.stack_entry()) as u64;
+                let q = requested(&reads, &b, entry);
+                let per = |x: u64| x as f64 / n.max(1) as f64;
+                let alone = waves(&reads, n, v.packet, v.packet, &b);
+                let alone_lines = [32, 64, 128].map(|l| per(wave_lines(&alone, l)));
+                let per_gpu = cfg.gpus.par_iter().map(|g| {
+                    let ws = waves(&reads, n, v.packet, g.wave, &b);
+                    let lines = [32, 64, 128].map(|l| per(wave_lines(&ws, l)));
+                    let h = cache::simulate(g, &ws, g.resident, b.nodes_end());
+                    let l1_acc: u64 = h.l1.iter().map(|c| c.accesses).sum();
+                    let l1_hits: u64 = h.l1.iter().map(|c| c.hits).sum();
+                    let rate = |hits: u64, acc: u64| if acc > 0 { hits as f64 / acc as f64 } else { 0.0 };
+                    let llc = h.llc.as_ref();
+                    let dram = per(h.dram_bytes);
+                    MemRow {
+                        gpu: g.id.into(),
+                        scene: scene.clone(),
+                        triangles,
+                        rays: kind.to_string(),
+                        ray_count: n,
+                        kernel: id.name(),
+                        layout: v.layout.name().into(),
+                        math: v.math.name().into(),
+                        branching: v.branching,
+                        packet: v.packet,
+                        wave: g.wave,
+                        status: Default::default(),
+                        node_bytes: per(q.nodes),
+                        vert_bytes: per(q.verts),
+                        id_bytes: per(q.ids),
+                        stack_bytes: per(q.stack),
+                        lines32_alone: alone_lines[0],
+                        lines64_alone: alone_lines[1],
+                        lines128_alone: alone_lines[2],
+                        lines32: lines[0],
+                        lines64: lines[1],
+                        lines128: lines[2],
+                        l1_bytes: per(l1_acc * g.l1_line),
+                        l1_hit: rate(l1_hits, l1_acc),
+                        l2_bytes: per(h.l2.accesses * g.l2_line),
+                        l2_hit: rate(h.l2.hits, h.l2.accesses),
+                        llc_bytes: llc.map_or(0.0, |c| per(c.accesses * c.line)),
+                        llc_hit: llc.map_or(0.0, |c| rate(c.hits, c.accesses)),
+                        dram_bytes: dram,
+                        dram_node_bytes: per(h.dram_node_bytes),
+                        dram_nj: dram * 8.0 * g.pj_per_bit / 1000.0,
+                        dram_bound_mrays: if dram > 0.0 { g.dram_gbs * 1e9 / dram / 1e6 } else { f64::INFINITY },
+                        issue_bound_mrays: cfg
+                            .estimates
+                            .iter()
+                            .find(|e| {
+                                e.family == g.id
+                                    && e.scene == scene
+                                    && e.rays == kind.to_string()
+                                    && e.kernel == id.name()
+                                    && e.status.is_ok()
+                            })
+                            .filter(|_| g.simds > 0)
+                            .map(|e| e.rays_per_kclk / 1000.0 * g.clock_mhz as f64 * (g.units * g.simds) as f64),
+                        what: What::Builtin(id),
+                        ..MemRow::default()
+                    }
+                });
+                rows.extend(per_gpu.collect::<Vec<_>>());
+            }
+        }
+    }
+    // By GPU, then as run: scene, ray set, variant.
+    rows.sort_by_key(|r| cfg.gpus.iter().position(|g| g.id == r.gpu));
+    crate::report::memory::set_ratios(&mut rows);
+    Ok(rows)
+}
+
+/// The default variants: every layout in every math at each of `branchings`, single rays.
+pub fn default_variants(branchings: &[usize], layouts: &[crate::layout::LayoutId]) -> Vec<crate::variant::Variant> {
+    use crate::layout::LayoutId;
+    let mut v = Vec::new();
+    for l in LayoutId::all().filter(|l| layouts.is_empty() || layouts.contains(l) || *l == LayoutId::f32()) {
+        for &m in l.info().maths {
+            for &b in branchings {
+                v.push(crate::variant::Variant::new(l, b, 1).with_math(m));
+            }
+        }
+    }
+    v
+}

@@ -1,0 +1,249 @@
+//! The memory side (`halftrace memory`): its exact tiers hold the identities they must, and
+//! the cache model agrees with patterns of known answer and with an independent implementation
+//! on the same trace.
+
+mod common;
+use common::*;
+use halftrace::base::Ray;
+use halftrace::layout::traverse::Reads;
+use halftrace::layout::LayoutId;
+use halftrace::memory::cache::{simulate, Cache};
+use halftrace::memory::gpus::{gpu, GPUS};
+use halftrace::memory::{lines_of, requested, wave_lines, waves, Buffers, WaveTrace};
+use halftrace::precision::FloatControls;
+
+fn sets() -> (Prepared, Vec<(String, Vec<Ray>)>) {
+    let p = prepare(&scene_path("teapot.obj"));
+    let s = ray_sets(&p, 48, 256);
+    (p, s)
+}
+
+/// Requested node bytes per ray = nodes visited × node bytes, vertex bytes = triangle tests ×
+/// 36, on every layout and math at B = 4, 8 and P = 1, 8, every ray set; each lane's passes
+/// visit what its counters say.
+#[test]
+fn requested_bytes_are_the_counters_times_the_record_sizes() {
+    let (p, sets) = sets();
+    for layout in LayoutId::all() {
+        for b in [4, 8] {
+            let enc = encode(&p, layout, b);
+            let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
+            for &math in layout.info().maths {
+                for pk in [1, 8] {
+                    for (kind, rays) in &sets {
+                        let what = format!("{layout} {} B={b} P={pk} {kind}", math.name());
+                        let (_, c) = layout.imp().trace(&enc, rays, pk, math, FloatControls::On);
+                        let reads = layout.imp().mem_reads(&enc, rays, pk, math, FloatControls::On);
+                        let q = requested(&reads, &buf, 8);
+                        let nodes: u64 = c.iter().map(|c| c.nodes as u64).sum();
+                        let tests: u64 = c.iter().map(|c| c.tri_tests as u64).sum();
+                        assert_eq!((q.visits, q.tests), (nodes, tests), "{what}: visits and tests");
+                        assert_eq!(q.nodes, nodes * enc.node_size() as u64, "{what}: node bytes");
+                        assert_eq!(q.verts, 36 * tests, "{what}: vertex bytes");
+                        assert!(q.ids <= 4 * tests, "{what}: id bytes");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The lines of a wave of one lane are that ray's own; a wave of every ray twice has the same
+/// lines as a wave of the rays once (so half per ray).
+#[test]
+fn one_lane_waves_and_doubled_rays_keep_their_lines() {
+    let (p, sets) = sets();
+    let layout = LayoutId::parse("f16h").unwrap();
+    let enc = encode(&p, layout, 4);
+    let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
+    let math = layout.default_math();
+    for (kind, rays) in &sets {
+        let reads = layout.imp().mem_reads(&enc, rays, 1, math, FloatControls::On);
+        let ones = waves(&reads, rays.len(), 1, 1, &buf);
+        for (i, r) in reads.iter().enumerate() {
+            // Ray i's own lines, step by step, from its reads directly.
+            let mut own = 0;
+            for x in r {
+                let mut ranges: Vec<_> = x.node.map(|n| buf.node(n)).into_iter().collect();
+                let mut v = Vec::new();
+                lines_of(&ranges, 64, &mut v);
+                own += v.len() as u64 * x.node.is_some() as u64;
+                for &(t, id) in &x.tris {
+                    ranges = vec![buf.verts(t)];
+                    if id {
+                        ranges.push(buf.id(t));
+                    }
+                    v.clear();
+                    lines_of(&ranges, 64, &mut v);
+                    own += v.len() as u64;
+                }
+            }
+            assert_eq!(wave_lines(&ones[i..i + 1], 64), own, "{kind} ray {i}: a one-lane wave's lines");
+        }
+        let twice: Vec<Ray> = rays.iter().flat_map(|r| [*r, *r]).collect();
+        let reads2 = layout.imp().mem_reads(&enc, &twice, 1, math, FloatControls::On);
+        for line in [32, 64, 128] {
+            let once = wave_lines(&waves(&reads, rays.len(), 1, 16, &buf), line);
+            let doubled = wave_lines(&waves(&reads2, twice.len(), 1, 32, &buf), line);
+            assert_eq!(once, doubled, "{kind}: {line}-byte lines of waves of 16 rays and of the same rays twice");
+        }
+    }
+}
+
+/// An LRU cache written another way: per set, a list of lines, most recent last.
+struct Naive {
+    line: u64,
+    sets: Vec<Vec<u64>>,
+    ways: usize,
+    hits: u64,
+    accesses: u64,
+}
+
+impl Naive {
+    fn new(bytes: u64, line: u64, ways: usize) -> Naive {
+        let lines = (bytes / line).max(1);
+        let ways = (ways as u64).clamp(1, lines) as usize;
+        let sets = (lines / ways as u64).max(1) as usize;
+        Naive { line, sets: vec![Vec::new(); sets], ways, hits: 0, accesses: 0 }
+    }
+    fn access(&mut self, l: u64) -> bool {
+        self.accesses += 1;
+        let n = self.sets.len() as u64;
+        let set = &mut self.sets[(l % n) as usize];
+        let hit = if let Some(i) = set.iter().position(|&x| x == l) {
+            set.remove(i);
+            true
+        } else {
+            if set.len() == self.ways {
+                set.remove(0);
+            }
+            false
+        };
+        set.push(l);
+        self.hits += hit as u64;
+        hit
+    }
+}
+
+/// The hierarchy of `simulate`, written again with the naive caches and its own schedule
+/// loop: (L1 accesses, L1 hits, L2 accesses, L2 hits, LLC accesses, LLC hits, DRAM bytes).
+fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace]) -> [u64; 7] {
+    let units = g.units as usize;
+    let mut l1: Vec<Naive> = (0..units).map(|_| Naive::new(g.l1_kib * 1024, g.l1_line, g.l1_ways)).collect();
+    let mut l2 = Naive::new(g.l2_kib * 1024, g.l2_line, g.l2_ways);
+    let mut llc = (g.llc_kib > 0).then(|| Naive::new(g.llc_kib * 1024, g.llc_line, g.llc_ways));
+    let mut dram = 0;
+    let queue: Vec<&WaveTrace> = ws.iter().filter(|w| !w.steps.is_empty()).collect();
+    let slots = units * g.resident;
+    let mut slot: Vec<Option<(usize, usize)>> = (0..slots).map(|s| queue.get(s).map(|_| (s, 0))).collect();
+    let mut next = slots.min(queue.len());
+    loop {
+        let mut any = false;
+        for s in 0..slots {
+            let Some((w, i)) = slot[s] else { continue };
+            any = true;
+            let mut lines: Vec<u64> = Vec::new();
+            for &(a, n) in &queue[w].steps[i] {
+                for l in a / g.l1_line..=(a + n as u64 - 1) / g.l1_line {
+                    if !lines.contains(&l) {
+                        lines.push(l);
+                    }
+                }
+            }
+            lines.sort();
+            for l in lines {
+                if l1[s % units].access(l) {
+                    continue;
+                }
+                let (a, end) = (l * g.l1_line, (l + 1) * g.l1_line);
+                let mut b = a / g.l2_line * g.l2_line;
+                while b < end {
+                    if !l2.access(b / g.l2_line) {
+                        match llc.as_mut() {
+                            None => dram += g.l2_line,
+                            Some(c) => {
+                                let mut m = 0;
+                                let mut x = b / c.line * c.line;
+                                while x < b + g.l2_line {
+                                    if !c.access(x / c.line) {
+                                        m += c.line;
+                                    }
+                                    x += c.line;
+                                }
+                                dram += m;
+                            }
+                        }
+                    }
+                    b += g.l2_line;
+                }
+            }
+            slot[s] = if i + 1 < queue[w].steps.len() {
+                Some((w, i + 1))
+            } else if next < queue.len() {
+                next += 1;
+                Some((next - 1, 0))
+            } else {
+                None
+            };
+        }
+        if !any {
+            break;
+        }
+    }
+    let (la, lh) = (l1.iter().map(|c| c.accesses).sum(), l1.iter().map(|c| c.hits).sum());
+    let (ca, ch) = llc.as_ref().map_or((0, 0), |c| (c.accesses, c.hits));
+    [la, lh, l2.accesses, l2.hits, ca, ch, dram]
+}
+
+/// Equal hit and miss counts at every level, and equal DRAM bytes, on a real trace, for every
+/// modelled GPU (their line sizes, associativities and last-level caches differ).
+#[test]
+fn the_cache_model_agrees_with_an_independent_implementation() {
+    let (p, sets) = sets();
+    let layout = LayoutId::parse("q8").unwrap();
+    let enc = encode(&p, layout, 4);
+    let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
+    let (kind, rays) = &sets[2];
+    let reads: Vec<Vec<Reads>> = layout.imp().mem_reads(&enc, rays, 1, layout.default_math(), FloatControls::On);
+    for g in GPUS {
+        // A small GPU of the same caches, so that waves queue and caches fill.
+        let small = halftrace::memory::gpus::Gpu {
+            units: 2,
+            resident: 2,
+            l2_kib: 64,
+            llc_kib: g.llc_kib.min(128),
+            ..g.clone()
+        };
+        let ws = waves(&reads, rays.len(), 1, g.wave, &buf);
+        let h = simulate(&small, &ws, small.resident, buf.nodes_end());
+        let got = [
+            h.l1.iter().map(|c| c.accesses).sum(),
+            h.l1.iter().map(|c| c.hits).sum(),
+            h.l2.accesses,
+            h.l2.hits,
+            h.llc.as_ref().map_or(0, |c| c.accesses),
+            h.llc.as_ref().map_or(0, |c| c.hits),
+            h.dram_bytes,
+        ];
+        assert_eq!(got, naive_hierarchy(&small, &ws), "{} on {kind} rays", g.id);
+        assert!(got[1] < got[0] && got[6] > 0, "{}: a trace that both hits and misses", g.id);
+    }
+    assert!(gpu("navi31").is_some() && gpu("nope").is_none());
+}
+
+/// The known answers, through the hierarchy: a stream of distinct lines longer than every level
+/// misses everywhere; the same small set of lines read again and again misses once per line.
+#[test]
+fn the_hierarchy_has_the_known_answers() {
+    let g = halftrace::memory::gpus::Gpu { units: 1, resident: 1, ..gpu("navi31").unwrap().clone() };
+    let line = g.l1_line;
+    let far = (g.llc_kib * 1024 * 4) / line;
+    let stream = WaveTrace { steps: (0..far).map(|i| vec![(i * line, line as u32)]).collect(), rays: 1 };
+    let h = simulate(&g, std::slice::from_ref(&stream), 1, 0);
+    assert_eq!(h.l1[0].hits + h.l2.hits + h.llc.as_ref().unwrap().hits, 0);
+    assert_eq!(h.dram_bytes, far * line);
+    let small = WaveTrace { steps: (0..1000).map(|i| vec![((i % 10) * line, line as u32)]).collect(), rays: 1 };
+    let h = simulate(&g, std::slice::from_ref(&small), 1, 0);
+    assert_eq!((h.l1[0].accesses - h.l1[0].hits, h.dram_bytes), (10, 10 * line));
+    let _ = Cache::new(1024, 64, 4);
+}
