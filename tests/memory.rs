@@ -247,3 +247,50 @@ fn the_hierarchy_has_the_known_answers() {
     assert_eq!((h.l1[0].accesses - h.l1[0].hits, h.dram_bytes), (10, 10 * line));
     let _ = Cache::new(1024, 64, 4);
 }
+
+/// The command: a bad GPU or branching is refused naming the flag; a small run writes its
+/// three files, one verdict per GPU and coherence, every layout's rows with f32's ratio 1, and
+/// its CSV reads back with the columns it names.
+#[test]
+fn the_command_writes_its_files_and_refuses_bad_flags() {
+    use std::process::Command;
+    let bin = env!("CARGO_BIN_EXE_halftrace");
+    let dir = std::env::temp_dir().join(format!("halftrace-memory-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = |args: &[&str]| Command::new(bin).arg("memory").args(args).output().unwrap();
+    let out = run(&["--gpu", "nope", "--out", dir.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--gpu 'nope'"), "{err}");
+    let out = run(&["--branchings", "3", "--out", dir.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--branchings"), "{err}");
+    let teapot = scene_path("teapot.obj");
+    let out = run(&[
+        "--gpu",
+        "navi31,g610",
+        "--res",
+        "24",
+        "--scene",
+        teapot.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text} {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(text.lines().filter(|l| l.contains("rays: **")).count(), 4, "{text}");
+    let md = std::fs::read_to_string(dir.join("memory.md")).unwrap();
+    assert!(md.starts_with("# The memory side of a ray\n\n## Verdict per GPU"), "{md}");
+    let mut r = csv::Reader::from_path(dir.join("memory.csv")).unwrap();
+    let h = r.headers().unwrap().clone();
+    let col = |name: &str| h.iter().position(|c| c == name).unwrap_or_else(|| panic!("no column {name}"));
+    let (layout, ratio) = (col("layout"), col("dram_vs_f32"));
+    let rows: Vec<csv::StringRecord> = r.records().map(Result::unwrap).collect();
+    // 2 GPUs × 3 ray kinds × every layout's maths × B 4, 8.
+    let kernels: usize = LayoutId::all().map(|l| l.info().maths.len() * 2).sum();
+    assert_eq!(rows.len(), 2 * 3 * kernels);
+    for row in rows.iter().filter(|r| &r[layout] == "f32") {
+        assert_eq!(&row[ratio], "1", "f32's own ratio");
+    }
+    assert!(dir.join("memory.json").is_file());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

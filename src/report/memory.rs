@@ -1,7 +1,7 @@
 //! The memory side's rows (`halftrace memory` writes them: `memory.csv`, `memory.json`), its
 //! report section with one verdict per GPU, and the verdict lines for `headline.md`.
 
-use super::csvx::{display, fixed};
+use super::csvx::{display, fixed, opt_display};
 use super::key::{f32_peer, Columns, Keyed, What};
 use super::rows::Status;
 use anyhow::Context as _;
@@ -166,13 +166,16 @@ struct Record<'a> {
     dram_nj: f64,
     #[serde(serialize_with = "fixed::<1, _>")]
     dram_bound_mrays: f64,
+    #[serde(serialize_with = "opt_display")]
     dram_vs_f32: Option<f64>,
+    #[serde(serialize_with = "opt_display")]
     dram_node_vs_f32: Option<f64>,
     #[serde(serialize_with = "opt_fixed1")]
     issue_bound_mrays: Option<f64>,
     #[serde(serialize_with = "fixed::<1, _>")]
     bound_mrays: f64,
     binds: &'a str,
+    #[serde(serialize_with = "opt_display")]
     bound_vs_f32: Option<f64>,
 }
 
@@ -260,8 +263,11 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
         let best = m.iter().max_by(|a, b| (a.1 .0 / a.1 .3 as f64).total_cmp(&(b.1 .0 / b.1 .3 as f64)));
         if let Some((l, (q, d, issue, n))) = best {
             let n = *n as f64;
-            let binds = if *issue == 0 {
-                "DRAM binds (no cycle model joined for this GPU, or memory is the tighter bound)".to_string()
+            let modelled = rows.iter().any(|r| r.gpu == gpu && r.issue_bound_mrays.is_some());
+            let binds = if !modelled {
+                "DRAM alone: no cycle model joined for this GPU".to_string()
+            } else if *issue == 0 {
+                "DRAM binds in every ray set".to_string()
             } else {
                 format!("issue binds in {issue} of {n} ray sets")
             };
