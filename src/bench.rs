@@ -285,7 +285,7 @@ fn bench_scene(runner: &mut Runner, cfg: &BenchConfig, scene: &str) -> anyhow::R
             Status::Skipped(why) => eprintln!("bench: {} skipped: {why}", key.label()),
             Status::Failed(f) => anyhow::bail!("bench: {scene} {}: {f}", set.kind),
         }
-        if let Key::Baseline(b) = key {
+        if let (Key::Baseline(b), Status::Ok) = (key, &o.status) {
             let a = o.m.vs_f32;
             eprintln!(
                 "bench: {scene} {} {b}: agrees with f32 on {:.4}% of {} rays",

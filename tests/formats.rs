@@ -231,3 +231,17 @@ fn bad_files_name_the_file_and_element() {
         assert!(e.contains(&p.display().to_string()) && e.contains(want), "{name}: {e}");
     }
 }
+
+/// An OBJ that starts with a UTF-8 byte-order mark loads the same triangles as without it (the
+/// mark once hid the first vertex line).
+#[test]
+fn an_obj_with_a_byte_order_mark_loads_every_vertex() {
+    let d = dir();
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
+    let (plain, bom) = (d.join("plain.obj"), d.join("bom.obj"));
+    std::fs::write(&plain, text).unwrap();
+    std::fs::write(&bom, [&b"\xEF\xBB\xBF"[..], text.as_bytes()].concat()).unwrap();
+    let (a, b) = (scene::load(&plain).unwrap(), scene::load(&bom).unwrap());
+    assert_eq!(b.len(), 2);
+    assert_eq!(a.tris, b.tris);
+}

@@ -96,7 +96,10 @@ pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
         for o in &r.ops {
             outln!("{:<9} {:>10.2} {:>10.2} {:>12.3}", o.op, o.fp16_gops, o.fp32_gops, o.ratio);
         }
-        outln!("fp16:fp32 ratio (geometric mean): {:.3}", r.fp16_ratio);
+        match &r.fp16_unavailable {
+            None => outln!("fp16:fp32 ratio (geometric mean): {:.3}", r.fp16_ratio),
+            Some(why) => outln!("fp16 not measured: {why}"),
+        }
     }
     Ok(())
 }

@@ -7,6 +7,7 @@ use crate::cli::EstimateArgs;
 use crate::estimate;
 use crate::isa::{self, Matrix};
 use crate::outdir::{OutDir, OutMode, Outputs};
+use anyhow::Context as _;
 use std::time::Instant;
 
 const FILES: &[&str] =
@@ -53,8 +54,17 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         .collect::<anyhow::Result<_>>()?;
     anyhow::ensure!(a.res > 0, "--res must be at least 1");
     // Scenes load after the kernels are built: a missing one is refused before.
-    for scene in &a.scene {
+    for (i, scene) in a.scene.iter().enumerate() {
         anyhow::ensure!(scene.exists(), "--scene {}: no such file", scene.display());
+        if let Some(first) = a.scene[..i].iter().find(|s| crate::fsx::same_file(s, scene)) {
+            anyhow::bail!(
+                "--scene {} is the same file as --scene {}: its rows would count twice",
+                scene.display(),
+                first.display()
+            );
+        }
+        // Every scene loads before any kernel is built (building takes minutes on five families).
+        crate::scene::load(scene).with_context(|| format!("--scene {}", scene.display()))?;
     }
     let rays = estimate::Rays { scenes: a.scene.clone(), kinds, res: a.res };
     let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &rays)?;

@@ -309,7 +309,13 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         let limit = Duration::from_secs_f64(budget + (budget / 2.0).max(120.0));
         let mut r = runner.run("sweep", &args, None, limit)?;
         let rows = report::read_rows(&dir).map(|r| r.len()).unwrap_or(0);
-        if r.done && rows < jobs {
+        // Partial only when the sweep ended well with jobs left (its budget ran out); a sweep
+        // that failed stays failed, its log named, whatever rows it left.
+        let ended_well = r.done && r.status == "ok";
+        if r.done && !ended_well {
+            r.done = false;
+            r.status = format!("{}; {rows} of {jobs} jobs", r.status);
+        } else if ended_well && rows < jobs {
             r.done = false;
             r.status = format!("partial: {rows} of {jobs} jobs (budget reached; --resume runs the rest)");
         } else if r.done {

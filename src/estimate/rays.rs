@@ -149,6 +149,9 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                 .ray_set(&RaySpec { kind: kind.clone(), params })
                 .with_context(|| format!("{} {kind} rays", path.display()))?;
             let ray_count = runner.rays(set).rays.len();
+            if ray_count == 0 {
+                eprintln!("estimate: {scene} {kind}: the ray set has no rays; its rows are skipped");
+            }
             let mut work: HashMap<(Variant, usize), (LoopWork, LoopWork)> = HashMap::new();
             for (((family, b), named), out) in built.iter().zip(&named).zip(per_family.iter_mut()) {
                 let generation = null::family(family).map_or("", |x| x.generation);
@@ -196,6 +199,9 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                         row.rays_per_kclk = 1000.0 * 64.0 * w64 * p.printed_latency / cycles_per_wave.max(1.0);
                         Ok(())
                     };
+                    if row.status.is_ok() && ray_count == 0 {
+                        row.status = Status::Skipped(format!("{scene} {kind}: the ray set has no rays"));
+                    }
                     if row.status.is_ok() {
                         if let Err(e) = weigh() {
                             row.status = Status::Failed(format!("{family} {} on {scene} {kind}: {e}", r.kernel));

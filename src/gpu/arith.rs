@@ -28,12 +28,19 @@ pub struct ArithRates {
     pub device: String,
     pub driver: String,
     pub ops: Vec<OpRate>,
-    /// Geometric mean of the per-operation ratios.
+    /// Geometric mean of the per-operation ratios (NaN where fp16 was not measured).
     pub fp16_ratio: f64,
+    /// Why the fp16 half was not measured (the device lacks `shaderFloat16`), `None` when it was.
+    #[serde(default)]
+    pub fp16_unavailable: Option<String>,
 }
 
-/// Measures every operation in both precisions: `threads` invocations × `iters` iterations × 16 operations.
+/// Measures every operation in both precisions: `threads` invocations × `iters` iterations × 16
+/// operations. On a device without `shaderFloat16` only fp32 is measured (building the fp16
+/// kernel there is invalid Vulkan usage, and SwiftShader's compiler dies on it): the fp16
+/// figures are NaN and [`ArithRates::fp16_unavailable`] says why.
 pub fn run(gpu: &Gpu, threads: u32, iters: u32, repeat: usize) -> Result<ArithRates, GpuError> {
+    let fp16_unavailable = (!gpu.info.shader_float16).then(|| "the device has no shaderFloat16".to_string());
     let out = Buffer::new(
         gpu,
         "arithmetic output",
@@ -46,6 +53,10 @@ pub fn run(gpu: &Gpu, threads: u32, iters: u32, repeat: usize) -> Result<ArithRa
     for (k, op) in OPS.iter().enumerate() {
         let mut rates = [0f64; 2];
         for (j, f16) in [true, false].into_iter().enumerate() {
+            if f16 && fp16_unavailable.is_some() {
+                rates[j] = f64::NAN;
+                continue;
+            }
             let mut defs = vec![("OP".to_string(), k.to_string())];
             if f16 {
                 defs.push(("F16".into(), "1".into()));
@@ -74,5 +85,5 @@ pub fn run(gpu: &Gpu, threads: u32, iters: u32, repeat: usize) -> Result<ArithRa
         ops.push(OpRate { op: op.to_string(), fp16_gops: rates[0], fp32_gops: rates[1], ratio: rates[0] / rates[1] });
     }
     let fp16_ratio = (ops.iter().map(|o| o.ratio.ln()).sum::<f64>() / ops.len() as f64).exp();
-    Ok(ArithRates { device: gpu.info.name.clone(), driver: gpu.info.driver.clone(), ops, fp16_ratio })
+    Ok(ArithRates { device: gpu.info.name.clone(), driver: gpu.info.driver.clone(), ops, fp16_ratio, fp16_unavailable })
 }

@@ -103,6 +103,17 @@ pub fn merge(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Merged> {
         canon.push(c);
         let isa = super::isa::read(d)?;
         // A folder of `isa` alone has no results.csv.
+        if isa.is_none() && !d.join("results.csv").exists() {
+            let other =
+                ["estimate.md", "memory.md", "conformance.md", "bench.md"].into_iter().find(|f| d.join(f).is_file());
+            anyhow::bail!(
+                "{}: not found — `report` renders sweep folders (results.csv) and isa folders (isa.json){}",
+                d.join("results.csv").display(),
+                other
+                    .map(|f| format!("; this folder's {f} is its own command's report, already rendered"))
+                    .unwrap_or_default()
+            );
+        }
         let sweep_rows = if isa.is_some() && !d.join("results.csv").exists() { Vec::new() } else { read_rows(d)? };
         for r in isa.unwrap_or_default() {
             let id =

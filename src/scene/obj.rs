@@ -9,6 +9,9 @@ use std::path::Path;
 
 /// The triangles of an OBJ file's bytes, and the warnings about its material files.
 pub fn load(path: &Path, bytes: &[u8]) -> Result<(Vec<[Vec3; 3]>, Vec<String>), SceneError> {
+    // A UTF-8 byte-order mark (editors on Windows write one) is not part of the first line:
+    // left there, the first statement is not recognised and its vertex is lost.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     prescan(path, bytes)?;
 
     let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };

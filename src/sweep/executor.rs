@@ -108,6 +108,9 @@ pub fn run(sweep: &Sweep, out: &Path, quiet: bool, mask: &[String], kept: Vec<Ro
         crate::fsx::write_atomic(&out.join("shard.json"), serde_json::to_string_pretty(&manifest)?.as_bytes())?;
     }
     let arith = gpu::arith::run(&g, 16384, 256, 3)?;
+    if let (Some(why), false) = (&arith.fp16_unavailable, quiet) {
+        eprintln!("note: the device's fp16:fp32 arithmetic ratio is not measured: {why}");
+    }
     crate::fsx::write_atomic(&out.join("device_arith.json"), serde_json::to_string_pretty(&arith)?.as_bytes())?;
     if resumed > 0 && !quiet {
         eprintln!("resuming {}: {resumed} row(s) kept, {} job(s) to run", out.display(), jobs.len());
