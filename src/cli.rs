@@ -343,7 +343,8 @@ pub struct ConformanceArgs {
 pub struct EstimateArgs {
     /// AMD families, comma-separated (RADV null devices: e.g. navi31, navi21, navi10, vega10,
     /// gfx1201), and other vendors' models (a740, g610, lnl, ga102, v3d-71: their compilers'
-    /// whole-shader estimates, shown beside).
+    /// whole-shader estimates, shown beside); `vendors`: every model, `all`: every family the
+    /// installed RADV opens and every model (as `isa` takes them).
     #[arg(long, value_delimiter = ',', default_value = "navi31")]
     pub family: Vec<String>,
     /// Kernels: layouts (every layout and math at B = 4), cover, default or full.

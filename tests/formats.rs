@@ -245,3 +245,15 @@ fn an_obj_with_a_byte_order_mark_loads_every_vertex() {
     assert_eq!(b.len(), 2);
     assert_eq!(a.tris, b.tris);
 }
+
+/// A node that is the child of two nodes (glTF 2.0 allows one parent) is refused, naming both,
+/// instead of loading twice.
+#[test]
+fn a_gltf_node_with_two_parents_is_refused() {
+    let p = dir().join("two-parents.gltf");
+    let text = gltf_listing("[1, 2]", "[0]").replace(r#"{"children":[0]}],"#, r#"{"children":[0]},{"children":[0]}],"#);
+    assert!(text.contains(r#"{"children":[0]},{"children":[0]}"#), "{text}");
+    std::fs::write(&p, text).unwrap();
+    let e = scene::load(&p).unwrap_err().to_string();
+    assert!(e.contains("node 0 is a child of both node 1 and node 2"), "{e}");
+}

@@ -30,10 +30,31 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("estimate")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;
-    let asked: Vec<String> = a.family.iter().map(|f| f.to_lowercase()).collect();
-    let (models, families): (Vec<String>, Vec<String>) =
+    // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
+    // installed RADV opens and every model.
+    let vendors = || isa::vendors::MODELS.iter().map(|m| m.name.to_string());
+    let mut asked: Vec<String> = Vec::new();
+    let mut all = false;
+    for f in a.family.iter().map(|f| f.to_lowercase()) {
+        match f.as_str() {
+            "vendors" => asked.extend(vendors()),
+            "all" => {
+                all = true;
+                asked.extend(vendors());
+            }
+            _ => asked.push(f),
+        }
+    }
+    let (models, mut families): (Vec<String>, Vec<String>) =
         asked.into_iter().partition(|f| isa::vendors::model(f).is_some());
-    let known = if families.is_empty() { Vec::new() } else { isa::known_families(&exe) };
+    let known = if families.is_empty() && !all { Vec::new() } else { isa::known_families(&exe) };
+    if all {
+        families.extend(known.iter().map(|k| k.name.to_string()));
+    }
+    // Each once, in the order asked.
+    let once =
+        |v: Vec<String>| v.iter().enumerate().filter(|(i, f)| !v[..*i].contains(f)).map(|(_, f)| f.clone()).collect();
+    let (models, families): (Vec<String>, Vec<String>) = (once(models), once(families));
     for f in &families {
         anyhow::ensure!(
             known.iter().any(|k| k.name == f),

@@ -250,6 +250,17 @@ pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
             if bytes.is_empty() { "; the file is empty" } else { "" }
         );
     }
+    // Columns added after the first version have defaults (older files load); every other
+    // column must be there, named when it is not (rather than serde's "missing field").
+    const DEFAULTED: &[&str] = &["float_controls", "setup", "flagged_rays"];
+    for c in columns() {
+        anyhow::ensure!(
+            DEFAULTED.contains(&c.as_str()) || header.contains(&c),
+            "{}: the column '{c}' is missing (a halftrace results.csv has {})",
+            p.display(),
+            columns().join(", ")
+        );
+    }
     let rows: Vec<Row> = r
         .deserialize()
         .enumerate()

@@ -145,12 +145,28 @@ fn check_unique(path: &Path, json: &gltf::json::Root) -> Result<(), SceneError> 
             return Err(bad(path, format!("scene {i} lists node {n} twice (a scene's nodes are unique in glTF 2.0)")));
         }
     }
+    let mut parent: Vec<Option<usize>> = vec![None; json.nodes.len()];
     for (i, node) in json.nodes.iter().enumerate() {
         if let Some(n) = node.children.as_deref().and_then(twice) {
             return Err(bad(
                 path,
                 format!("node {i} lists child {n} twice (a node's children are unique in glTF 2.0)"),
             ));
+        }
+        // One parent per node (glTF 2.0): a node under two parents would load twice.
+        for c in node.children.iter().flatten().map(|c| c.value()) {
+            match parent.get(c).copied().flatten() {
+                Some(p) => {
+                    return Err(bad(
+                        path,
+                        format!(
+                            "node {c} is a child of both node {p} and node {i} (a node has one parent in glTF 2.0)"
+                        ),
+                    ))
+                }
+                None if c < parent.len() => parent[c] = Some(i),
+                None => {}
+            }
         }
     }
     Ok(())

@@ -55,6 +55,8 @@ fn small_sweep_writes_consistent_outputs() {
     assert_eq!(arith.ops.len(), 5);
     assert!(arith.fp16_ratio > 0.0 && rows.iter().all(|r| r.device_fp16_ratio == arith.fp16_ratio));
     let json: Vec<Row> = serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    // Each row's typed identity is parsed from its columns where a file is read.
+    let json: Vec<Row> = json.into_iter().map(Row::typed).collect();
     assert_eq!(json, rows, "results.json and results.csv disagree");
     // no empty field, one row per variant
     let text = std::fs::read_to_string(out.join("results.csv")).unwrap();

@@ -74,6 +74,19 @@ fn report_refuses_duplicate_rows() {
     let text = std::fs::read_to_string(a.join("results.csv")).unwrap();
     let e = bad("status", &|d| std::fs::write(d.join("results.csv"), text.replace(",ok,", ",weird,")).unwrap());
     assert!(e.contains("row 2") && e.contains("weird"), "{e}");
+    // A column missing is named (it once gave serde's raw "missing field").
+    let e = bad("column", &|d| {
+        let mut rd = csv::Reader::from_reader(text.as_bytes());
+        let h = rd.headers().unwrap().clone();
+        let drop = h.iter().position(|c| c == "bvh_bytes").unwrap();
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.write_record(h.iter().enumerate().filter(|(i, _)| *i != drop).map(|(_, c)| c)).unwrap();
+        for r in rd.records() {
+            w.write_record(r.unwrap().iter().enumerate().filter(|(i, _)| *i != drop).map(|(_, c)| c)).unwrap();
+        }
+        std::fs::write(d.join("results.csv"), w.into_inner().unwrap()).unwrap();
+    });
+    assert!(e.contains("the column 'bvh_bytes' is missing"), "{e}");
     type Edit = fn(&mut Row);
     let edits: [(&str, Edit, &str); 6] = [
         ("nan", |r| r.mrays_median = f64::NAN, "mrays_median NaN"),
