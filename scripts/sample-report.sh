@@ -20,11 +20,12 @@ out=$tmp/sample-report
 $bin sweep --out "$out"
 $bin isa --family "$(IFS=,; echo "polaris10,vega10,navi10,navi21,navi31,gfx1201"),vendors" --out "$out" --force
 $bin estimate --family vega10,navi21,navi31,gfx1201 --out "$out" --force
-$bin memory --estimate "$out" --out "$out" --force
-$bin report "$out"
+$bin memory --rays primary,ao --estimate "$out" --out "$out" --force
 git rev-parse HEAD > "$out/SAMPLE-COMMIT"
 bash scripts/spirv-hash.sh > "$out/spirv.sha256"
 rm -rf docs/sample-report
 cp -r "$out" docs/sample-report
 rm -rf "$tmp"
+# Rendered in place, so the report names the folder it is read from.
+$bin report docs/sample-report
 echo "sample-report: docs/sample-report made at $(git rev-parse --short=12 HEAD)"
