@@ -312,15 +312,13 @@ pub fn run(opts: &Options, exe: &Path, mut say: impl FnMut(&str)) -> anyhow::Res
         // Partial only when the sweep ended well with jobs left (its budget ran out); a sweep
         // that failed stays failed, its log named, whatever rows it left.
         let ended_well = r.done && r.status == "ok";
-        if r.done && !ended_well {
-            r.done = false;
-            r.status = format!("{}; {rows} of {jobs} jobs", r.status);
-        } else if ended_well && rows < jobs {
+        if ended_well && rows < jobs {
             r.done = false;
             r.status = format!("partial: {rows} of {jobs} jobs (budget reached; --resume runs the rest)");
-        } else if r.done {
+        } else if ended_well {
             r.status = format!("ok: {rows} jobs");
         } else {
+            r.done = false;
             r.status = format!("{}; {rows} of {jobs} jobs", r.status);
         }
         record(&mut state, "sweep", r);

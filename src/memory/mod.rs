@@ -207,10 +207,22 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let per = |x: u64| x as f64 / n.max(1) as f64;
                 let alone = waves(&reads, n, v.packet, v.packet, &b);
                 let alone_lines = [32, 64, 128].map(|l| per(wave_lines(&alone, l)));
+                // Each wave width's waves and lines once (several GPUs share a width).
+                let mut widths: Vec<usize> = cfg.gpus.iter().map(|g| g.wave).collect();
+                widths.sort_unstable();
+                widths.dedup();
+                let by_width: Vec<(usize, Vec<WaveTrace>, [f64; 3])> = widths
+                    .into_iter()
+                    .map(|w| {
+                        let ws = waves(&reads, n, v.packet, w, &b);
+                        let lines = [32, 64, 128].map(|l| per(wave_lines(&ws, l)));
+                        (w, ws, lines)
+                    })
+                    .collect();
                 let per_gpu = cfg.gpus.par_iter().map(|g| {
-                    let ws = waves(&reads, n, v.packet, g.wave, &b);
-                    let lines = [32, 64, 128].map(|l| per(wave_lines(&ws, l)));
-                    let h = cache::simulate(g, &ws, g.resident, b.nodes_end());
+                    let (_, ws, lines) = by_width.iter().find(|x| x.0 == g.wave).expect("every width made");
+                    let (ws, lines) = (ws.as_slice(), *lines);
+                    let h = cache::simulate(g, ws, g.resident, b.nodes_end());
                     let l1_acc: u64 = h.l1.iter().map(|c| c.accesses).sum();
                     let l1_hits: u64 = h.l1.iter().map(|c| c.hits).sum();
                     let rate = |hits: u64, acc: u64| if acc > 0 { hits as f64 / acc as f64 } else { 0.0 };

@@ -24,6 +24,14 @@ pub fn fixed<const D: usize, S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::E
     s.serialize_str(&format!("{v:.D$}"))
 }
 
+/// `Some` number with `D` decimals, `None` empty.
+pub fn opt_fixed<const D: usize, S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match v {
+        Some(v) => fixed::<D, S>(v, s),
+        None => s.serialize_str(""),
+    }
+}
+
 /// A CSV file of `records` (a header from the record type's field names).
 pub fn to_bytes<R: Serialize>(records: impl IntoIterator<Item = R>) -> anyhow::Result<Vec<u8>> {
     let mut w = csv::Writer::from_writer(Vec::new());

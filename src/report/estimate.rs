@@ -103,7 +103,7 @@ impl RayRow {
 pub fn set_ratios(rows: &mut [RayRow]) {
     let ratios: Vec<Option<f64>> = rows
         .iter()
-        .map(|r| f32_peer(r, rows).filter(|_| r.status.is_ok()).map(|f| r.cycles_per_ray / f.cycles_per_ray))
+        .map(|r| f32_peer(r, rows.iter()).filter(|_| r.status.is_ok()).map(|f| r.cycles_per_ray / f.cycles_per_ray))
         .collect();
     for (r, q) in rows.iter_mut().zip(ratios) {
         r.vs_f32 = q;

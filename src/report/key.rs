@@ -197,18 +197,11 @@ pub trait Keyed {
 /// built-in kernel at the same B, P, packet implementation and float controls (else the other
 /// float controls) — the one answer the tables, `isa`, `estimate` and the memory results use.
 /// `row` itself when it is f32's kernel; None for a baseline, an unknown row, or where f32 has
-/// no ok row.
-pub fn f32_peer<'a, R: Keyed>(row: &R, rows: &'a [R]) -> Option<&'a R> {
+/// no ok row. `rows`: a slice's `iter()`, or references already filtered.
+pub fn f32_peer<'a, R: Keyed + 'a>(row: &R, rows: impl IntoIterator<Item = &'a R> + Clone) -> Option<&'a R> {
     let peers = row.what().f32_peers()?;
     let place = row.place();
-    peers.iter().find_map(|p| rows.iter().find(|r| r.ok() && r.place() == place && r.what() == p))
-}
-
-/// [`f32_peer`] over references.
-pub fn f32_peer_of<'a, R: Keyed>(row: &R, rows: &[&'a R]) -> Option<&'a R> {
-    let peers = row.what().f32_peers()?;
-    let place = row.place();
-    peers.iter().find_map(|p| rows.iter().copied().find(|r| r.ok() && r.place() == place && r.what() == p))
+    peers.iter().find_map(|p| rows.clone().into_iter().find(|r| r.ok() && r.place() == place && r.what() == p))
 }
 
 #[cfg(test)]

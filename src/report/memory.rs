@@ -1,7 +1,7 @@
 //! The memory side's rows (`halftrace memory` writes them: `memory.csv`, `memory.json`), its
 //! report section with one verdict per GPU, and the verdict lines for `headline.md`.
 
-use super::csvx::{display, fixed, opt_display};
+use super::csvx::{display, fixed, opt_display, opt_fixed};
 use super::key::{f32_peer, Columns, Keyed, What};
 use super::rows::Status;
 use anyhow::Context as _;
@@ -94,7 +94,7 @@ pub fn set_ratios(rows: &mut [MemRow]) {
     let div = |a: f64, b: f64| (b > 0.0).then(|| a / b);
     let q: Vec<_> = rows
         .iter()
-        .map(|r| match f32_peer(r, rows) {
+        .map(|r| match f32_peer(r, rows.iter()) {
             Some(f) if r.ok() => (
                 div(r.dram_bytes, f.dram_bytes),
                 div(r.dram_node_bytes, f.dram_node_bytes),
@@ -170,20 +170,13 @@ struct Record<'a> {
     dram_vs_f32: Option<f64>,
     #[serde(serialize_with = "opt_display")]
     dram_node_vs_f32: Option<f64>,
-    #[serde(serialize_with = "opt_fixed1")]
+    #[serde(serialize_with = "opt_fixed::<1, _>")]
     issue_bound_mrays: Option<f64>,
     #[serde(serialize_with = "fixed::<1, _>")]
     bound_mrays: f64,
     binds: &'a str,
     #[serde(serialize_with = "opt_display")]
     bound_vs_f32: Option<f64>,
-}
-
-fn opt_fixed1<S: serde::Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
-    match v {
-        Some(v) => s.serialize_str(&format!("{v:.1}")),
-        None => s.serialize_str(""),
-    }
 }
 
 /// memory.csv.

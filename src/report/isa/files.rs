@@ -9,13 +9,18 @@ use serde::{Serialize, Serializer};
 use std::collections::BTreeSet;
 use std::path::Path;
 
-/// A statistic's cell: whole numbers without decimals, others with four; empty when absent.
-fn cell<S: Serializer>(x: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+/// A statistic's text: whole numbers without decimals, others with four; empty when absent.
+fn cell_text(x: Option<f64>) -> String {
     match x {
-        Some(v) if v.fract() == 0.0 && v.abs() < 1e15 => s.serialize_str(&format!("{v:.0}")),
-        Some(v) => s.serialize_str(&format!("{v:.4}")),
-        None => s.serialize_str(""),
+        Some(v) if v.fract() == 0.0 && v.abs() < 1e15 => format!("{v:.0}"),
+        Some(v) => format!("{v:.4}"),
+        None => String::new(),
     }
+}
+
+/// A statistic's cell ([`cell_text`]).
+fn cell<S: Serializer>(x: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(&cell_text(*x))
 }
 
 /// One line of `isa.csv` before the drivers' own statistics.
@@ -170,12 +175,9 @@ pub fn write(dir: &Path, rows: &[IsaRow]) -> anyhow::Result<()> {
     let template = IsaRow::default();
     let header: Vec<String> =
         header_of(Record::of(&template)).into_iter().chain(names.iter().map(|n| format!("stat: {n}"))).collect();
-    let stat = |r: &IsaRow, n: &String| match r.stats.get(n) {
-        Some(v) if v.fract() == 0.0 && v.abs() < 1e15 => format!("{v:.0}"),
-        Some(v) => format!("{v:.4}"),
-        None => String::new(),
-    };
-    let records = rows.iter().map(|r| (Record::of(r), names.iter().map(|n| stat(r, n)).collect::<Vec<_>>()));
+    let records = rows
+        .iter()
+        .map(|r| (Record::of(r), names.iter().map(|n| cell_text(r.stats.get(*n).copied())).collect::<Vec<_>>()));
     let bytes = to_bytes_with(&header, records)?;
     crate::fsx::write_atomic(&dir.join("isa.csv"), &bytes)?;
     crate::fsx::write_atomic(&dir.join("isa.json"), serde_json::to_string_pretty(rows)?.as_bytes())

@@ -224,7 +224,7 @@ pub fn set_ratios(rows: &mut [IsaRow]) {
     };
     let ratios: Vec<Option<VsF32>> = rows
         .iter()
-        .map(|r| match f32_peer(r, rows) {
+        .map(|r| match f32_peer(r, rows.iter()) {
             Some(f) if r.status.is_ok() => Some(VsF32 {
                 vgprs: ratio(r.vgprs, f.vgprs),
                 scratch: ratio(r.scratch_bytes, f.scratch_bytes),

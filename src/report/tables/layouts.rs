@@ -32,7 +32,7 @@ pub fn layout_points(rows: &[Row]) -> BTreeMap<(String, usize, String, usize), L
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && has_counters(&r.layout)).collect();
     let mut acc: BTreeMap<(String, usize, String, usize), LayoutPoint> = BTreeMap::new();
     for h in ok.iter().filter(|r| r.what.kernel().is_some()) {
-        let Some(f) = crate::report::key::f32_peer_of(*h, &ok) else {
+        let Some(f) = crate::report::key::f32_peer(*h, ok.iter().copied()) else {
             continue;
         };
         let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };

@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::precision::Math;
-use crate::report::key::{f32_peer_of, What};
+use crate::report::key::{f32_peer, What};
 
 /// f16h ÷ f32 ratios of one (device, scene, rays, B, P) pair of rows.
 #[derive(Clone, Debug, PartialEq)]
@@ -27,7 +27,7 @@ pub fn ratios(rows: &[Row]) -> Vec<Ratio> {
     let ok: Vec<&Row> = rows.iter().filter(|r| r.status.is_ok()).collect();
     let mut out = Vec::new();
     for h in ok.iter().filter(|r| r.what.is_poster()) {
-        if let Some(f) = f32_peer_of(*h, &ok) {
+        if let Some(f) = f32_peer(*h, ok.iter().copied()) {
             let div = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
             out.push(Ratio {
                 device: h.device.clone(),
@@ -111,7 +111,7 @@ pub fn separated_effects(rows: &[Row]) -> String {
         None => String::new(),
     };
     for h in ok.iter().filter(|r| r.what.layout() == Some(poster) && r.what.builtin().is_some()) {
-        if let Some(f) = f32_peer_of(*h, &ok) {
+        if let Some(f) = f32_peer(*h, ok.iter().copied()) {
             let e = acc
                 .entry((h.device.clone(), h.branching, h.packet))
                 .or_default()
