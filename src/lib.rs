@@ -3,12 +3,12 @@
 //!
 //! Layers, bottom up (each module imports only those below it; `docs/architecture.md` has the
 //! picture and `tests/architecture.rs` checks it): [`base`] (rays, hits, counters, the fp32
-//! tests), [`precision`], [`fp16`], [`fsx`] and [`outdir`] (files and output folders);
+//! tests), [`precision`], [`vendor`] (one file per GPU vendor), [`fp16`], [`fsx`] and [`outdir`] (files and output folders);
 //! [`interface`] (what Rust and GLSL share), [`scene`], [`rays`], [`npy`]; [`bvh`]; [`layout`]
 //! (one folder per precision layout, the CPU traversal); [`variant`]; [`gpu`] (the Vulkan
 //! backend, the only `unsafe`); [`baseline`] (`rq`, `rt`, `embree`); [`report`]; [`runner`]
 //! (validate, then time — the one way to a result); [`sweep`], [`bench`], [`conformance`],
-//! [`isa`]; [`devreport`]; [`cli`] and [`commands`].
+//! [`isa`]; [`devreport`]; [`commands`] (one file per subcommand: its arguments and its run).
 
 // The exact arithmetic loops over the three axes index several arrays in step, as the GLSL
 // they mirror does; iterators would hide that correspondence.
@@ -20,7 +20,6 @@ pub mod base;
 pub mod baseline;
 pub mod bench;
 pub mod bvh;
-pub mod cli;
 pub mod commands;
 pub mod conformance;
 pub mod devreport;
@@ -46,3 +45,4 @@ pub mod scene;
 pub mod sweep;
 pub mod units;
 pub mod variant;
+pub mod vendor;

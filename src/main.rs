@@ -1,11 +1,10 @@
-//! The `halftrace` command line: parse ([`halftrace::cli`]), run ([`halftrace::commands`]),
+//! The `halftrace` command line: parse and run ([`halftrace::commands`]),
 //! report an error with its causes.
 
 #![deny(unsafe_code)]
 
 use clap::Parser;
-use halftrace::cli::{Cli, Cmd};
-use halftrace::commands;
+use halftrace::commands::Cli;
 
 fn main() {
     // A bad flag or value exits 1 like every other error (clap's own code is 2); help and
@@ -15,23 +14,7 @@ fn main() {
         let _ = e.print();
         std::process::exit(code)
     });
-    let r = match &cli.cmd {
-        Cmd::Trace(a) => commands::trace(a),
-        Cmd::BvhStats { scene } => commands::bvh_stats(scene),
-        Cmd::Instance(a) => commands::instance(a),
-        Cmd::Devices(a) => commands::devices(a),
-        Cmd::Conformance(a) => commands::conformance(a),
-        Cmd::Isa(a) => commands::isa(a),
-        Cmd::Estimate(a) => commands::estimate(a),
-        Cmd::Memory(a) => commands::memory(a),
-        Cmd::DeviceReport(a) => commands::device_report(a),
-        Cmd::ProbeFamily => commands::probe_family(),
-        Cmd::IsaModel(a) => commands::isa_model(a),
-        Cmd::Shaders { emit } => commands::shaders(emit),
-        Cmd::Sweep(a) => commands::sweep(a),
-        Cmd::Bench(a) => commands::bench(a),
-        Cmd::Report { dirs, out } => commands::report(dirs, out.as_deref()),
-    };
+    let r = cli.cmd.run();
     if let Err(e) = r {
         // stdout closed by its reader (`halftrace devices | head`): the reader has what it
         // wanted; end quietly, as other tools do.

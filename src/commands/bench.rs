@@ -1,11 +1,50 @@
 //! `halftrace bench`: the speed ratios a kernel change is judged by.
 
 use super::outln;
+use super::LayoutArg;
 use crate::bench::{self, BenchConfig};
-use crate::cli::{BenchArgs, LayoutArg};
 use crate::rays::RayKind;
 use anyhow::Context as _;
 use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Scenes (OBJ, glTF or PLY); repeat the flag. Default: the bundled teapot, and
+    /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) from the test scenes
+    /// (`tests/scenes`, else `../shared/scenes`) when they are there.
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Ray kinds, comma-separated: primary, ao, diffuse, grazing.
+    #[arg(long, default_value = "primary,ao,diffuse", value_delimiter = ',')]
+    pub rays: Vec<crate::rays::RayKind>,
+    /// Reduced-precision layouts to time beside f32, comma-separated (default: every
+    /// conservative one) — for a quicker check of one layout's change.
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<LayoutArg>,
+    #[arg(long, default_value_t = 256)]
+    pub width: u32,
+    #[arg(long, default_value_t = 256)]
+    pub height: u32,
+    /// Branching factors of the P = 1 kernels, comma-separated: 2, 4, 8, 16 (the fixed ratios
+    /// are at B = 8; f16h ÷ f32 is reported at each other one).
+    #[arg(long, default_value = "4,8", value_delimiter = ',')]
+    pub branchings: Vec<usize>,
+    /// Interleaved rounds (every target once per round).
+    #[arg(long, default_value_t = 5)]
+    pub rounds: usize,
+    /// Timed dispatches per target and round (after one warm-up).
+    #[arg(long, default_value_t = 5)]
+    pub repeat: usize,
+    /// Vulkan device (index or name substring).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Enable the Khronos validation layer.
+    #[arg(long)]
+    pub validation: bool,
+    /// Also write the report (Markdown) to this file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
 
 pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
     let mut scenes = a.scene.clone();

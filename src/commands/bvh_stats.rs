@@ -7,7 +7,15 @@ use crate::layout::{Encoded, LayoutId, TriBuffer};
 use std::path::Path;
 use std::time::Instant;
 
-pub fn bvh_stats(path: &Path) -> anyhow::Result<()> {
+#[derive(clap::Args)]
+pub struct BvhStatsArgs {
+    /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
+    #[arg(long)]
+    pub scene: std::path::PathBuf,
+}
+
+pub fn bvh_stats(a: &BvhStatsArgs) -> anyhow::Result<()> {
+    let path: &Path = &a.scene;
     let scene = crate::scene::load(path)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");

@@ -1,11 +1,41 @@
 //! `halftrace conformance`: every variant against its CPU reference on one device.
 
 use super::outln;
-use crate::cli::ConformanceArgs;
 use crate::conformance;
 use crate::outdir::{OutDir, OutMode, Outputs};
 use anyhow::Context;
 use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct ConformanceArgs {
+    /// A covering subset (each layout, B, P, math, float-control mode and packet
+    /// implementation at least once) instead of the full cross product.
+    #[arg(long)]
+    pub quick: bool,
+    /// Scene file (repeat for several; default: the bundled scene).
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Also every .obj / .obj.gz scene in this folder.
+    #[arg(long)]
+    pub scenes_dir: Option<PathBuf>,
+    /// Vulkan device: index or name substring (see `halftrace devices`).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Output folder for conformance.md and conformance.csv (default
+    /// reports/conformance-<UTC timestamp>/). Its conformance files, if any, are refused
+    /// unless --force; other files there are left alone.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace the conformance files in --out.
+    #[arg(long)]
+    pub force: bool,
+    /// Run under the Khronos validation layer; any message fails the run.
+    #[arg(long)]
+    pub validation: bool,
+    /// Treat a device feature as missing (testing the fallbacks).
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+}
 
 /// What `conformance` writes into its folder, which it may share: these files, refused unless
 /// `--force`, which replaces them (each as it is written, at the end), nothing else.

@@ -1,10 +1,53 @@
 //! `halftrace device-report`: a device's whole report in one budgeted, resumable command.
 
 use super::outln;
-use crate::cli::DeviceReportArgs;
 use crate::devreport::{self, Options};
 use anyhow::Context;
 use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct DeviceReportArgs {
+    /// Vulkan device: index or name substring (default: the device every command picks).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Wall time for the whole report (seconds, or e.g. 90s, 8m, 1h): the fixed steps run whole,
+    /// the sweep gets what remains (at least one job).
+    #[arg(long, default_value = "8m", value_parser = |s: &str| crate::units::parse_duration("--budget", s))]
+    pub budget: f64,
+    /// Output folder (default REPORTS/<device name>). One that holds files is refused unless
+    /// --resume or --force.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The folder the default --out is made in.
+    #[arg(long, default_value = "reports", conflicts_with = "out")]
+    pub reports: PathBuf,
+    /// Scenes: the first (default: the bundled scene) gets conformance, the bench and the
+    /// default matrix; the others are swept after it while the budget lasts. On a GPU the first
+    /// is also swept instanced to at least 300k triangles, right after it.
+    #[arg(long)]
+    pub scene: Vec<PathBuf>,
+    /// Also sweep every .obj / .obj.gz scene in this folder, after --scene (default:
+    /// tests/scenes, the repository's test scenes, when run from the repository root, else
+    /// ../shared/scenes when it exists; "none" for none).
+    #[arg(long)]
+    pub scenes_dir: Option<PathBuf>,
+    /// Image size of the bench's and the sweep's rays (default 256 × 256 on a CPU device such
+    /// as lavapipe, 1024 × 1024 on a GPU).
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Finish the report in --out: run only the steps that did not finish (the sweep resumes);
+    /// a folder with no report yet gets a new one.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace the report's own files in --out (other files there are left alone).
+    #[arg(long)]
+    pub force: bool,
+    /// Treat a device feature as missing in every step (testing).
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+}
 
 pub fn device_report(a: &DeviceReportArgs) -> anyhow::Result<()> {
     let mut scenes = a.scene.clone();

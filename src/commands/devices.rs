@@ -2,11 +2,24 @@
 
 use super::outln;
 use crate::baseline::BaselineId;
-use crate::cli::DevicesArgs;
 use crate::gpu::{self, DeviceInfo};
 use crate::layout::LayoutId;
 use crate::precision::FcChoice;
 use crate::variant::{PacketImpl, Variant, PACKETS};
+
+#[derive(clap::Args)]
+pub struct DevicesArgs {
+    /// Also measure the device's raw fp16 and fp32 arithmetic rates (sub, mul, min, max,
+    /// compare).
+    #[arg(long, alias = "bench")]
+    pub arith: bool,
+    /// Only this device (index or name substring; for --arith, default: the default device).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Show what would run with these features treated as missing (testing).
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+}
 
 pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
     let mut list = gpu::list_devices()?;

@@ -3,12 +3,43 @@
 //! estimate-rays.csv.
 
 use super::outln;
-use crate::cli::EstimateArgs;
 use crate::estimate;
 use crate::isa::{self, Matrix};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use anyhow::Context as _;
 use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct EstimateArgs {
+    /// AMD families, comma-separated (RADV null devices: e.g. navi31, navi21, navi10, vega10,
+    /// gfx1201), and other vendors' models (a740, g610, lnl, ga102, v3d-71: their compilers'
+    /// whole-shader estimates, shown beside); `vendors`: every model, `all`: every family the
+    /// installed RADV opens and every model (as `isa` takes them).
+    #[arg(long, value_delimiter = ',', default_value = "navi31")]
+    pub family: Vec<String>,
+    /// Kernels: layouts (every layout and math at B = 4), cover, default or full.
+    #[arg(long, default_value = "default")]
+    pub matrix: String,
+    /// Only these layouts (and f32, the reference).
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    /// Scenes whose rays weight the loops (OBJ, glTF or PLY; repeatable).
+    #[arg(long, default_value = "scenes/teapot.obj")]
+    pub scene: Vec<std::path::PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing or a .npy file).
+    #[arg(long, value_delimiter = ',', default_value = "primary,ao")]
+    pub rays: Vec<String>,
+    /// Image side of the primary rays (ao and diffuse start from their hits).
+    #[arg(long, default_value_t = 256)]
+    pub res: u32,
+    /// Output folder (default reports/estimate-<UTC timestamp>/). Its estimate files, if any,
+    /// are refused unless --force; other files there are left alone.
+    #[arg(long)]
+    pub out: Option<std::path::PathBuf>,
+    /// Replace the estimate files in --out.
+    #[arg(long)]
+    pub force: bool,
+}
 
 const FILES: &[&str] =
     &["estimate.md", "estimate.csv", "estimate-rays.csv", "estimate-rays.json", "estimate.png", "estimate.svg"];
@@ -32,7 +63,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let exe = std::env::current_exe()?;
     // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
     // installed RADV opens and every model.
-    let vendors = || isa::vendors::MODELS.iter().map(|m| m.name.to_string());
+    let vendors = || crate::vendor::models().map(|(_, m)| m.name.to_string());
     let mut asked: Vec<String> = Vec::new();
     let mut all = false;
     for f in a.family.iter().map(|f| f.to_lowercase()) {
@@ -46,7 +77,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         }
     }
     let (models, mut families): (Vec<String>, Vec<String>) =
-        asked.into_iter().partition(|f| isa::vendors::model(f).is_some());
+        asked.into_iter().partition(|f| crate::vendor::find_model(f).is_some());
     let known = if families.is_empty() && !all { Vec::new() } else { isa::known_families(&exe) };
     if all {
         families.extend(known.iter().map(|k| k.name.to_string()));
@@ -61,12 +92,12 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
             "--family '{f}': neither an AMD family the installed RADV opens a null device for ({}) nor a model of \
              the other vendors ({})",
             known.iter().map(|k| k.name).collect::<Vec<_>>().join(", "),
-            isa::vendors::MODELS.iter().map(|m| m.name).collect::<Vec<_>>().join(", ")
+            crate::vendor::models().map(|(_, m)| m.name).collect::<Vec<_>>().join(", ")
         );
     }
     if !models.is_empty() {
         // Before any work: the compilers must be there.
-        isa::vendors::compilers().map_err(anyhow::Error::msg)?;
+        isa::shim::compilers().map_err(anyhow::Error::msg)?;
     }
     let kinds: Vec<crate::rays::RayKind> = a
         .rays

@@ -1,8 +1,23 @@
 //! `halftrace instance`: a big glTF scene made of copies of a small one.
 
 use super::outln;
-use crate::cli::InstanceArgs;
 use crate::scene::{self, MAX_TRIANGLES};
+
+#[derive(clap::Args)]
+pub struct InstanceArgs {
+    /// Scene to instance (OBJ, glTF or PLY).
+    #[arg(long)]
+    pub scene: std::path::PathBuf,
+    /// Number of instances.
+    #[arg(long)]
+    pub count: usize,
+    /// Seed of the rotations and scales.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The .glb file to write (an existing file is refused).
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+}
 
 pub fn instance(a: &InstanceArgs) -> anyhow::Result<()> {
     let (count, out) = (a.count, &a.out);

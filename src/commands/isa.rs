@@ -2,13 +2,72 @@
 //! pipeline statistics; writes isa.md, isa.csv, isa.json and the plots.
 
 use super::outln;
-use crate::cli::IsaArgs;
 use crate::isa::{self, Matrix, Target};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use crate::report::isa::IsaRow;
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct IsaModelArgs {
+    /// A model under its drm-shim (this process has its environment) or an AMD family.
+    #[arg(long)]
+    pub model: String,
+    /// layouts (isa --quick), cover, default or full (`variant::Matrix`).
+    #[arg(long, default_value = "default")]
+    pub matrix: String,
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    #[arg(long)]
+    pub validation: bool,
+    /// Write the representations under this folder.
+    #[arg(long)]
+    pub disasm: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+pub struct IsaArgs {
+    /// GPU families and models, comma-separated. AMD through RADV's null devices (e.g.
+    /// navi31,navi21,vega10); other vendors through Mesa's drm-shims, once
+    /// scripts/install-compilers.sh has built them: a618,a660,a740,a750 (Qualcomm Adreno),
+    /// g52,g610 (Arm Mali), tgl,dg2,mtl,lnl,bmg (Intel), tu102,ga102 (NVIDIA),
+    /// v3d-42,v3d-71 (Broadcom). `vendors`: every model of the other vendors; `all`: every AMD
+    /// family the installed RADV knows and every model. Default, without --device: polaris10,
+    /// vega10, navi10, navi21, navi31, gfx1201 (GCN4 to RDNA4).
+    #[arg(long, value_delimiter = ',')]
+    pub family: Vec<String>,
+    /// A Vulkan device (index or name substring) whose driver exposes
+    /// VK_KHR_pipeline_executable_properties; repeat for several.
+    #[arg(long)]
+    pub device: Vec<String>,
+    /// Layouts beside f32, comma-separated (default: every layout).
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    /// Every layout and math at B = 4, P = 1 only.
+    #[arg(long, conflicts_with = "full")]
+    pub quick: bool,
+    /// Every layout, math, B and P, every packet implementation, float controls on and off.
+    #[arg(long)]
+    pub full: bool,
+    /// Output folder (default reports/isa-<UTC timestamp>/). Its isa.* files, if any, are
+    /// refused unless --force; other files there are left alone (a sweep folder may hold both).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace the isa files in --out.
+    #[arg(long)]
+    pub force: bool,
+    /// Also write each kernel's internal representations (NIR, ACO IR, disassembly) under
+    /// disasm/<family>/.
+    #[arg(long)]
+    pub disasm: bool,
+    /// Run under the Khronos validation layer; any message fails the run.
+    #[arg(long)]
+    pub validation: bool,
+    /// No line per kernel.
+    #[arg(long)]
+    pub quiet: bool,
+}
 
 /// The files (and the folder) `isa` writes into its output folder.
 const FILES: &[&str] = &[
@@ -66,9 +125,9 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let exe = std::env::current_exe()?;
     let wants_families = !a.family.is_empty() || a.device.is_empty();
     // AMD families are probed (RADV aborts on a family it does not know); models need the
-    // compilers of scripts/install-compilers.sh, which `vendors::compilers` finds or names.
+    // compilers of scripts/install-compilers.sh, which `isa::shim::compilers` finds or names.
     let amd_asked = a.family.is_empty()
-        || a.family.iter().any(|f| !f.eq_ignore_ascii_case("vendors") && isa::vendors::model(f).is_none());
+        || a.family.iter().any(|f| !f.eq_ignore_ascii_case("vendors") && crate::vendor::find_model(f).is_none());
     let known = if wants_families && amd_asked { isa::known_families(&exe) } else { Vec::new() };
     let names: Vec<&str> = known.iter().map(|f| f.name).collect();
     let mut families: Vec<String> = Vec::new();
@@ -81,10 +140,10 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         match f.as_str() {
             "all" => {
                 families.extend(known.iter().map(|k| k.name.to_string()));
-                models.extend(isa::vendors::MODELS.iter().map(|m| m.name.to_string()));
+                models.extend(crate::vendor::models().map(|(_, m)| m.name.to_string()));
             }
-            "vendors" => models.extend(isa::vendors::MODELS.iter().map(|m| m.name.to_string())),
-            _ if isa::vendors::model(&f).is_some() => models.push(f),
+            "vendors" => models.extend(crate::vendor::models().map(|(_, m)| m.name.to_string())),
+            _ if crate::vendor::find_model(&f).is_some() => models.push(f),
             _ => families.push(f),
         }
     }
@@ -94,7 +153,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
          or name a device whose driver reports pipeline statistics with --device"
     );
     for f in families {
-        let all_models: Vec<&str> = isa::vendors::MODELS.iter().map(|m| m.name).collect();
+        let all_models: Vec<&str> = crate::vendor::models().map(|(_, m)| m.name).collect();
         anyhow::ensure!(
             names.contains(&f.as_str()),
             "--family '{f}': neither an AMD family the installed RADV opens ({}) nor a model of the other vendors ({})",
@@ -105,7 +164,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     }
     if !models.is_empty() {
         // Before any work: the compilers must be there.
-        isa::vendors::compilers().map_err(anyhow::Error::msg)?;
+        isa::shim::compilers().map_err(anyhow::Error::msg)?;
     }
     targets.extend(models.into_iter().map(Target::Model));
     targets.extend(a.device.iter().cloned().map(Target::Device));
@@ -201,10 +260,10 @@ pub fn probe_family() -> anyhow::Result<()> {
 }
 
 /// `halftrace isa-model` (hidden): the isa matrix on the model whose drm-shim environment this
-/// process has, one JSON row per line on stdout (read by `isa`, `isa::vendors::run_model`).
-pub fn isa_model(a: &crate::cli::IsaModelArgs) -> anyhow::Result<()> {
+/// process has, one JSON row per line on stdout (read by `isa`, `isa::shim::run_model`).
+pub fn isa_model(a: &IsaModelArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
-        isa::vendors::model(&a.model).is_some() || crate::gpu::null::family(&a.model).is_some(),
+        crate::vendor::find_model(&a.model).is_some() || crate::gpu::null::family(&a.model).is_some(),
         "--model {}: no such model or AMD family",
         a.model
     );

@@ -2,10 +2,43 @@
 //! cache model of each GPU; writes memory.md, memory.csv and memory.json.
 
 use super::outln;
-use crate::cli::MemoryArgs;
 use crate::memory::{self, gpus};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct MemoryArgs {
+    /// GPU models, comma-separated (navi31, navi21, vega10, g610, a740, lnl, ga102, h100, h200;
+    /// default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub gpu: Vec<String>,
+    /// Only these layouts (and f32, the reference); every math of each.
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<crate::layout::LayoutId>,
+    /// Branching factors, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "4,8")]
+    pub branchings: Vec<usize>,
+    /// Scenes (OBJ, glTF or PLY; repeatable).
+    #[arg(long, default_value = "scenes/teapot.obj")]
+    pub scene: Vec<std::path::PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing or a .npy file).
+    #[arg(long, value_delimiter = ',', default_value = "primary,ao,diffuse")]
+    pub rays: Vec<String>,
+    /// Image side of the primary rays (ao and diffuse start from their hits).
+    #[arg(long, default_value_t = 256)]
+    pub res: u32,
+    /// A folder of `halftrace estimate` (its estimate-rays.json): the issue cycles of the AMD
+    /// families it estimated bound their rays/s beside DRAM's (the roofline).
+    #[arg(long)]
+    pub estimate: Option<std::path::PathBuf>,
+    /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
+    /// refused unless --force; other files there are left alone.
+    #[arg(long)]
+    pub out: Option<std::path::PathBuf>,
+    /// Replace the memory files in --out.
+    #[arg(long)]
+    pub force: bool,
+}
 
 const FILES: &[&str] = &["memory.md", "memory.csv", "memory.json"];
 

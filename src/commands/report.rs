@@ -5,7 +5,19 @@ use crate::outdir::{OutDir, OutMode};
 use crate::report::merge;
 use std::path::{Path, PathBuf};
 
-pub fn report(dirs: &[PathBuf], out: Option<&Path>) -> anyhow::Result<()> {
+#[derive(clap::Args)]
+pub struct ReportArgs {
+    /// Sweep folders holding results.csv.
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Where to write the report (default: the first folder); a folder that is not one of
+    /// the inputs also gets the merged results.csv and results.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn report(a: &ReportArgs) -> anyhow::Result<()> {
+    let (dirs, out): (&[PathBuf], Option<&Path>) = (&a.dirs, a.out.as_deref());
     // A device report's folder (`device-report`) stands for its sweep.
     let dirs: Vec<PathBuf> = dirs
         .iter()

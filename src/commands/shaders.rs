@@ -6,7 +6,15 @@ use crate::variant::{spirv_kernels, DeviceBuild};
 use anyhow::Context;
 use std::path::Path;
 
-pub fn shaders(dir: &Path) -> anyhow::Result<()> {
+#[derive(clap::Args)]
+pub struct ShadersArgs {
+    /// Output folder (e.g. spirv/).
+    #[arg(long)]
+    pub emit: std::path::PathBuf,
+}
+
+pub fn shaders(a: &ShadersArgs) -> anyhow::Result<()> {
+    let dir: &Path = &a.emit;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for k in spirv_kernels() {
         for stats in [false, true] {

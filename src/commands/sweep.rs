@@ -2,10 +2,88 @@
 //! then the sweep.
 
 use super::outln;
-use crate::cli::SweepArgs;
 use crate::outdir::{self, OutDir, OutMode};
 use crate::sweep::{self, Config, Shard, Sweep};
 use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct SweepArgs {
+    /// TOML file with any of the keys of sweep.example.toml; flags override it.
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
+    /// Scene file (repeat for several).
+    #[arg(long)]
+    pub scene: Vec<std::path::PathBuf>,
+    /// Ray kinds, comma-separated (primary, ao, diffuse, grazing, FILE.npy).
+    #[arg(long, value_delimiter = ',')]
+    pub rays: Vec<String>,
+    /// Layouts and baselines, comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<String>,
+    /// Layouts that get the B and P series, comma-separated (default f32,f16h; "all" for
+    /// every layout in --layouts); the others run at --layout-branchings only.
+    #[arg(long, value_delimiter = ',')]
+    pub series: Vec<String>,
+    /// Branching factors swept at P = 1 (series layouts).
+    #[arg(long, value_delimiter = ',')]
+    pub branchings: Vec<usize>,
+    /// Branching factors at which every layout runs with P = 1 (default 4,8).
+    #[arg(long, value_delimiter = ',', alias = "scheme-branchings")]
+    pub layout_branchings: Vec<usize>,
+    /// Packet sizes swept at B = --packet-branching.
+    #[arg(long, value_delimiter = ',')]
+    pub packets: Vec<usize>,
+    #[arg(long)]
+    pub packet_branching: Option<usize>,
+    /// Math modes, comma-separated: f16, f32, mixed.
+    #[arg(long, value_delimiter = ',')]
+    pub maths: Vec<String>,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    #[arg(long)]
+    pub warmup: Option<usize>,
+    #[arg(long)]
+    pub repeat: Option<usize>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Output folder (default reports/<UTC timestamp>/). A folder that already holds files is
+    /// refused unless --resume or --force.
+    #[arg(long)]
+    pub out: Option<std::path::PathBuf>,
+    /// Run share K of N of the job list (1 <= K <= N; deterministic, balanced by expected
+    /// cost) into --out/shard-K-of-N; merge the shards with `halftrace report`. Inside a Slurm
+    /// job array it defaults to the array task (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT).
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Wall-time budget (seconds, or e.g. 90s, 8m, 1h30m): no job starts once the time so far
+    /// plus the longest job so far would pass it (the first job always runs); --resume runs
+    /// the rest.
+    #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--budget", s))]
+    pub budget: Option<f64>,
+    /// Continue the sweep in --out: keep its rows, run only the jobs they do not record.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace the sweep's files in --out (other files there are left alone).
+    #[arg(long)]
+    pub force: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Float-control modes of the kernels: auto, on or off (see `trace --help`).
+    #[arg(long)]
+    pub float_controls: Option<crate::precision::FcChoice>,
+    /// Treat a device feature as missing (testing), e.g. rayQuery.
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+    /// How long a dispatch may run before its kernel is declared hung: seconds or e.g. 90s,
+    /// 10m (default 600 s; at most a week).
+    #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--kernel-timeout", s))]
+    pub kernel_timeout: Option<f64>,
+}
 
 /// The sweep's configuration: the file's (or the defaults), each flag given over it, checked.
 fn config(a: &SweepArgs) -> anyhow::Result<Sweep> {

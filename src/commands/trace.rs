@@ -2,10 +2,10 @@
 //! runner: validated against the CPU reference, timed, and written out on request.
 
 use super::outln;
+use super::LayoutArg;
 use crate::base::Status;
 use crate::base::{agreement, mean_counters, simd_utilisation, Counters, Hit};
 use crate::baseline::BaselineId;
-use crate::cli::{Backend, LayoutArg, TraceArgs};
 use crate::gpu::{self, Gpu};
 use crate::layout::LayoutId;
 use crate::precision::{FcChoice, FloatControls};
@@ -16,6 +16,96 @@ use crate::variant::{Buffers, KernelSpec, Source, Variant, PACKETS};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Where `trace` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    /// The Vulkan device's kernels, checked against the CPU reference.
+    Gpu,
+    /// The CPU reference alone.
+    Cpu,
+}
+
+#[derive(clap::Args)]
+pub struct TraceArgs {
+    /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Layout (f32, f16h, …) or baseline (rq: the driver's acceleration structure and ray
+    /// queries; rt: the same structure and a ray-tracing pipeline; embree); `halftrace devices`
+    /// lists them.
+    #[arg(long, default_value = "f16h")]
+    pub layout: LayoutArg,
+    /// Branching factor: 2, 4, 8 or 16.
+    #[arg(long, default_value_t = 4)]
+    pub branching: usize,
+    /// Rays per packet: 1, 4, 8, 16, 32 or 64.
+    #[arg(long, default_value_t = 1)]
+    pub packet: usize,
+    /// Box-test arithmetic, for layouts with several modes (f16h: f16 = the poster's, f32 =
+    /// fp16 nodes with fp32 tests, mixed); default: the layout's first mode.
+    #[arg(long)]
+    pub math: Option<crate::precision::Math>,
+    /// Packet implementation (default: subgroup when P fits the device's subgroup, else hybrid
+    /// where the device has subgroup arithmetic, else shared memory).
+    #[arg(long)]
+    pub packet_impl: Option<crate::variant::PacketImpl>,
+    /// primary, ao, diffuse, grazing, or a FILE.npy (float32, N x 8).
+    #[arg(long, default_value = "primary")]
+    pub rays: crate::rays::RayKind,
+    #[arg(long, default_value_t = 256)]
+    pub width: u32,
+    #[arg(long, default_value_t = 256)]
+    pub height: u32,
+    /// eye_x,eye_y,eye_z,target_x,target_y,target_z,fov_degrees (default: frame the scene).
+    #[arg(long, value_parser = |s: &str| crate::rays::Camera::parse(s).map_err(|e| e.to_string()))]
+    pub camera: Option<crate::rays::Camera>,
+    /// Seed for ao, diffuse and grazing rays.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write hits (structured t, prim, u, v) to this .npy file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the traced rays to this .npy file.
+    #[arg(long)]
+    pub save_rays: Option<PathBuf>,
+    /// Write a shaded PNG (primary rays only).
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    /// Default: gpu when a Vulkan device can be opened.
+    #[arg(long)]
+    pub backend: Option<Backend>,
+    /// Vulkan device: index or name substring (see `halftrace devices`).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Timed dispatches after the warm-up.
+    #[arg(long, default_value_t = 10)]
+    pub repeat: usize,
+    /// Untimed warm-up dispatches.
+    #[arg(long, default_value_t = 2)]
+    pub warmup: usize,
+    /// Also run the counting kernel and print work per ray.
+    #[arg(long)]
+    pub stats: bool,
+    /// Run this kernel in place of the built-in one of the variant: a GLSL compute file
+    /// (compiled with the built-in kernel's defines and includes) or a SPIR-V module (.spv),
+    /// checked against the variant's interface, then validated and timed like the built-in.
+    #[arg(long, alias = "spirv")]
+    pub kernel: Option<PathBuf>,
+    /// Float-control execution modes of the kernel: on (round-to-nearest-even, inf/NaN
+    /// preserved), off (a build whose hits stay exact without them), auto (on where the
+    /// device has them, else off where the layout has such a build).
+    #[arg(long, default_value = "auto")]
+    pub float_controls: crate::precision::FcChoice,
+    /// Treat a device feature as missing (testing the fallbacks), e.g. shaderFloat16,
+    /// storageBuffer16BitAccess, floatControls, subgroupSizeControl, rayQuery.
+    #[arg(long, hide = true)]
+    pub mask_feature: Vec<String>,
+    /// How long a dispatch may run before its kernel is declared hung: seconds or e.g. 90s,
+    /// 10m (default 600 s; at most a week).
+    #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--kernel-timeout", s))]
+    pub kernel_timeout: Option<f64>,
+}
 
 pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(a.repeat >= 1, "--repeat {}: at least one timed dispatch is needed", a.repeat);

@@ -107,7 +107,8 @@ impl Gpu {
         let inst = Instance::new(validation)?;
         let instance = inst.instance.clone();
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
-        let infos: Vec<DeviceInfo> = pds.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect();
+        let infos: Vec<DeviceInfo> =
+            pds.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i).with_quirks()).collect();
         let idx = pick(&infos, opts.device.as_deref())?;
         let mut info = infos[idx].clone();
         let physical = pds[idx];
@@ -311,7 +312,7 @@ impl Gpu {
     /// helps no other device.
     pub fn compiles_at_first_dispatch(&self) -> bool {
         let cache_off = std::env::var("MESA_SHADER_CACHE_DISABLE").is_ok_and(|v| v == "1" || v == "true");
-        self.info.driver.starts_with("llvmpipe") && !cache_off
+        self.info.compiles_at_first_dispatch() && !cache_off
     }
 
     /// Records commands with `record`, submits them and waits for completion, at most the

@@ -13,6 +13,8 @@ pub struct DeviceInfo {
     pub name: String,
     pub kind: String,
     pub driver: String,
+    /// `VkDriverId`: which driver this is, whose vendor ([`crate::vendor`]) sets the quirks.
+    pub driver_id: vk::DriverId,
     pub api_version: String,
     pub shader_float16: bool,
     pub storage_16bit: bool,
@@ -59,7 +61,7 @@ pub struct DeviceInfo {
     /// memory, in bytes, where it is known to matter: turnip (Adreno) keeps every one of up to
     /// 256 bytes there, each field of an array of structs on its own (measured with `isa` on
     /// a740: f16h's group stack at B = 4 needs 192 registers with 64 groups, 128 with 65).
-    /// 0: none known.
+    /// 0: none known. A vendor quirk ([`DeviceInfo::with_quirks`]).
     pub register_array_bytes: u32,
     /// Whether kernels that defer entries keep the entry of the child to enter next in shared
     /// memory rather than in registers (`PENDING_SHARED`): on GPUs it saves registers (isa,
@@ -67,8 +69,28 @@ pub struct DeviceInfo {
     /// a740 unchanged at B = 4, 168 -> 128 at B = 8). Not on Intel's compiler, where it costs
     /// registers (lnl f16h fp16 B = 4: 103 -> 110, and more spills at B = 16), nor on a CPU
     /// implementation, where registers are not scarce and shared memory is memory (lavapipe,
-    /// `bench`: f16h fp32 math B = 4 0.82-0.84x the speed of the entry in registers).
+    /// `bench`: f16h fp32 math B = 4 0.82-0.84x the speed of the entry in registers). A vendor
+    /// quirk ([`DeviceInfo::with_quirks`]).
     pub pending_shared: bool,
+}
+
+impl DeviceInfo {
+    /// The device with its vendor's quirks set (`crate::vendor`, from the driver id; the GPU
+    /// default for a driver of no vendor), after [`describe`] has read what Vulkan says. A CPU
+    /// implementation keeps the pending entry in registers: registers are not scarce there and
+    /// shared memory is memory.
+    pub fn with_quirks(mut self) -> DeviceInfo {
+        let q = crate::vendor::Vendor::of_driver_id(self.driver_id).map_or(crate::vendor::GPU_DEFAULT, |v| v.quirks);
+        self.register_array_bytes = q.register_array_bytes;
+        self.pending_shared = q.pending_shared && self.kind != "cpu";
+        self
+    }
+
+    /// Whether the driver compiles a compute pipeline's code at its first dispatch rather than
+    /// when the pipeline is created (lavapipe: llvmpipe compiles there).
+    pub fn compiles_at_first_dispatch(&self) -> bool {
+        self.driver_id == vk::DriverId::MESA_LLVMPIPE
+    }
 }
 
 impl DeviceInfo {
@@ -92,18 +114,6 @@ pub fn shim() -> Option<String> {
         let f = std::path::Path::new(p).file_name()?.to_str()?;
         Some(f.strip_prefix("lib")?.strip_suffix("_noop_drm_shim.so")?.to_string())
     })
-}
-
-/// Whether the driver `id` is the one the drm-shim `shim` fakes a kernel for.
-fn shimmed(shim: &str, id: vk::DriverId) -> bool {
-    match shim {
-        "freedreno" => id == vk::DriverId::MESA_TURNIP,
-        "panfrost" => id == vk::DriverId::MESA_PANVK,
-        "intel" => id == vk::DriverId::INTEL_OPEN_SOURCE_MESA,
-        "nouveau" => id == vk::DriverId::MESA_NVK,
-        "v3d" => id == vk::DriverId::MESA_V3DV,
-        _ => false,
-    }
 }
 
 impl DeviceInfo {
@@ -157,7 +167,8 @@ pub const MASKABLE: &[&str] = &[
     "floatControls",
 ];
 
-/// What the harness reads of one physical device. Vulkan 1.0 and 1.1 devices (panvk on Mali,
+/// What the harness reads of one physical device, from Vulkan's queries alone (the vendor's
+/// quirks come after: [`DeviceInfo::with_quirks`]). Vulkan 1.0 and 1.1 devices (panvk on Mali,
 /// for one) are asked through the structures of their extensions, not the 1.2 aggregates.
 pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {
     unsafe {
@@ -265,7 +276,7 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
         let timestamps =
             qf.iter().any(|q| q.queue_flags.contains(vk::QueueFlags::COMPUTE) && q.timestamp_valid_bits > 0);
         let name = props.device_name_as_c_str().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
-        let shimmed = shim().is_some_and(|s| shimmed(&s, drv.driver_id));
+        let shimmed = shim().is_some_and(|s| crate::vendor::Vendor::shimmed(&s, drv.driver_id).is_some());
         let spirv_minor = match minor {
             0 => 0,
             1 if has0(ash::khr::spirv_1_4::NAME) => 4,
@@ -309,12 +320,10 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             max_subgroup_size: if ssc_ok { ssc.max_subgroup_size } else { sub.subgroup_size },
             pipeline_statistics: stats_ok,
             spirv_minor,
-            register_array_bytes: if drv.driver_id == vk::DriverId::MESA_TURNIP { 256 } else { 0 },
-            pending_shared: props.device_type != vk::PhysicalDeviceType::CPU
-                && !matches!(
-                    drv.driver_id,
-                    vk::DriverId::INTEL_OPEN_SOURCE_MESA | vk::DriverId::INTEL_PROPRIETARY_WINDOWS
-                ),
+            driver_id: drv.driver_id,
+            // The vendor's quirks are set after: [`DeviceInfo::with_quirks`].
+            register_array_bytes: 0,
+            pending_shared: true,
         }
     }
 }
@@ -330,7 +339,7 @@ fn is_null_device(name: &str, driver: vk::DriverId) -> bool {
 pub fn list_devices() -> Result<Vec<DeviceInfo>, GpuError> {
     let inst = Instance::new(false)?;
     let pds = unsafe { inst.instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
-    Ok(pds.into_iter().enumerate().map(|(i, pd)| describe(&inst.instance, pd, i)).collect())
+    Ok(pds.into_iter().enumerate().map(|(i, pd)| describe(&inst.instance, pd, i).with_quirks()).collect())
 }
 
 /// The device `--device` chooses: an index, or a case-insensitive name substring; without

@@ -18,28 +18,8 @@
 
 use crate::report::isa::AsmCounts;
 
-/// Which ISA a disassembly is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Isa {
-    Ir3,
-    Nak,
-    Intel,
-    Mali,
-}
-
-impl Isa {
-    /// The ISA of a representation named `name` by a driver of `vendor`.
-    pub fn of(vendor: &str, name: &str) -> Option<Isa> {
-        let n = name.to_lowercase();
-        match vendor {
-            "Qualcomm" if n.contains("assembly") => Some(Isa::Ir3),
-            "NVIDIA" if n.contains("assembly") => Some(Isa::Nak),
-            "Intel" if n.contains("assembly") => Some(Isa::Intel),
-            "Arm" if n.contains("assembly") => Some(Isa::Mali),
-            _ => None,
-        }
-    }
-}
+/// Which ISA a disassembly is: each vendor's file names its own ([`crate::vendor::Vendor::disassembly`]).
+pub use crate::vendor::Disassembly as Isa;
 
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Class {
@@ -72,9 +52,13 @@ fn add(c: &mut AsmCounts, class: Class) {
     }
 }
 
-/// Counts the instructions of disassembly `text` in ISA `isa`.
+/// Counts the instructions of disassembly `text` in ISA `isa` (ACO's as a GFX9+ generation's,
+/// with `scratch_*` instructions: [`crate::isa::counts`] takes the generation).
 pub fn count(isa: Isa, text: &str) -> AsmCounts {
     let mut c = AsmCounts::default();
+    if isa == Isa::Aco {
+        return crate::isa::counts::count(text, true);
+    }
     if matches!(isa, Isa::Ir3 | Isa::Nak | Isa::Mali) {
         // These ISAs name private memory: zero is a count, not "unknown".
         (c.scratch_loads, c.scratch_stores) = (Some(0), Some(0));
@@ -85,6 +69,7 @@ pub fn count(isa: Isa, text: &str) -> AsmCounts {
             Isa::Nak => nak(line),
             Isa::Intel => intel(line),
             Isa::Mali => mali(line),
+            Isa::Aco => None,
         };
         if let Some(k) = class {
             add(&mut c, k);

@@ -8,7 +8,7 @@
 pub mod aco;
 pub mod counts;
 pub mod mix;
-pub mod vendors;
+pub mod shim;
 
 use crate::base::Status;
 use crate::gpu::executable::executables;
@@ -37,7 +37,7 @@ pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<KernelSpec> {
 pub enum Target {
     /// RADV's null device of a family.
     Family(String),
-    /// Another vendor's model under its drm-shim, built in a child process ([`vendors`]).
+    /// Another vendor's model under its drm-shim, built in a child process ([`shim`]).
     Model(String),
     /// A device by index or name (its driver must expose pipeline statistics).
     Device(String),
@@ -106,7 +106,7 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
             _ => None,
         })
         .collect();
-    let mut runs: Vec<Option<vendors::ModelRun>> =
+    let mut runs: Vec<Option<shim::ModelRun>> =
         models.par_iter().map(|name| run_model(cfg, exe, name).map(Some)).collect::<anyhow::Result<_>>()?;
     let mut next_run = runs.iter_mut();
     for t in &cfg.targets {
@@ -137,9 +137,9 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
 }
 
 /// The rows of model `name`, built in its own process.
-fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<vendors::ModelRun> {
-    let m = vendors::model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
-    let dir = vendors::compilers().map_err(anyhow::Error::msg)?;
+fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<shim::ModelRun> {
+    let (v, m) = crate::vendor::find_model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
+    let dir = shim::compilers().map_err(anyhow::Error::msg)?;
     let mut args = vec!["--matrix".to_string(), cfg.matrix.name().to_string()];
     if !cfg.layouts.is_empty() {
         args.push("--layouts".into());
@@ -152,13 +152,13 @@ fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<vendors::Mo
         args.push("--disasm".into());
         args.push(d.join(m.name).display().to_string());
     }
-    vendors::run_model(exe, &m, &dir, &args, &cfg.builds)
+    shim::run_model(exe, (v, m), &dir, &args, &cfg.builds)
 }
 
 /// Builds `builds` in this process (`halftrace isa-model`) on model `name` — a device a
 /// drm-shim fakes (this process was started with its environment) or an AMD family's RADV
 /// null device — printing each row as one line of JSON as it is made and, on stderr,
-/// [`vendors::MARKER`] and the kernel before building it.
+/// [`shim::MARKER`] and the kernel before building it.
 pub fn run_model_here(
     name: &str,
     builds: &[KernelSpec],
@@ -166,8 +166,8 @@ pub fn run_model_here(
     disasm: Option<&Path>,
 ) -> anyhow::Result<Vec<String>> {
     use std::io::Write as _;
-    let (g, who) = match vendors::model(name) {
-        Some(m) => {
+    let (g, who) = match crate::vendor::find_model(name) {
+        Some((v, m)) => {
             let g = Gpu::new(&ContextOptions { validation, statistics: true, ..Default::default() })?;
             anyhow::ensure!(
                 g.info.compile_only,
@@ -176,13 +176,13 @@ pub fn run_model_here(
                 g.info.name,
                 std::env::var("LD_PRELOAD").unwrap_or_default()
             );
-            (g, Who { family: None, model: Some(m) })
+            (g, Who { family: None, model: Some((v, *m)) })
         }
         None => (null::open(name, validation)?, Who { family: null::family(name), model: None }),
     };
     let mut out = std::io::stdout().lock();
     for b in builds {
-        let row = build_one(&g, &who, b, disasm, |k| eprintln!("{}{k}", vendors::MARKER))?;
+        let row = build_one(&g, &who, b, disasm, |k| eprintln!("{}{k}", shim::MARKER))?;
         writeln!(out, "{}", serde_json::to_string(&row)?)?;
         out.flush()?;
     }
@@ -205,7 +205,7 @@ pub fn aco_programs(
         args.push("--layouts".into());
         args.push(layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
     }
-    let (stdout, status, stderr) = vendors::run_child(
+    let (stdout, status, stderr) = shim::run_child(
         std::process::Command::new(exe)
             .args(&args)
             .env("ACO_DEBUG", "perfinfo")
@@ -220,7 +220,7 @@ pub fn aco_programs(
         stdout.lines().map(|l| serde_json::from_str(l).map(IsaRow::typed)).collect::<Result<_, _>>()?;
     // Each kernel's printout runs from its marker to the next one.
     let mut sections: BTreeMap<String, &str> = BTreeMap::new();
-    let mut parts = stderr.split(vendors::MARKER).skip(1);
+    let mut parts = stderr.split(shim::MARKER).skip(1);
     for part in parts.by_ref() {
         let (kernel, text) = part.split_once('\n').unwrap_or((part, ""));
         sections.insert(kernel.trim().to_string(), text);
@@ -244,7 +244,7 @@ pub fn aco_programs(
 /// What a device is besides its driver's name: an AMD family, or a model under a drm-shim.
 struct Who {
     family: Option<Family>,
-    model: Option<vendors::Model>,
+    model: Option<(&'static crate::vendor::Vendor, crate::vendor::Model)>,
 }
 
 /// What a device's build of the kernels used, in words.
@@ -277,7 +277,11 @@ fn build_one(
 ) -> anyhow::Result<IsaRow> {
     let v = b.variant;
     let (family, generation, device) = match (who.model, who.family) {
-        (Some(m), _) => (m.name.to_string(), m.generation.to_string(), format!("{} ({})", m.display, m.driver.name())),
+        (Some((v, m)), _) => (
+            m.name.to_string(),
+            m.generation.to_string(),
+            format!("{} ({})", m.display, v.shim.map_or(v.name, |s| s.driver)),
+        ),
         (None, Some(f)) => (f.name.to_string(), f.generation.to_string(), g.info.name.clone()),
         (None, None) => (String::new(), String::new(), g.info.name.clone()),
     };
@@ -295,7 +299,7 @@ fn build_one(
         packet: v.packet,
         ..IsaRow::default()
     };
-    row.vendor = crate::report::isa::vendor_of(&row.driver).to_string();
+    row.vendor = crate::vendor::VendorId::of_driver(&row.driver);
     let imp = support::packet_impl(&g.info, b);
     row.packet_impl = format!("{imp:?}").to_lowercase();
     let d = match support::decide(&g.info, b) {
@@ -340,17 +344,18 @@ fn build_one(
     };
     row.subgroup_size = e.subgroup_size;
     row.stats = e.statistics.iter().map(|s| (s.name.clone(), s.value)).collect();
-    if row.vendor == "AMD" {
-        // GFX9 on has scratch_* instructions; an AMD device of unknown generation may not.
-        let flat_scratch = matches!(who.family.map(|f| f.generation), Some(g) if !g.starts_with("GCN") || g == "GCN5");
-        if let Some((_, asm)) = e.representations.iter().find(|(n, _)| n.to_lowercase().contains("assembly")) {
-            row.asm = Some(counts::count(asm, flat_scratch));
+    // The vendor's disassembly, where its driver prints one.
+    let listing = e.representations.iter().find(|(n, _)| n.to_lowercase().contains("assembly"));
+    row.asm = match (row.vendor.get().and_then(|v| v.disassembly), listing) {
+        (Some(mix::Isa::Aco), Some((_, asm))) => {
+            // GFX9 on has scratch_* instructions; an AMD device of unknown generation may not.
+            let flat_scratch =
+                matches!(who.family.map(|f| f.generation), Some(g) if !g.starts_with("GCN") || g == "GCN5");
+            Some(counts::count(asm, flat_scratch))
         }
-    } else if let Some((isa, text)) =
-        e.representations.iter().find_map(|(n, t)| mix::Isa::of(&row.vendor, n).map(|i| (i, t)))
-    {
-        row.asm = Some(mix::count(isa, text));
-    }
+        (Some(isa), Some((_, text))) => Some(mix::count(isa, text)),
+        _ => None,
+    };
     row.fill_known();
     if let Some(dir) = disasm {
         std::fs::create_dir_all(dir)?;

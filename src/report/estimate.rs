@@ -224,22 +224,6 @@ pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
     }))
 }
 
-/// What each vendor's whole-shader cycle figure assumes (docs/vendors.md), by the driver's
-/// vendor name.
-pub fn vendor_assumes(vendor: &str) -> &'static str {
-    match vendor {
-        "Intel" => {
-            "`Cycle Count` (`INTEL_DEBUG=cs`): one SIMD thread's issue and dependency cycles, each loop's \
-                    body weighted ×10 per nesting level, branches unweighted"
-        }
-        "Arm" => {
-            "normalized cycles (`BIFROST_MESA_DEBUG=shaderdb`): the busiest functional unit's cycles, \
-                  every instruction counted once (loops not weighted)"
-        }
-        _ => "no cycle estimate from this driver",
-    }
-}
-
 /// The other vendors' section: their compilers' own whole-shader cycle estimates at P = 1 with
 /// what each assumes, beside the ray-weighted AMD figures ("" without rows). Whole-shader
 /// figures cannot be weighted by the rays: they give no per-block costs.
@@ -261,7 +245,8 @@ pub fn vendors_section(rows: &[super::isa::IsaRow]) -> String {
     for d in devices {
         let g: Vec<&super::isa::IsaRow> = rows.iter().filter(|r| r.device_label() == d && r.packet == 1).collect();
         let Some(first) = g.first() else { continue };
-        md += &format!("## {d}: {}\n\n", vendor_assumes(&first.vendor));
+        let assumes = first.vendor.get().map_or("no cycle estimate from this driver", |v| v.cycles);
+        md += &format!("## {d}: {assumes}\n\n");
         md += "| kernel | layout | math | B | cycles | ÷ f32 | registers | spills | status |\n|---|---|---|---:|---:|---:|---:|---:|---|\n";
         let num = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.0}"));
         for r in g {

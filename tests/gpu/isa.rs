@@ -229,7 +229,7 @@ fn null_devices_are_refused_by_the_commands_that_run() {
 /// install fails; elsewhere the test says it did not run and how to make it run.
 #[test]
 fn isa_builds_on_every_vendors_compiler() {
-    if let Err(why) = halftrace::isa::vendors::compilers() {
+    if let Err(why) = halftrace::isa::shim::compilers() {
         assert!(std::env::var("HALFTRACE_REQUIRE_COMPILERS").is_err(), "{why}");
         eprintln!("isa_builds_on_every_vendors_compiler DID NOT RUN: {why}");
         return;

@@ -114,7 +114,7 @@ impl<'a> Record<'a> {
             device: &r.device,
             family: &r.family,
             generation: &r.generation,
-            vendor: &r.vendor,
+            vendor: r.vendor.name(),
             driver: &r.driver,
             device_build: &r.device_build,
             version: &r.version,
@@ -171,6 +171,12 @@ impl<'a> Record<'a> {
 /// column per statistic any row names), each atomically.
 pub fn write(dir: &Path, rows: &[IsaRow]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    crate::fsx::write_atomic(&dir.join("isa.csv"), &csv_bytes(rows)?)?;
+    crate::fsx::write_atomic(&dir.join("isa.json"), serde_json::to_string_pretty(rows)?.as_bytes())
+}
+
+/// `isa.csv`'s bytes.
+pub(super) fn csv_bytes(rows: &[IsaRow]) -> anyhow::Result<Vec<u8>> {
     let names: BTreeSet<&String> = rows.iter().flat_map(|r| r.stats.keys()).collect();
     let template = IsaRow::default();
     let header: Vec<String> =
@@ -178,9 +184,7 @@ pub fn write(dir: &Path, rows: &[IsaRow]) -> anyhow::Result<()> {
     let records = rows
         .iter()
         .map(|r| (Record::of(r), names.iter().map(|n| cell_text(r.stats.get(*n).copied())).collect::<Vec<_>>()));
-    let bytes = to_bytes_with(&header, records)?;
-    crate::fsx::write_atomic(&dir.join("isa.csv"), &bytes)?;
-    crate::fsx::write_atomic(&dir.join("isa.json"), serde_json::to_string_pretty(rows)?.as_bytes())
+    to_bytes_with(&header, records)
 }
 
 /// The rows of `DIR/isa.json`, or `None` when the folder has none.

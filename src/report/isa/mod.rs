@@ -7,12 +7,12 @@ mod columns;
 mod files;
 mod tables;
 
-pub use columns::{vendor_of, COLUMN_NAMES, VENDORS};
 pub use files::{read, write};
 pub use tables::{headline, plot, render, section};
 
 use super::key::{f32_peer, Columns, Keyed, What};
 use super::rows::{order, Status};
+use crate::vendor::VendorId;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -21,14 +21,15 @@ use std::collections::BTreeMap;
 pub struct IsaRow {
     pub device: String,
     /// The RADV family of a null device (`navi31`) or the model a drm-shim fakes (`a740`,
-    /// `g610`, `lnl`, `ga102`, `v3d-71`: `isa::vendors`), empty for a real device.
+    /// `g610`, `lnl`, `ga102`, `v3d-71`: `crate::vendor`), empty for a real device.
     pub family: String,
     /// The family's generation or architecture (GCN4, RDNA3, Adreno 7xx, Valhall, Xe2, …),
     /// empty when unknown.
     pub generation: String,
-    /// AMD, Qualcomm, Arm, Intel, NVIDIA or Broadcom (from the driver).
+    /// The vendor whose compiler built it (`crate::vendor`, from the driver); written as its
+    /// name.
     #[serde(default)]
-    pub vendor: String,
+    pub vendor: VendorId,
     pub driver: String,
     /// What the device's build of the kernels used: fp64 or its integer fallback, 16-bit
     /// storage or 32-bit words, the SPIR-V version, and where it differs from the GPU default
@@ -251,7 +252,7 @@ pub fn sorted(rows: &[IsaRow]) -> Vec<IsaRow> {
         crate::gpu::null::FAMILIES
             .iter()
             .position(|f| f.name == r.family)
-            .unwrap_or_else(|| 1000 + VENDORS.iter().position(|v| *v == r.vendor).unwrap_or(VENDORS.len()) * 100)
+            .unwrap_or_else(|| 1000 + r.vendor.get().map_or(crate::vendor::REGISTRY.len(), |v| v.position()) * 100)
     };
     v.sort_by(|a, b| {
         (gen(a), &a.device, &a.driver, order(&a.layout), &a.math, a.branching, a.packet, &a.kernel).cmp(&(
@@ -266,4 +267,64 @@ pub fn sorted(rows: &[IsaRow]) -> Vec<IsaRow> {
         ))
     });
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::LayoutId;
+    use crate::variant::{KernelId, PacketImpl, Variant};
+
+    /// A kernel at B = 4, P = 1 built by `crate::vendor::fake`'s compiler, which names its
+    /// statistics its own way.
+    fn fake_row(layout: &str, regs: f64) -> IsaRow {
+        let v = Variant::new(LayoutId::parse(layout).unwrap(), 4, 1);
+        let mut r = IsaRow {
+            device: "Fake GPU One (fakedrv)".into(),
+            family: "fk1".into(),
+            generation: "Fake 1".into(),
+            driver: "fakedrv 1.0".into(),
+            kernel: KernelId::new(v, PacketImpl::Single, false).name(),
+            layout: layout.into(),
+            math: v.math.name().into(),
+            branching: 4,
+            packet: 1,
+            packet_impl: "single".into(),
+            float_controls: v.fc.name().into(),
+            stats: [("Fake regs", regs), ("Fake lanes", 12.0), ("Fake ops", 900.0), ("Fake spills", 3.0)]
+                .map(|(k, v)| (k.to_string(), v))
+                .into(),
+            ..IsaRow::default()
+        }
+        .typed();
+        r.fill_known();
+        r
+    }
+
+    /// A vendor is one file and one registry line: the fake vendor's rows get their vendor,
+    /// its columns and its occupancy unit, and reach every table of `isa` with nothing else
+    /// touched.
+    #[test]
+    fn a_vendor_in_one_file_reaches_the_tables() {
+        let mut rows = vec![fake_row("f32", 40.0), fake_row("f16h", 52.0)];
+        set_ratios(&mut rows);
+        let h = &rows[1];
+        assert_eq!(h.vendor, "Fakevendor");
+        assert_eq!(
+            (h.registers, h.occupancy, h.spills, h.instructions),
+            (Some(52.0), Some(12.0), Some(3.0), Some(900.0))
+        );
+        assert_eq!(h.occupancy_unit, "lanes/unit");
+        assert_eq!(h.vs_f32.and_then(|q| q.registers), Some(1.3));
+        let md = section(&rows, 2);
+        assert!(md.contains("## fk1 (Fake 1)"), "{md}");
+        assert!(md.contains("| lanes/unit |"), "the vendor's own table, in its unit:\n{md}");
+        assert!(md.contains("| f16h "), "{md}");
+        assert!(md.contains("| 52 | 1.30× |"), "{md}");
+        let head = headline(&rows);
+        assert!(head.contains("| fk1 (Fake 1) | 40 / – / 12 | 52 / – / 12 |"), "{head}");
+        assert!(head.contains("lanes per unit"), "the vendor's unit named in words:\n{head}");
+        let csv = String::from_utf8(files::csv_bytes(&rows).unwrap()).unwrap();
+        assert!(csv.lines().nth(1).unwrap().contains(",Fakevendor,fakedrv 1.0,"), "{csv}");
+    }
 }

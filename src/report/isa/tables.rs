@@ -4,6 +4,7 @@
 use super::{sorted, AsmCounts, IsaRow};
 use crate::report::plots;
 use crate::report::rows::{order, Status};
+use crate::vendor::{Stats, REGISTRY};
 use std::path::Path;
 
 fn num(x: Option<f64>) -> String {
@@ -78,7 +79,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
     // Across AMD generations: VGPRs / scratch KiB per wave / waves per SIMD, P = 1.
     let cols: Vec<String> = devices
         .iter()
-        .filter(|d| ok.iter().any(|r| r.device_label() == d.0 && r.vendor == "AMD"))
+        .filter(|d| ok.iter().any(|r| r.device_label() == d.0 && r.vendor.stats_are(Stats::Aco)))
         .map(|d| d.0.clone())
         .collect();
     let mut kernels: Vec<(usize, String, usize)> = Vec::new();
@@ -110,7 +111,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
         let here: Vec<&IsaRow> = rows.iter().filter(|r| r.device_label() == *d && r.driver == *drv).collect();
         md += &format!("{h}# {d}\n\n");
         let one: Vec<&&IsaRow> = here.iter().filter(|r| r.status.is_ok() && r.packet == 1).collect();
-        if !one.is_empty() && one[0].vendor != "AMD" && !one[0].vendor.is_empty() {
+        if !one.is_empty() && one[0].vendor.stats_are(Stats::Own) {
             md += &vendor_table(&one);
         } else if !one.is_empty() {
             md += "Layouts at P = 1:\n\n| layout | B | fc | VGPRs | ×f32 | SGPRs | scratch KiB/wave | ×f32 | waves/SIMD | \
@@ -196,11 +197,12 @@ fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str) -> Stri
         return String::new();
     }
     let cols: Vec<&String> = devices.iter().map(|d| &d.0).collect();
+    let units: Vec<String> =
+        REGISTRY.iter().filter_map(|v| v.occupancy).map(|o| format!("{} ({})", o.words, o.note)).collect();
     let mut md = format!(
         "{h}# Across vendors (P = 1): registers per thread / private bytes per thread / occupancy\n\n\
-         Occupancy in the vendor's unit: waves per SIMD (AMD), waves per core (Adreno), threads (Mali; 1: more \
-         than 32 registers), warps per SM (NVIDIA, estimated from the registers), QPU threads (VideoCore); \
-         – where the driver does not say.\n\n| kernel | B | {} |\n|---|---|{}\n",
+         Occupancy in the vendor's unit: {}; – where the driver does not say.\n\n| kernel | B | {} |\n|---|---|{}\n",
+        units.join(", "),
         cols.iter().map(|c| c.as_str()).collect::<Vec<_>>().join(" | "),
         "---|".repeat(cols.len())
     );
@@ -326,12 +328,13 @@ pub fn headline(rows: &[IsaRow]) -> String {
     if devices.is_empty() || kernels.is_empty() {
         return String::new();
     }
+    let units: Vec<&str> = REGISTRY.iter().filter_map(|v| v.occupancy).map(|o| o.words).collect();
     let mut md = format!(
         "## Compiler view, B = 4, P = 1: registers per thread / private bytes per thread / occupancy\n\n\
          Each vendor's production compiler without its GPU (RADV null devices, Mesa's drm-shims; nothing ran). \
-         Occupancy in the vendor's unit (waves per SIMD, waves per core, threads, warps per SM, QPU threads); \
-         – where the driver does not say or the device cannot build the kernel (no shaderFloat16); † the build \
+         Occupancy in the vendor's unit ({}); – where the driver does not say or the device cannot build the kernel (no shaderFloat16); † the build \
          without float controls (the device has none). More in [isa.md](isa.md).\n\n| device | {} |\n|---|{}\n",
+        units.join(", "),
         kernels.iter().map(|k| k.1.as_str()).collect::<Vec<_>>().join(" | "),
         "---:|".repeat(kernels.len())
     );

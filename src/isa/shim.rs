@@ -5,125 +5,19 @@
 //! drivers Debian does not ship are built by `scripts/install-compilers.sh` into a cache
 //! ([`compilers`]).
 //!
-//! One driver and one model per process (the shim's model comes from the environment when the
-//! driver opens): each [`Model`] is built in a child process (`halftrace isa-model`) that
+//! The vendors and their models are in `crate::vendor`. One driver and one model per process
+//! (the shim's model comes from the environment when the driver opens): each model is built in a child process (`halftrace isa-model`) that
 //! prints one row per kernel as it goes, so that the rows a driver wrote before crashing (v3dv
 //! has crashed at teardown) survive, and the crash is reported by model.
 
 use crate::base::Status;
 use crate::report::isa::IsaRow;
 use crate::variant::KernelSpec;
+use crate::vendor::{Model, Shim, Vendor};
 use anyhow::Context as _;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
-
-/// A driver under a drm-shim: its shim library, ICD manifest and the vendor it compiles for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Driver {
-    Turnip,
-    Panvk,
-    Anv,
-    Nvk,
-    V3dv,
-}
-
-impl Driver {
-    /// The shim's library name under `lib/` of the compilers folder.
-    pub fn shim(self) -> &'static str {
-        match self {
-            Driver::Turnip => "libfreedreno_noop_drm_shim.so",
-            Driver::Panvk => "libpanfrost_noop_drm_shim.so",
-            Driver::Anv => "libintel_noop_drm_shim.so",
-            Driver::Nvk => "libnouveau_noop_drm_shim.so",
-            Driver::V3dv => "libv3d_noop_drm_shim.so",
-        }
-    }
-    /// The ICD manifest under `icd/`.
-    pub fn icd(self) -> &'static str {
-        match self {
-            Driver::Turnip => "freedreno.json",
-            Driver::Panvk => "panfrost.json",
-            Driver::Anv => "intel.json",
-            Driver::Nvk => "nouveau.json",
-            Driver::V3dv => "broadcom.json",
-        }
-    }
-    pub fn vendor(self) -> &'static str {
-        match self {
-            Driver::Turnip => "Qualcomm",
-            Driver::Panvk => "Arm",
-            Driver::Anv => "Intel",
-            Driver::Nvk => "NVIDIA",
-            Driver::V3dv => "Broadcom",
-        }
-    }
-    /// The driver's name as halftrace's docs and tables use it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Driver::Turnip => "turnip",
-            Driver::Panvk => "panvk",
-            Driver::Anv => "anv",
-            Driver::Nvk => "NVK",
-            Driver::V3dv => "v3dv",
-        }
-    }
-}
-
-/// A GPU model a shim fakes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Model {
-    /// The name `--family` takes (`a740`, `g610`, `lnl`, `ga102`, `v3d-71`).
-    pub name: &'static str,
-    /// What the tables call it.
-    pub display: &'static str,
-    /// Its architecture or generation.
-    pub generation: &'static str,
-    pub driver: Driver,
-    /// The shim's environment for this model.
-    pub env: &'static [(&'static str, &'static str)],
-}
-
-const fn m(
-    name: &'static str,
-    display: &'static str,
-    generation: &'static str,
-    driver: Driver,
-    env: &'static [(&'static str, &'static str)],
-) -> Model {
-    Model { name, display, generation, driver, env }
-}
-
-/// Every model `isa` knows besides the AMD families, in vendor order.
-pub const MODELS: &[Model] = &[
-    m("a618", "Adreno 618", "Adreno 6xx", Driver::Turnip, &[("FD_GPU_ID", "618")]),
-    m("a660", "Adreno 660", "Adreno 6xx", Driver::Turnip, &[("FD_GPU_ID", "660")]),
-    m("a740", "Adreno 740", "Adreno 7xx", Driver::Turnip, &[("FD_GPU_ID", "740")]),
-    m("a750", "Adreno 750", "Adreno 7xx", Driver::Turnip, &[("FD_GPU_ID", "750")]),
-    // panvk calls Bifrost v7 untested and opens it only when asked to.
-    m(
-        "g52",
-        "Mali-G52",
-        "Bifrost (v7)",
-        Driver::Panvk,
-        &[("PAN_GPU_ID", "7212"), ("PAN_I_WANT_A_BROKEN_VULKAN_DRIVER", "1")],
-    ),
-    m("g610", "Mali-G610", "Valhall (v10)", Driver::Panvk, &[("PAN_GPU_ID", "a867")]),
-    m("tgl", "Intel Tiger Lake", "Xe-LP (Gen12)", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "tgl")]),
-    m("dg2", "Intel Arc A-series (DG2)", "Xe-HPG", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "dg2")]),
-    m("mtl", "Intel Meteor Lake", "Xe-LPG", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "mtl")]),
-    m("lnl", "Intel Lunar Lake", "Xe2", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "lnl")]),
-    m("bmg", "Intel Arc B-series (Battlemage)", "Xe2", Driver::Anv, &[("INTEL_STUB_GPU_PLATFORM", "bmg")]),
-    m("tu102", "NVIDIA TU102", "Turing", Driver::Nvk, &[("NOUVEAU_CHIPSET", "162")]),
-    m("ga102", "NVIDIA GA102", "Ampere", Driver::Nvk, &[("NOUVEAU_CHIPSET", "172")]),
-    m("v3d-42", "VideoCore VI (V3D 4.2)", "V3D 4.2 (Raspberry Pi 4)", Driver::V3dv, &[("V3D_GPU_ID", "42")]),
-    m("v3d-71", "VideoCore VII (V3D 7.1)", "V3D 7.1 (Raspberry Pi 5)", Driver::V3dv, &[("V3D_GPU_ID", "71")]),
-];
-
-/// The model called `name` (case-insensitive).
-pub fn model(name: &str) -> Option<Model> {
-    MODELS.iter().copied().find(|m| m.name.eq_ignore_ascii_case(name))
-}
 
 /// Where `scripts/install-compilers.sh` put the drivers and shims: `HALFTRACE_COMPILERS`, else
 /// the newest complete `mesa-*` folder under `${HALFTRACE_CACHE:-${XDG_CACHE_HOME:-~/.cache}/
@@ -161,22 +55,18 @@ pub fn compilers() -> Result<PathBuf, String> {
     })
 }
 
-/// The environment that opens `m`'s driver under its shim.
-pub fn environment(m: &Model, dir: &Path) -> Vec<(String, String)> {
+/// The environment that opens model `m`'s driver under its shim `s`.
+pub fn environment(s: &Shim, m: &Model, dir: &Path) -> Vec<(String, String)> {
+    let icd = dir.join("icd").join(s.icd).display().to_string();
     let mut env = vec![
-        ("LD_PRELOAD".to_string(), dir.join("lib").join(m.driver.shim()).display().to_string()),
-        ("VK_ICD_FILENAMES".to_string(), dir.join("icd").join(m.driver.icd()).display().to_string()),
+        ("LD_PRELOAD".to_string(), dir.join("lib").join(s.library()).display().to_string()),
+        ("VK_ICD_FILENAMES".to_string(), icd.clone()),
         // The loader's newer spelling would win over VK_ICD_FILENAMES.
-        ("VK_DRIVER_FILES".to_string(), dir.join("icd").join(m.driver.icd()).display().to_string()),
+        ("VK_DRIVER_FILES".to_string(), icd),
     ];
     env.extend(m.env.iter().map(|(k, v)| (k.to_string(), v.to_string())));
-    // The compiler's own one-line summary per shader on stderr: Mali's estimate (its
-    // statistics report only the code size), V3D's spills and temporaries.
-    match m.driver {
-        Driver::Panvk => env.push(("BIFROST_MESA_DEBUG".into(), "shaderdb".into())),
-        Driver::V3dv => env.push(("V3D_DEBUG".into(), "shaderdb".into())),
-        _ => {}
-    }
+    // The compiler's own one-line summary per shader on stderr, where the vendor needs it.
+    env.extend(s.summary_env.iter().map(|(k, v)| (k.to_string(), v.to_string())));
     env
 }
 
@@ -208,18 +98,20 @@ pub fn run_child(cmd: &mut Command) -> std::io::Result<(String, ExitStatus, Stri
     Ok((stdout, status, reader.join().unwrap_or_default()))
 }
 
-/// Builds `builds` on `m` in a child process `exe isa-model` with the shim's environment.
-/// Rows the child printed before dying are kept; builds it never reported become failed rows
-/// naming the crash. `args`: the child's arguments after `isa-model --model NAME`.
+/// Builds `builds` on `vendor`'s model `m` in a child process `exe isa-model` with the shim's
+/// environment. Rows the child printed before dying are kept; builds it never reported become
+/// failed rows naming the crash. `args`: the child's arguments after `isa-model --model NAME`.
 pub fn run_model(
     exe: &Path,
-    m: &Model,
+    (vendor, m): (&'static Vendor, &Model),
     dir: &Path,
     args: &[String],
     builds: &[KernelSpec],
 ) -> anyhow::Result<ModelRun> {
-    let (stdout, status, stderr) =
-        run_child(Command::new(exe).args(["isa-model", "--model", m.name]).args(args).envs(environment(m, dir)))?;
+    let shim = vendor.shim.ok_or_else(|| anyhow::anyhow!("{}: {} has no drm-shim", m.name, vendor.name))?;
+    let (stdout, status, stderr) = run_child(
+        Command::new(exe).args(["isa-model", "--model", m.name]).args(args).envs(environment(&shim, m, dir)),
+    )?;
     let mut rows: Vec<IsaRow> = Vec::new();
     let mut bad_lines = 0;
     for line in stdout.lines() {
@@ -271,8 +163,8 @@ pub fn run_model(
             device: m.display.to_string(),
             family: m.name.to_string(),
             generation: m.generation.to_string(),
-            vendor: m.driver.vendor().to_string(),
-            driver: m.driver.name().to_string(),
+            vendor: crate::vendor::VendorId(Some(vendor)),
+            driver: shim.driver.to_string(),
             ..IsaRow::default()
         });
         for b in &builds[rows.len()..] {
@@ -364,10 +256,9 @@ mod tests {
     }
 
     #[test]
-    fn every_model_has_one_name() {
-        for (i, a) in MODELS.iter().enumerate() {
-            assert!(crate::gpu::null::family(a.name).is_none(), "{} is also an AMD family", a.name);
-            assert!(MODELS[i + 1..].iter().all(|b| b.name != a.name), "{} twice", a.name);
+    fn no_model_is_also_an_amd_family() {
+        for (_, m) in crate::vendor::models() {
+            assert!(crate::gpu::null::family(m.name).is_none(), "{} is also an AMD family", m.name);
         }
     }
 }

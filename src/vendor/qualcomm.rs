@@ -1,0 +1,45 @@
+//! Qualcomm Adreno: turnip under the freedreno drm-shim.
+
+use super::{model, Disassembly, Input, Neutral, Occupancy, Quirks, Shim, Stats, Vendor};
+use ash::vk;
+
+pub static QUALCOMM: Vendor = Vendor {
+    name: "Qualcomm",
+    driver_ids: &[vk::DriverId::MESA_TURNIP, vk::DriverId::QUALCOMM_PROPRIETARY],
+    driver_names: &["turnip"],
+    shim: Some(Shim { kernel: "freedreno", icd: "freedreno.json", driver: "turnip", summary_env: &[] }),
+    models: &[
+        model("a618", "Adreno 618", "Adreno 6xx", &[("FD_GPU_ID", "618")]),
+        model("a660", "Adreno 660", "Adreno 6xx", &[("FD_GPU_ID", "660")]),
+        model("a740", "Adreno 740", "Adreno 7xx", &[("FD_GPU_ID", "740")]),
+        model("a750", "Adreno 750", "Adreno 7xx", &[("FD_GPU_ID", "750")]),
+    ],
+    stats: Stats::Own,
+    sources: [
+        "Registers used × 4 (vec4 registers)",
+        "–",
+        "LDP Count + STP Count (private loads and stores)",
+        "Max Waves Per Core (waves/core)",
+        "Instruction Count",
+        "–",
+    ],
+    neutral,
+    disassembly: Some(Disassembly::Ir3),
+    occupancy: Some(Occupancy { unit: "waves/core", words: "waves per core", note: "Adreno" }),
+    cycles: "no cycle estimate from this driver",
+    // turnip keeps every private array of up to 256 bytes in registers, each field of an
+    // array of structs on its own (isa on a740: f16h's group stack at B = 4 needs 192
+    // registers with 64 groups, 128 with 65).
+    quirks: Quirks { register_array_bytes: 256, pending_shared: true },
+};
+
+fn neutral(s: &Input) -> Neutral {
+    Neutral {
+        registers: s.get("Registers used").map(|r| 4.0 * r),
+        private_bytes: None,
+        spills: s.sum("LDP Count", "STP Count"),
+        occupancy: s.get("Max Waves Per Core"),
+        instructions: s.get("Instruction Count"),
+        cycles: None,
+    }
+}
