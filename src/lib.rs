@@ -16,6 +16,7 @@
 // `unsafe` lives in the Vulkan layer alone; anywhere else it is a compile error.
 #![deny(unsafe_code)]
 
+pub mod argv;
 pub mod base;
 pub mod baseline;
 pub mod bench;

@@ -2,12 +2,13 @@
 
 use super::outln;
 use super::LayoutArg;
+use crate::argv::Argv;
 use crate::bench::{self, BenchConfig};
 use crate::rays::RayKind;
 use anyhow::Context as _;
 use std::path::PathBuf;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct BenchArgs {
     /// Scenes (OBJ, glTF or PLY); repeat the flag. Default: the bundled teapot, and
     /// sponza_dabrovic (a large interior) and igea (a 270k-triangle scan) from the test scenes
@@ -44,6 +45,24 @@ pub struct BenchArgs {
     /// Also write the report (Markdown) to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+}
+
+impl BenchArgs {
+    /// This command's line, every argument as set.
+    pub fn argv(&self) -> Argv {
+        Argv::new("bench")
+            .each("scene", self.scene.iter().map(|p| p.display()))
+            .list("rays", &self.rays)
+            .list("layouts", &self.layouts)
+            .opt("width", Some(self.width))
+            .opt("height", Some(self.height))
+            .list("branchings", &self.branchings)
+            .opt("rounds", Some(self.rounds))
+            .opt("repeat", Some(self.repeat))
+            .opt("device", self.device.as_ref())
+            .flag("validation", self.validation)
+            .opt("out", self.out.as_ref().map(|p| p.display()))
+    }
 }
 
 pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {

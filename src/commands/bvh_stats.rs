@@ -7,7 +7,7 @@ use crate::layout::{Encoded, LayoutId, TriBuffer};
 use std::path::Path;
 use std::time::Instant;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct BvhStatsArgs {
     /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
     #[arg(long)]

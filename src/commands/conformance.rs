@@ -1,12 +1,13 @@
 //! `halftrace conformance`: every variant against its CPU reference on one device.
 
 use super::outln;
+use crate::argv::Argv;
 use crate::conformance;
 use crate::outdir::{OutDir, OutMode, Outputs};
 use anyhow::Context;
 use std::path::PathBuf;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct ConformanceArgs {
     /// A covering subset (each layout, B, P, math, float-control mode and packet
     /// implementation at least once) instead of the full cross product.
@@ -35,6 +36,21 @@ pub struct ConformanceArgs {
     /// Treat a device feature as missing (testing the fallbacks).
     #[arg(long, hide = true)]
     pub mask_feature: Vec<String>,
+}
+
+impl ConformanceArgs {
+    /// This command's line, every argument as set.
+    pub fn argv(&self) -> Argv {
+        Argv::new("conformance")
+            .flag("quick", self.quick)
+            .each("scene", self.scene.iter().map(|p| p.display()))
+            .opt("scenes-dir", self.scenes_dir.as_ref().map(|p| p.display()))
+            .opt("device", self.device.as_ref())
+            .opt("out", self.out.as_ref().map(|p| p.display()))
+            .flag("force", self.force)
+            .flag("validation", self.validation)
+            .each("mask-feature", &self.mask_feature)
+    }
 }
 
 /// What `conformance` writes into its folder, which it may share: these files, refused unless

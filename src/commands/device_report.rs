@@ -1,11 +1,14 @@
 //! `halftrace device-report`: a device's whole report in one budgeted, resumable command.
 
 use super::outln;
-use crate::devreport::{self, Options};
+use super::{bench::BenchArgs, conformance::ConformanceArgs, defaults, devices::DevicesArgs};
+use super::{isa::IsaArgs, sweep::SweepArgs};
+use crate::argv::Argv;
+use crate::devreport::{self, Child, Options};
 use anyhow::Context;
 use std::path::PathBuf;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct DeviceReportArgs {
     /// Vulkan device: index or name substring (default: the device every command picks).
     #[arg(long)]
@@ -82,6 +85,7 @@ pub fn device_report(a: &DeviceReportArgs) -> anyhow::Result<()> {
         resume: a.resume,
         force: a.force,
         mask_features: a.mask_feature.clone(),
+        argv: child_argv,
     };
     let exe = std::env::current_exe().context("finding this binary (each step runs it)")?;
     let t0 = std::time::Instant::now();
@@ -110,4 +114,123 @@ pub fn device_report(a: &DeviceReportArgs) -> anyhow::Result<()> {
         s.out.join("logs").display()
     );
     Ok(())
+}
+
+/// A report step's command line, built from the command's own arguments.
+fn child_argv(c: &Child) -> Argv {
+    use super::Cmd;
+    match child_args(c) {
+        Cmd::Devices(a) => a.argv(),
+        Cmd::Conformance(a) => a.argv(),
+        Cmd::Bench(a) => a.argv(),
+        Cmd::Sweep(a) => a.argv(),
+        Cmd::Isa(a) => a.argv(),
+        other => unreachable!("no report step runs {other:?}"),
+    }
+}
+
+/// A report step as its command's typed arguments.
+fn child_args(c: &Child) -> super::Cmd {
+    use super::Cmd;
+    match c.clone() {
+        Child::Devices { mask_features } => {
+            Cmd::Devices(DevicesArgs { mask_feature: mask_features, ..defaults("devices") })
+        }
+        Child::Conformance { scene, device, mask_features, out } => Cmd::Conformance(ConformanceArgs {
+            quick: true,
+            scene: vec![scene],
+            device: Some(device),
+            mask_feature: mask_features,
+            out: Some(out),
+            force: true,
+            ..defaults("conformance")
+        }),
+        Child::Bench { scene, device, rays, rounds, repeat, width, height, out } => Cmd::Bench(BenchArgs {
+            scene: vec![scene],
+            rays,
+            rounds,
+            repeat,
+            width,
+            height,
+            device: Some(device),
+            out: Some(out),
+            ..defaults("bench")
+        }),
+        Child::Sweep {
+            scenes,
+            device,
+            mask_features,
+            width,
+            height,
+            kernel_timeout_s,
+            budget_s,
+            out,
+            resume,
+            force,
+        } => Cmd::Sweep(SweepArgs {
+            scene: scenes,
+            device: Some(device),
+            mask_feature: mask_features,
+            width: Some(width),
+            height: Some(height),
+            kernel_timeout: Some(kernel_timeout_s),
+            budget: Some(budget_s),
+            out: Some(out),
+            resume,
+            force,
+            quiet: true,
+            ..defaults("sweep")
+        }),
+        Child::Isa { device, out } => {
+            Cmd::Isa(IsaArgs { device: vec![device], out: Some(out), force: true, quiet: true, ..defaults("isa") })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rays::RayKind;
+    use clap::Parser;
+
+    /// Each step's command line parses back, with clap, into the arguments it was built from.
+    #[test]
+    fn each_steps_command_parses_back() {
+        let p = |s: &str| PathBuf::from(s);
+        let mask = vec!["shaderFloat16".to_string()];
+        for c in [
+            Child::Devices { mask_features: mask.clone() },
+            Child::Conformance { scene: p("-odd.obj"), device: "1".into(), mask_features: mask.clone(), out: p("o/c") },
+            Child::Bench {
+                scene: p("a b.obj"),
+                device: "0".into(),
+                rays: vec![RayKind::Primary, RayKind::Ao],
+                rounds: 3,
+                repeat: 3,
+                width: 320,
+                height: 200,
+                out: p("o/bench.md"),
+            },
+            Child::Sweep {
+                scenes: vec![p("a.obj"), p("b,c.glb")],
+                device: "0".into(),
+                mask_features: mask.clone(),
+                width: 64,
+                height: 48,
+                kernel_timeout_s: 120.0,
+                budget_s: 61.3,
+                out: p("o/sweep"),
+                resume: true,
+                force: false,
+            },
+            Child::Isa { device: "2".into(), out: p("o/sweep") },
+        ] {
+            let want = child_args(&c);
+            let argv = child_argv(&c).0;
+            let got =
+                crate::commands::Cli::try_parse_from(std::iter::once("halftrace".to_string()).chain(argv.clone()))
+                    .unwrap_or_else(|e| panic!("{c:?}: {argv:?} does not parse: {e}"));
+            assert_eq!(got.cmd, want, "{c:?}: {argv:?}");
+        }
+    }
 }

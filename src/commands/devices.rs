@@ -1,13 +1,14 @@
 //! `halftrace devices`: every Vulkan device, what it can do, and what halftrace runs on it.
 
 use super::outln;
+use crate::argv::Argv;
 use crate::baseline::BaselineId;
 use crate::gpu::{self, DeviceInfo};
 use crate::layout::LayoutId;
 use crate::precision::FcChoice;
 use crate::variant::{PacketImpl, Variant, PACKETS};
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct DevicesArgs {
     /// Also measure the device's raw fp16 and fp32 arithmetic rates (sub, mul, min, max,
     /// compare).
@@ -19,6 +20,16 @@ pub struct DevicesArgs {
     /// Show what would run with these features treated as missing (testing).
     #[arg(long, hide = true)]
     pub mask_feature: Vec<String>,
+}
+
+impl DevicesArgs {
+    /// This command's line, every argument as set.
+    pub fn argv(&self) -> Argv {
+        Argv::new("devices")
+            .flag("arith", self.arith)
+            .opt("device", self.device.as_ref())
+            .each("mask-feature", &self.mask_feature)
+    }
 }
 
 pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {

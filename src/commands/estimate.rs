@@ -9,7 +9,7 @@ use crate::outdir::{OutDir, OutMode, Outputs};
 use anyhow::Context as _;
 use std::time::Instant;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct EstimateArgs {
     /// AMD families, comma-separated (RADV null devices: e.g. navi31, navi21, navi10, vega10,
     /// gfx1201), and other vendors' models (a740, g610, lnl, ga102, v3d-71: their compilers'
@@ -63,42 +63,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let exe = std::env::current_exe()?;
     // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
     // installed RADV opens and every model.
-    let vendors = || crate::vendor::models().map(|(_, m)| m.name.to_string());
-    let mut asked: Vec<String> = Vec::new();
-    let mut all = false;
-    for f in a.family.iter().map(|f| f.to_lowercase()) {
-        match f.as_str() {
-            "vendors" => asked.extend(vendors()),
-            "all" => {
-                all = true;
-                asked.extend(vendors());
-            }
-            _ => asked.push(f),
-        }
-    }
-    let (models, mut families): (Vec<String>, Vec<String>) =
-        asked.into_iter().partition(|f| crate::vendor::find_model(f).is_some());
-    let known = if families.is_empty() && !all { Vec::new() } else { isa::known_families(&exe) };
-    if all {
-        families.extend(known.iter().map(|k| k.name.to_string()));
-    }
-    // Each once, in the order asked.
-    let once =
-        |v: Vec<String>| v.iter().enumerate().filter(|(i, f)| !v[..*i].contains(f)).map(|(_, f)| f.clone()).collect();
-    let (models, families): (Vec<String>, Vec<String>) = (once(models), once(families));
-    for f in &families {
-        anyhow::ensure!(
-            known.iter().any(|k| k.name == f),
-            "--family '{f}': neither an AMD family the installed RADV opens a null device for ({}) nor a model of \
-             the other vendors ({})",
-            known.iter().map(|k| k.name).collect::<Vec<_>>().join(", "),
-            crate::vendor::models().map(|(_, m)| m.name).collect::<Vec<_>>().join(", ")
-        );
-    }
-    if !models.is_empty() {
-        // Before any work: the compilers must be there.
-        isa::shim::compilers().map_err(anyhow::Error::msg)?;
-    }
+    let (families, models) = isa::families(&a.family, &exe, false)?;
     let kinds: Vec<crate::rays::RayKind> = a
         .rays
         .iter()

@@ -3,7 +3,7 @@
 use super::outln;
 use crate::scene::{self, MAX_TRIANGLES};
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct InstanceArgs {
     /// Scene to instance (OBJ, glTF or PLY).
     #[arg(long)]

@@ -2,31 +2,29 @@
 //! pipeline statistics; writes isa.md, isa.csv, isa.json and the plots.
 
 use super::outln;
+use crate::argv::Argv;
 use crate::isa::{self, Matrix, Target};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use crate::report::isa::IsaRow;
 use anyhow::Context;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-#[derive(clap::Args)]
-pub struct IsaModelArgs {
-    /// A model under its drm-shim (this process has its environment) or an AMD family.
-    #[arg(long)]
-    pub model: String,
-    /// layouts (isa --quick), cover, default or full (`variant::Matrix`).
-    #[arg(long, default_value = "default")]
-    pub matrix: String,
-    #[arg(long, value_delimiter = ',')]
-    pub layouts: Vec<crate::layout::LayoutId>,
-    #[arg(long)]
-    pub validation: bool,
-    /// Write the representations under this folder.
-    #[arg(long)]
-    pub disasm: Option<PathBuf>,
+/// The representations of a run that succeeded (`tmp`) in place of an earlier run's (`dest`).
+fn replace_disasm(tmp: &Path, dest: &Path) -> anyhow::Result<()> {
+    if dest.exists() {
+        std::fs::remove_dir_all(dest).with_context(|| format!("replacing {}", dest.display()))?;
+    }
+    if tmp.exists() {
+        std::fs::rename(tmp, dest).with_context(|| format!("moving the representations to {}", dest.display()))?;
+    }
+    Ok(())
 }
 
-#[derive(clap::Args)]
+/// `isa-model`'s arguments: `isa` builds them ([`isa::ModelArgs`]).
+pub use crate::isa::ModelArgs as IsaModelArgs;
+
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct IsaArgs {
     /// GPU families and models, comma-separated. AMD through RADV's null devices (e.g.
     /// navi31,navi21,vega10); other vendors through Mesa's drm-shims, once
@@ -67,6 +65,23 @@ pub struct IsaArgs {
     /// No line per kernel.
     #[arg(long)]
     pub quiet: bool,
+}
+
+impl IsaArgs {
+    /// This command's line, every argument as set.
+    pub fn argv(&self) -> Argv {
+        Argv::new("isa")
+            .list("family", &self.family)
+            .each("device", &self.device)
+            .list("layouts", &self.layouts)
+            .flag("quick", self.quick)
+            .flag("full", self.full)
+            .opt("out", self.out.as_ref().map(|p| p.display()))
+            .flag("force", self.force)
+            .flag("disasm", self.disasm)
+            .flag("validation", self.validation)
+            .flag("quiet", self.quiet)
+    }
 }
 
 /// The files (and the folder) `isa` writes into its output folder.
@@ -121,51 +136,9 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     // The folder first: a bad one is refused before any null device is probed.
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("isa")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
-    let mut targets: Vec<Target> = Vec::new();
     let exe = std::env::current_exe()?;
-    let wants_families = !a.family.is_empty() || a.device.is_empty();
-    // AMD families are probed (RADV aborts on a family it does not know); models need the
-    // compilers of scripts/install-compilers.sh, which `isa::shim::compilers` finds or names.
-    let amd_asked = a.family.is_empty()
-        || a.family.iter().any(|f| !f.eq_ignore_ascii_case("vendors") && crate::vendor::find_model(f).is_none());
-    let known = if wants_families && amd_asked { isa::known_families(&exe) } else { Vec::new() };
-    let names: Vec<&str> = known.iter().map(|f| f.name).collect();
-    let mut families: Vec<String> = Vec::new();
-    let mut models: Vec<String> = Vec::new();
-    if a.family.is_empty() && a.device.is_empty() {
-        families = isa::default_families(&known);
-    }
-    for f in &a.family {
-        let f = f.to_lowercase();
-        match f.as_str() {
-            "all" => {
-                families.extend(known.iter().map(|k| k.name.to_string()));
-                models.extend(crate::vendor::models().map(|(_, m)| m.name.to_string()));
-            }
-            "vendors" => models.extend(crate::vendor::models().map(|(_, m)| m.name.to_string())),
-            _ if crate::vendor::find_model(&f).is_some() => models.push(f),
-            _ => families.push(f),
-        }
-    }
-    anyhow::ensure!(
-        families.is_empty() || !names.is_empty(),
-        "no RADV null device opens here (RADV, in Debian's mesa-vulkan-drivers, provides them for any AMD family); \
-         or name a device whose driver reports pipeline statistics with --device"
-    );
-    for f in families {
-        let all_models: Vec<&str> = crate::vendor::models().map(|(_, m)| m.name).collect();
-        anyhow::ensure!(
-            names.contains(&f.as_str()),
-            "--family '{f}': neither an AMD family the installed RADV opens ({}) nor a model of the other vendors ({})",
-            names.join(", "),
-            all_models.join(", ")
-        );
-        targets.push(Target::Family(f));
-    }
-    if !models.is_empty() {
-        // Before any work: the compilers must be there.
-        isa::shim::compilers().map_err(anyhow::Error::msg)?;
-    }
+    let (families, models) = isa::families(&a.family, &exe, a.device.is_empty())?;
+    let mut targets: Vec<Target> = families.into_iter().map(Target::Family).collect();
     targets.extend(models.into_iter().map(Target::Model));
     targets.extend(a.device.iter().cloned().map(Target::Device));
     // Each device once: a repeated name would give rows `report` refuses as duplicates.
@@ -216,13 +189,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     crate::report::isa::write(&out, &s.rows)?;
     crate::report::isa::render(&s.rows, &out)?;
     if let Some(tmp) = &cfg.disasm {
-        let dest = out.join("disasm");
-        if dest.exists() {
-            std::fs::remove_dir_all(&dest).with_context(|| format!("replacing {}", dest.display()))?;
-        }
-        if tmp.exists() {
-            std::fs::rename(tmp, &dest).with_context(|| format!("moving the representations to {}", dest.display()))?;
-        }
+        replace_disasm(tmp, &out.join("disasm"))?;
     }
     for n in &s.notes {
         eprintln!("warning: {n}");
@@ -277,4 +244,25 @@ pub fn isa_model(a: &IsaModelArgs) -> anyhow::Result<()> {
         messages.first().map(String::as_str).unwrap_or("")
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    /// The model child's command line parses back, with clap, into the arguments it was built
+    /// from.
+    #[test]
+    fn the_model_childs_command_parses_back() {
+        let a = crate::isa::ModelArgs {
+            model: "a740".into(),
+            matrix: "layouts".into(),
+            layouts: vec!["f16h".parse().unwrap(), "q8".parse().unwrap()],
+            validation: true,
+            disasm: Some("out dir/-x".into()),
+        };
+        let argv = std::iter::once("halftrace".to_string()).chain(a.argv().0);
+        let got = crate::commands::Cli::try_parse_from(argv).unwrap();
+        assert_eq!(got.cmd, crate::commands::Cmd::IsaModel(a));
+    }
 }

@@ -6,7 +6,7 @@ use crate::memory::{self, gpus};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use std::time::Instant;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct MemoryArgs {
     /// GPU models, comma-separated (navi31, navi21, vega10, g610, a740, lnl, ga102, h100, h200;
     /// default: all).

@@ -22,14 +22,14 @@ mod shaders;
 mod sweep;
 mod trace;
 
-#[derive(Parser)]
+#[derive(Parser, Debug)]
 #[command(name = "halftrace", version, about = "Half-precision hierarchical BVH traversal harness")]
 pub struct Cli {
     #[command(subcommand)]
     pub cmd: Cmd,
 }
 
-#[derive(Subcommand)]
+#[derive(Subcommand, Clone, Debug, PartialEq)]
 pub enum Cmd {
     /// Trace a ray set through one layout and branching factor.
     Trace(trace::TraceArgs),
@@ -127,6 +127,23 @@ impl std::str::FromStr for LayoutArg {
             }),
         }
     }
+}
+
+impl std::fmt::Display for LayoutArg {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LayoutArg::Layout(l) => write!(f, "{l}"),
+            LayoutArg::Baseline(b) => write!(f, "{b}"),
+        }
+    }
+}
+
+/// A command's arguments as its defaults make them (every flag left out): where halftrace
+/// builds a child's command from typed arguments, the fields it sets go over these.
+pub(crate) fn defaults<A: clap::Args + clap::FromArgMatches>(name: &'static str) -> A {
+    let m = A::augment_args(clap::Command::new(name)).try_get_matches_from([name]);
+    // Every command halftrace runs itself takes no required argument: a test builds each.
+    A::from_arg_matches(&m.expect("no required argument")).expect("its own matches")
 }
 
 /// Writes a line to stdout, returning I/O errors (a closed pipe ends the command quietly).

@@ -5,7 +5,7 @@ use crate::outdir::{OutDir, OutMode};
 use crate::report::merge;
 use std::path::{Path, PathBuf};
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct ReportArgs {
     /// Sweep folders holding results.csv.
     #[arg(required = true)]

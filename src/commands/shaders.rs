@@ -6,7 +6,7 @@ use crate::variant::{spirv_kernels, DeviceBuild};
 use anyhow::Context;
 use std::path::Path;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct ShadersArgs {
     /// Output folder (e.g. spirv/).
     #[arg(long)]

@@ -2,11 +2,12 @@
 //! then the sweep.
 
 use super::outln;
+use crate::argv::Argv;
 use crate::outdir::{self, OutDir, OutMode};
 use crate::sweep::{self, Config, Shard, Sweep};
 use std::time::Instant;
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct SweepArgs {
     /// TOML file with any of the keys of sweep.example.toml; flags override it.
     #[arg(long)]
@@ -83,6 +84,44 @@ pub struct SweepArgs {
     /// 10m (default 600 s; at most a week).
     #[arg(long, value_parser = |s: &str| crate::units::parse_duration("--kernel-timeout", s))]
     pub kernel_timeout: Option<f64>,
+}
+
+impl SweepArgs {
+    /// This command's line, every argument as set.
+    pub fn argv(&self) -> Argv {
+        let path = |p: &Option<std::path::PathBuf>| p.as_ref().map(|p| p.display().to_string());
+        Argv::new("sweep")
+            .opt("config", path(&self.config))
+            .each("scene", self.scene.iter().map(|p| p.display()))
+            .list("rays", &self.rays)
+            .list("layouts", &self.layouts)
+            .list("series", &self.series)
+            .list("branchings", &self.branchings)
+            .list("layout-branchings", &self.layout_branchings)
+            .list("packets", &self.packets)
+            .opt("packet-branching", self.packet_branching)
+            .list("maths", &self.maths)
+            .opt("width", self.width)
+            .opt("height", self.height)
+            .opt("warmup", self.warmup)
+            .opt("repeat", self.repeat)
+            .opt("seed", self.seed)
+            .opt("device", self.device.as_ref())
+            .opt("out", path(&self.out))
+            .opt("shard", self.shard.as_ref())
+            .opt("budget", self.budget)
+            .flag("resume", self.resume)
+            .flag("force", self.force)
+            .flag("quiet", self.quiet)
+            .opt(
+                "float-controls",
+                self.float_controls
+                    .and_then(|f| clap::ValueEnum::to_possible_value(&f))
+                    .map(|v| v.get_name().to_string()),
+            )
+            .each("mask-feature", &self.mask_feature)
+            .opt("kernel-timeout", self.kernel_timeout)
+    }
 }
 
 /// The sweep's configuration: the file's (or the defaults), each flag given over it, checked.

@@ -26,7 +26,7 @@ pub enum Backend {
     Cpu,
 }
 
-#[derive(clap::Args)]
+#[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct TraceArgs {
     /// Scene: OBJ, glTF (.gltf, .glb) or PLY, each optionally gzip-compressed (.gz).
     #[arg(long)]

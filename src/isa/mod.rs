@@ -32,6 +32,37 @@ pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<KernelSpec> {
     variant::matrix(m, &imps).into_iter().filter(|k| keep(k.variant.layout)).collect()
 }
 
+/// `halftrace isa-model`'s arguments (a hidden command: the child process that builds the
+/// matrix on one model): built here from the typed values, parsed back in a test.
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct ModelArgs {
+    /// A model under its drm-shim (this process has its environment) or an AMD family.
+    #[arg(long)]
+    pub model: String,
+    /// layouts (isa --quick), cover, default or full (`variant::Matrix`).
+    #[arg(long, default_value = "default")]
+    pub matrix: String,
+    #[arg(long, value_delimiter = ',')]
+    pub layouts: Vec<LayoutId>,
+    #[arg(long)]
+    pub validation: bool,
+    /// Write the representations under this folder.
+    #[arg(long)]
+    pub disasm: Option<PathBuf>,
+}
+
+impl ModelArgs {
+    /// The child's command line.
+    pub fn argv(&self) -> crate::argv::Argv {
+        crate::argv::Argv::new("isa-model")
+            .opt("model", Some(&self.model))
+            .opt("matrix", Some(&self.matrix))
+            .list("layouts", &self.layouts)
+            .flag("validation", self.validation)
+            .opt("disasm", self.disasm.as_ref().map(|d| d.display()))
+    }
+}
+
 /// Where kernels are built.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Target {
@@ -140,19 +171,14 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
 fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<shim::ModelRun> {
     let (v, m) = crate::vendor::find_model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
     let dir = shim::compilers().map_err(anyhow::Error::msg)?;
-    let mut args = vec!["--matrix".to_string(), cfg.matrix.name().to_string()];
-    if !cfg.layouts.is_empty() {
-        args.push("--layouts".into());
-        args.push(cfg.layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
-    }
-    if cfg.validation {
-        args.push("--validation".into());
-    }
-    if let Some(d) = &cfg.disasm {
-        args.push("--disasm".into());
-        args.push(d.join(m.name).display().to_string());
-    }
-    shim::run_model(exe, (v, m), &dir, &args, &cfg.builds)
+    let args = ModelArgs {
+        model: m.name.into(),
+        matrix: cfg.matrix.name().into(),
+        layouts: cfg.layouts.clone(),
+        validation: cfg.validation,
+        disasm: cfg.disasm.as_ref().map(|d| d.join(m.name)),
+    };
+    shim::run_model(exe, (v, m), &dir, &args.argv(), &cfg.builds)
 }
 
 /// Builds `builds` in this process (`halftrace isa-model`) on model `name` — a device a
@@ -199,15 +225,16 @@ pub fn aco_programs(
     matrix: Matrix,
     layouts: &[LayoutId],
 ) -> anyhow::Result<Vec<(IsaRow, Result<aco::Program, String>)>> {
-    let mut args =
-        vec!["isa-model".to_string(), "--model".into(), family.into(), "--matrix".into(), matrix.name().into()];
-    if !layouts.is_empty() {
-        args.push("--layouts".into());
-        args.push(layouts.iter().map(|l| l.name()).collect::<Vec<_>>().join(","));
-    }
+    let args = ModelArgs {
+        model: family.into(),
+        matrix: matrix.name().into(),
+        layouts: layouts.to_vec(),
+        validation: false,
+        disasm: None,
+    };
     let (stdout, status, stderr) = shim::run_child(
         std::process::Command::new(exe)
-            .args(&args)
+            .args(&args.argv().0)
             .env("ACO_DEBUG", "perfinfo")
             .env("RADV_DEBUG", "preoptir")
             .env("MESA_SHADER_CACHE_DISABLE", "true"),
@@ -392,6 +419,58 @@ pub fn known_families(exe: &Path) -> Vec<Family> {
         });
     }
     null::FAMILIES.iter().zip(ok).filter(|(_, k)| *k).map(|(f, _)| *f).collect()
+}
+
+/// The AMD families and the other vendors' models `--family` names (`vendors`: every model;
+/// `all`: every family the installed RADV opens and every model), each once in the order
+/// asked, checked: an AMD family must be one the installed RADV opens (probed only when one is
+/// asked for), and models need the compilers. `default`: nothing asked means the default
+/// families. Returns (families, models).
+pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+    let asked: Vec<String> = asked.iter().map(|f| f.to_lowercase()).collect();
+    let is_model = |f: &str| crate::vendor::find_model(f).is_some();
+    let defaulted = asked.is_empty() && default;
+    let amd_asked = defaulted || asked.iter().any(|f| f != "vendors" && !is_model(f));
+    let known = if amd_asked { known_families(exe) } else { Vec::new() };
+    let names: Vec<&str> = known.iter().map(|f| f.name).collect();
+    let every_model = || crate::vendor::models().map(|(_, m)| m.name.to_string());
+    let mut families = if defaulted { default_families(&known) } else { Vec::new() };
+    let mut models = Vec::new();
+    for f in asked {
+        match f.as_str() {
+            "all" => {
+                families.extend(names.iter().map(|n| n.to_string()));
+                models.extend(every_model());
+            }
+            "vendors" => models.extend(every_model()),
+            _ if is_model(&f) => models.push(f),
+            _ => families.push(f),
+        }
+    }
+    // Each once, in the order asked.
+    let once = |v: Vec<String>| -> Vec<String> {
+        v.iter().enumerate().filter(|(i, f)| !v[..*i].contains(f)).map(|(_, f)| f.clone()).collect()
+    };
+    let (families, models) = (once(families), once(models));
+    anyhow::ensure!(
+        families.is_empty() || !names.is_empty(),
+        "no RADV null device opens here (RADV, in Debian's mesa-vulkan-drivers, provides them for any AMD family); \
+         or name a device whose driver reports pipeline statistics with --device"
+    );
+    for f in &families {
+        let all_models: Vec<&str> = crate::vendor::models().map(|(_, m)| m.name).collect();
+        anyhow::ensure!(
+            names.contains(&f.as_str()),
+            "--family '{f}': neither an AMD family the installed RADV opens ({}) nor a model of the other vendors ({})",
+            names.join(", "),
+            all_models.join(", ")
+        );
+    }
+    if !models.is_empty() {
+        // Before any work: the compilers must be there.
+        shim::compilers().map_err(anyhow::Error::msg)?;
+    }
+    Ok((families, models))
 }
 
 /// The families `isa` builds for by default: those of [`null::DEFAULT_FAMILIES`] in `known`.

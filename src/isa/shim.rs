@@ -100,18 +100,16 @@ pub fn run_child(cmd: &mut Command) -> std::io::Result<(String, ExitStatus, Stri
 
 /// Builds `builds` on `vendor`'s model `m` in a child process `exe isa-model` with the shim's
 /// environment. Rows the child printed before dying are kept; builds it never reported become
-/// failed rows naming the crash. `args`: the child's arguments after `isa-model --model NAME`.
+/// failed rows naming the crash. `args`: the child's command line ([`crate::isa::ModelArgs`]).
 pub fn run_model(
     exe: &Path,
     (vendor, m): (&'static Vendor, &Model),
     dir: &Path,
-    args: &[String],
+    args: &crate::argv::Argv,
     builds: &[KernelSpec],
 ) -> anyhow::Result<ModelRun> {
     let shim = vendor.shim.ok_or_else(|| anyhow::anyhow!("{}: {} has no drm-shim", m.name, vendor.name))?;
-    let (stdout, status, stderr) = run_child(
-        Command::new(exe).args(["isa-model", "--model", m.name]).args(args).envs(environment(&shim, m, dir)),
-    )?;
+    let (stdout, status, stderr) = run_child(Command::new(exe).args(&args.0).envs(environment(&shim, m, dir)))?;
     let mut rows: Vec<IsaRow> = Vec::new();
     let mut bad_lines = 0;
     for line in stdout.lines() {
