@@ -4,6 +4,7 @@
 //! [`ClosestTrue`]), agreement between results, how a measurement ended ([`Status`]), the random generator ([`Rng`]) and the Rust↔GLSL
 //! struct mechanism ([`glsl`]). Every other module builds on these.
 
+pub mod agreement;
 pub mod exact;
 pub mod geom;
 pub mod glsl;
@@ -14,11 +15,9 @@ pub mod slab;
 pub mod status;
 pub mod tri;
 
+pub use agreement::{agreement, mean_counters, simd_utilisation, Agreement, RunOutput};
 pub use geom::{max_abs_axis, Aabb};
-pub use hit::{
-    admit, agreement, hit_pad, mean_counters, padded_box, resolve_flagged, simd_utilisation, Agreement, ClosestBox,
-    ClosestTrue, Counters, Hit, RunOutput, PRIM_FLAGGED,
-};
+pub use hit::{admit, hit_pad, padded_box, resolve_flagged, ClosestBox, ClosestTrue, Counters, Hit, PRIM_FLAGGED};
 pub use ray::{validate, Ray, RayError, DIR_MAX, DIR_MIN};
 pub use rng::Rng;
 pub use slab::{lower32, slab32, upper32, RayPre, HIT_CAP};

@@ -3,6 +3,7 @@
 
 pub mod build;
 pub mod exact;
+mod split;
 pub mod stats;
 pub mod wide;
 
