@@ -12,7 +12,7 @@ use crate::precision::{FcChoice, FloatControls};
 use crate::rays::{RayKind, RayParams};
 use crate::runner::measure::compare;
 use crate::runner::{Measurement, Options, Plan, RaySetId, RaySpec, Runner, Target, Timing};
-use crate::variant::{Buffers, KernelSpec, Source, Variant, PACKETS};
+use crate::variant::{Buffers, KernelSpec, Source, Variant};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -114,15 +114,8 @@ pub fn trace(a: &TraceArgs) -> anyhow::Result<()> {
         LayoutArg::Baseline(b) => return trace_baseline(a, b),
         LayoutArg::Layout(l) => l,
     };
-    crate::bvh::check_branching(a.branching).context("--branching")?;
-    anyhow::ensure!(PACKETS.contains(&a.packet), "--packet {}: use one of 1, 4, 8, 16, 32, 64", a.packet);
-    let maths = layout.info().maths;
-    let math = a.math.unwrap_or(maths[0]);
-    if !maths.contains(&math) {
-        let names: Vec<&str> = maths.iter().map(|m| m.name()).collect();
-        anyhow::bail!("--math {}: layout {layout} has {}", math.name(), names.join(", "));
-    }
-    let mut variant = Variant::new(layout, a.branching, a.packet).with_math(math);
+    let mut variant = Variant::checked(layout, a.branching, a.packet, a.math)
+        .map_err(|e| anyhow::anyhow!("--{} {e}", e.parameter()))?;
     if a.float_controls == FcChoice::Off {
         variant = variant.with_fc(FloatControls::Off);
     }

@@ -93,16 +93,12 @@ impl KernelTable {
             self.layout
         );
         let layout: LayoutId = self.layout.parse().with_context(what)?;
-        let b = bvh::check_branching(self.branching.unwrap_or(4)).with_context(what)?;
-        let p = self.packet.unwrap_or(1);
-        anyhow::ensure!(PACKETS.contains(&p), "{}: packet {p} is not one of 1, 4, 8, 16, 32, 64", what());
-        let mut v = Variant::new(layout, b, p);
-        if let Some(m) = &self.math {
-            let math: Math = m.parse().map_err(anyhow::Error::msg).with_context(what)?;
-            anyhow::ensure!(layout.info().maths.contains(&math), "{}: layout {layout} has no math mode {m}", what());
-            v = v.with_math(math);
-        }
-        Ok(v)
+        let math = match &self.math {
+            Some(m) => Some(m.parse::<Math>().map_err(anyhow::Error::msg).with_context(what)?),
+            None => None,
+        };
+        Variant::checked(layout, self.branching.unwrap_or(4), self.packet.unwrap_or(1), math)
+            .map_err(|e| anyhow::anyhow!("{}: {} {e}", what(), e.parameter()))
     }
 }
 

@@ -79,7 +79,53 @@ pub fn stack_groups(b: usize) -> usize {
     (stack_entries(b) - 1) / (b - 1) - 1
 }
 
+/// What is wrong with a variant asked for by parameters: the message starts with the value;
+/// a caller puts the parameter ([`VariantError::parameter`]) before it as its input spells it
+/// (`--packet 3: …`, `[[kernel]] 'mine': packet 3: …`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum VariantError {
+    #[error("{0}: use one of 2, 4, 8, 16")]
+    Branching(usize),
+    #[error("{0}: use one of 1, 4, 8, 16, 32, 64")]
+    Packet(usize),
+    #[error("{math}: layout {layout} has {has}")]
+    Math { math: String, layout: LayoutId, has: String },
+}
+
+impl VariantError {
+    /// The parameter it is about.
+    pub fn parameter(&self) -> &'static str {
+        match self {
+            VariantError::Branching(_) => "branching",
+            VariantError::Packet(_) => "packet",
+            VariantError::Math { .. } => "math",
+        }
+    }
+}
+
 impl Variant {
+    /// The one checked constructor of a variant from what a user named (`trace`'s flags, a
+    /// `[[kernel]]` table): B one of the built ones, P one of [`PACKETS`], the math one the
+    /// layout has (its default without one).
+    pub fn checked(
+        layout: LayoutId,
+        branching: usize,
+        packet: usize,
+        math: Option<Math>,
+    ) -> Result<Variant, VariantError> {
+        crate::bvh::check_branching(branching).map_err(|_| VariantError::Branching(branching))?;
+        if !PACKETS.contains(&packet) {
+            return Err(VariantError::Packet(packet));
+        }
+        let maths = layout.info().maths;
+        let math = math.unwrap_or(maths[0]);
+        if !maths.contains(&math) {
+            let has: Vec<&str> = maths.iter().map(|m| m.name()).collect();
+            return Err(VariantError::Math { math: math.name().into(), layout, has: has.join(", ") });
+        }
+        Ok(Variant::new(layout, branching, packet).with_math(math))
+    }
+
     /// A variant in its layout's default math.
     pub fn new(layout: LayoutId, branching: usize, packet: usize) -> Variant {
         Variant {
@@ -270,6 +316,23 @@ impl std::fmt::Display for Variant {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The one checked constructor names what is wrong, value first, for trace and
+    /// `[[kernel]]` alike.
+    #[test]
+    fn a_checked_variant_names_the_bad_parameter() {
+        let f16h = LayoutId::parse("f16h").unwrap();
+        let f32 = LayoutId::f32();
+        let v = Variant::checked(f16h, 8, 4, Some(Math::F32)).unwrap();
+        assert_eq!((v.branching, v.packet, v.math), (8, 4, Math::F32));
+        assert_eq!(Variant::checked(f16h, 4, 1, None).unwrap().math, f16h.default_math());
+        let e = Variant::checked(f16h, 3, 1, None).unwrap_err();
+        assert_eq!((e.parameter(), e.to_string()), ("branching", "3: use one of 2, 4, 8, 16".to_string()));
+        let e = Variant::checked(f16h, 4, 2, None).unwrap_err();
+        assert_eq!((e.parameter(), e.to_string()), ("packet", "2: use one of 1, 4, 8, 16, 32, 64".to_string()));
+        let e = Variant::checked(f32, 4, 1, Some(Math::F16)).unwrap_err();
+        assert_eq!((e.parameter(), e.to_string()), ("math", "f16: layout f32 has f32".to_string()));
+    }
 
     #[test]
     fn stack_bytes_follow_the_layout_and_math() {
