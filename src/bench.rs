@@ -91,25 +91,19 @@ pub struct BenchResult {
 /// reduced-precision layout (or those of `only`) in every math at each of `branchings` (P = 1);
 /// on primary rays also f32 at B = 4 with every packet size.
 fn variants(kind: &RayKind, only: &[LayoutId], branchings: &[usize]) -> Vec<Variant> {
-    let mut v = Vec::new();
-    for layout in LayoutId::all() {
-        let l = layout.info();
-        let chosen = layout == LayoutId::f32() || if only.is_empty() { l.conservative } else { only.contains(&layout) };
-        if !chosen {
-            continue;
-        }
-        for &math in l.maths {
-            for &b in branchings {
-                v.push(Variant::new(layout, b, 1).with_math(math));
-            }
-        }
-    }
-    if *kind == RayKind::Primary {
-        for p in BENCH_PACKETS {
-            v.push(Variant::new(LayoutId::f32(), 4, p));
-        }
-    }
-    v
+    let layouts: Vec<LayoutId> = LayoutId::all()
+        .filter(|&l| l == LayoutId::f32() || if only.is_empty() { l.info().conservative } else { only.contains(&l) })
+        .collect();
+    let f32_packets = if *kind == RayKind::Primary { &[LayoutId::f32()][..] } else { &[] };
+    crate::variant::series(&crate::variant::Series {
+        layouts: &layouts,
+        maths: &|l| l.info().maths.to_vec(),
+        series: f32_packets,
+        branchings: &[],
+        layout_branchings: branchings,
+        packets: &BENCH_PACKETS,
+        packet_branching: 4,
+    })
 }
 
 /// A ray set of a scene: its kind and size.

@@ -6,7 +6,7 @@ use crate::baseline::BaselineId;
 use crate::gpu::{self, DeviceInfo};
 use crate::layout::LayoutId;
 use crate::precision::FcChoice;
-use crate::variant::{PacketImpl, Variant, PACKETS};
+use crate::variant::{Matrix, PacketImpl, PACKETS};
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
 pub struct DevicesArgs {
@@ -132,15 +132,14 @@ pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
 /// skipped), per packet size the implementation, and the baselines.
 fn plan(d: &DeviceInfo) -> Vec<String> {
     let mut out = Vec::new();
-    for l in LayoutId::all() {
-        for &m in l.info().maths {
-            let v = Variant::new(l, 4, 1).with_math(m);
-            let what = match gpu::support::resolve(d, v, FcChoice::Auto) {
-                Ok(r) => format!("runs, float controls {}", r.fc.name()),
-                Err(why) => format!("skipped: {why}"),
-            };
-            out.push(format!("{:<11} math {:<6} {what}", l.name(), m.name()));
-        }
+    // Every layout in every math at B = 4, P = 1: the matrix `isa --quick` builds.
+    for k in crate::variant::matrix(Matrix::Layouts, &|_| vec![None]) {
+        let v = k.variant;
+        let what = match gpu::support::resolve(d, v, FcChoice::Auto) {
+            Ok(r) => format!("runs, float controls {}", r.fc.name()),
+            Err(why) => format!("skipped: {why}"),
+        };
+        out.push(format!("{:<11} math {:<6} {what}", v.layout.name(), v.math.name()));
     }
     let packets: Vec<String> = PACKETS
         .iter()

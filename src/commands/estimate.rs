@@ -99,13 +99,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         };
         isa::run(&cfg, &exe, |_| {})?.rows
     };
-    crate::fsx::write_atomic(&out.join("estimate.csv"), &estimate::csv(&rows)?)?;
-    crate::report::estimate::write(&ray_rows, &out)?;
-    crate::report::estimate::plot(&ray_rows, &out)?;
-    let md = estimate::markdown(&rows)
-        + &crate::report::estimate::section(&ray_rows)
-        + &crate::report::estimate::vendors_section(&vendor_rows);
-    crate::fsx::write_atomic(&out.join("estimate.md"), md.as_bytes())?;
+    estimate::write(&out, &rows, &ray_rows, &vendor_rows)?;
     let failed: Vec<String> = rows
         .iter()
         .map(|r| &r.status)

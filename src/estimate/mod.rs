@@ -158,6 +158,25 @@ pub fn run(
     Ok((rows, ray_out))
 }
 
+/// Every file of an `estimate` folder: estimate.csv (ACO's estimate per kernel, taken apart),
+/// estimate-rays.csv and .json (per ray set), the plot, and estimate.md — its one renderer:
+/// the kernels' loops, the cycles per ray ([`crate::report::estimate::section`], which a
+/// merged report shows too) and the other vendors' whole-shader figures.
+pub fn write(
+    out: &std::path::Path,
+    rows: &[Row],
+    ray_rows: &[crate::report::estimate::RayRow],
+    vendor_rows: &[crate::report::isa::IsaRow],
+) -> anyhow::Result<()> {
+    crate::fsx::write_atomic(&out.join("estimate.csv"), &csv(rows)?)?;
+    crate::report::estimate::write(ray_rows, out)?;
+    crate::report::estimate::plot(ray_rows, out)?;
+    let md = markdown(rows)
+        + &crate::report::estimate::section(ray_rows)
+        + &crate::report::estimate::vendors_section(vendor_rows);
+    crate::fsx::write_atomic(&out.join("estimate.md"), md.as_bytes())
+}
+
 /// The loops of a row, largest share first (the blocks outside every loop last).
 fn by_share(r: &Row) -> Vec<&LoopCost> {
     let mut ls: Vec<&LoopCost> = r.loops.iter().filter(|l| l.header.is_some()).collect();
@@ -165,9 +184,9 @@ fn by_share(r: &Row) -> Vec<&LoopCost> {
     ls
 }
 
-/// estimate.md: per family, each kernel's ACO estimate, rebuilt, and its three costliest
+/// estimate.md's first part: per family, each kernel's ACO estimate, rebuilt, and its three costliest
 /// loops.
-pub fn markdown(rows: &[Row]) -> String {
+fn markdown(rows: &[Row]) -> String {
     let mut md = String::from("# Estimated cycles: ACO's model taken apart per loop\n\n");
     md += "ACO's `Latency` (one wave, issue plus stall cycles) for each kernel, rebuilt from the final program's \
            blocks with the weights ACO gives them, and the loops that carry it: the cycles of one pass through a \
