@@ -247,23 +247,36 @@ impl Drop for ComputePipeline<'_> {
         if self.gpu.hung() {
             return;
         }
-        let d = &self.gpu.device;
-        unsafe {
-            if self.pool != vk::DescriptorPool::null() {
-                d.destroy_descriptor_pool(self.pool, None);
-            }
-            if self.pipeline != vk::Pipeline::null() {
-                d.destroy_pipeline(self.pipeline, None);
-            }
-            if self.layout != vk::PipelineLayout::null() {
-                d.destroy_pipeline_layout(self.layout, None);
-            }
-            if self.dsl != vk::DescriptorSetLayout::null() {
-                d.destroy_descriptor_set_layout(self.dsl, None);
-            }
-            if self.module != vk::ShaderModule::null() {
-                d.destroy_shader_module(self.module, None);
-            }
+        destroy_parts(self.gpu, self.pool, self.pipeline, self.layout, self.dsl, &[self.module]);
+    }
+}
+
+/// Destroys what a pipeline is made of, each object that was made (null ones are skipped):
+/// the compute and the ray-tracing pipelines' one teardown.
+pub(super) fn destroy_parts(
+    gpu: &Gpu,
+    pool: vk::DescriptorPool,
+    pipeline: vk::Pipeline,
+    layout: vk::PipelineLayout,
+    dsl: vk::DescriptorSetLayout,
+    modules: &[vk::ShaderModule],
+) {
+    let d = &gpu.device;
+    unsafe {
+        if pool != vk::DescriptorPool::null() {
+            d.destroy_descriptor_pool(pool, None);
+        }
+        if pipeline != vk::Pipeline::null() {
+            d.destroy_pipeline(pipeline, None);
+        }
+        if layout != vk::PipelineLayout::null() {
+            d.destroy_pipeline_layout(layout, None);
+        }
+        if dsl != vk::DescriptorSetLayout::null() {
+            d.destroy_descriptor_set_layout(dsl, None);
+        }
+        for &m in modules.iter().filter(|&&m| m != vk::ShaderModule::null()) {
+            d.destroy_shader_module(m, None);
         }
     }
 }

@@ -254,24 +254,7 @@ impl Drop for RtPipeline<'_> {
         if self.gpu.hung() {
             return;
         }
-        let d = &self.gpu.device;
-        unsafe {
-            if self.pool != vk::DescriptorPool::null() {
-                d.destroy_descriptor_pool(self.pool, None);
-            }
-            if self.pipeline != vk::Pipeline::null() {
-                d.destroy_pipeline(self.pipeline, None);
-            }
-            if self.layout != vk::PipelineLayout::null() {
-                d.destroy_pipeline_layout(self.layout, None);
-            }
-            if self.dsl != vk::DescriptorSetLayout::null() {
-                d.destroy_descriptor_set_layout(self.dsl, None);
-            }
-            for &m in &self.modules {
-                d.destroy_shader_module(m, None);
-            }
-        }
+        super::pipeline::destroy_parts(self.gpu, self.pool, self.pipeline, self.layout, self.dsl, &self.modules);
     }
 }
 

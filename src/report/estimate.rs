@@ -2,7 +2,7 @@
 //! `estimate-rays.json`, `estimate-rays.csv`), its section of the report and its plot.
 
 use super::csvx::{display, opt_display};
-use super::key::{f32_peer, Columns, Keyed, What};
+use super::key::{f32_peer, What};
 use super::plots;
 use super::rows::Status;
 use anyhow::Context as _;
@@ -71,33 +71,7 @@ pub struct RayRow {
     pub what: What,
 }
 
-impl Keyed for RayRow {
-    fn what(&self) -> &What {
-        &self.what
-    }
-    fn place(&self) -> [&str; 4] {
-        [&self.family, "", &self.scene, &self.rays]
-    }
-    fn ok(&self) -> bool {
-        self.status.is_ok()
-    }
-}
-
-impl RayRow {
-    /// The row with [`RayRow::what`] parsed from its identity columns ([`What::read`]).
-    pub fn typed(mut self) -> RayRow {
-        self.what = What::read(Columns {
-            layout: &self.layout,
-            math: &self.math,
-            branching: self.branching,
-            packet: self.packet,
-            float_controls: "",
-            kernel: &self.kernel,
-            packet_impl: Some(&self.packet_impl),
-        });
-        self
-    }
-}
+super::key::keyed_row!(RayRow, |r| place: [&r.family, "", &r.scene, &r.rays], float_controls: "", packet_impl: Some(&r.packet_impl));
 
 /// Sets each row's ratio to its f32 peer's cycles per ray.
 pub fn set_ratios(rows: &mut [RayRow]) {

@@ -183,6 +183,47 @@ fn impl_of(s: &str) -> Option<PacketImpl> {
 }
 
 /// A result row of any kind, as [`f32_peer`] sees it.
+/// Makes a result row type keyed: [`Keyed`] (its `what`, its place, its `status`) and
+/// `typed()`, which parses `what` once from the row's identity columns (`layout`, `math`,
+/// `branching`, `packet`, `kernel`) where rows are read. `$r` names the row in the expressions
+/// for its place, its float-controls column and its packet implementation.
+macro_rules! keyed_row {
+    ($t:ident, |$r:ident| place: $place:expr, float_controls: $fc:expr, packet_impl: $imp:expr $(,)?) => {
+        impl $crate::report::key::Keyed for $t {
+            fn what(&self) -> &$crate::report::key::What {
+                &self.what
+            }
+            fn place(&self) -> [&str; 4] {
+                let $r = self;
+                $place
+            }
+            fn ok(&self) -> bool {
+                self.status.is_ok()
+            }
+        }
+
+        impl $t {
+            /// The row with its `what` parsed from its identity columns
+            /// ([`What::read`](crate::report::key::What::read)).
+            pub fn typed(mut self) -> $t {
+                let $r = &self;
+                let what = $crate::report::key::What::read($crate::report::key::Columns {
+                    layout: &$r.layout,
+                    math: &$r.math,
+                    branching: $r.branching,
+                    packet: $r.packet,
+                    float_controls: $fc,
+                    kernel: &$r.kernel,
+                    packet_impl: $imp,
+                });
+                self.what = what;
+                self
+            }
+        }
+    };
+}
+pub(crate) use keyed_row;
+
 pub trait Keyed {
     /// What the row measured.
     fn what(&self) -> &What;

@@ -2,7 +2,7 @@
 //! report section with one verdict per GPU, and the verdict lines for `headline.md`.
 
 use super::csvx::{display, fixed, opt_display, opt_fixed};
-use super::key::{f32_peer, Columns, Keyed, What};
+use super::key::{f32_peer, Keyed, What};
 use super::rows::Status;
 use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
@@ -70,17 +70,7 @@ pub struct MemRow {
     pub what: What,
 }
 
-impl Keyed for MemRow {
-    fn what(&self) -> &What {
-        &self.what
-    }
-    fn place(&self) -> [&str; 4] {
-        [&self.gpu, "", &self.scene, &self.rays]
-    }
-    fn ok(&self) -> bool {
-        self.status.is_ok()
-    }
-}
+super::key::keyed_row!(MemRow, |r| place: [&r.gpu, "", &r.scene, &r.rays], float_controls: "", packet_impl: None);
 
 /// Sets each row's roofline (the lower of its issue and DRAM bounds) and its ratios to its f32
 /// peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
@@ -330,22 +320,6 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
         }
     }
     md
-}
-
-impl MemRow {
-    /// The row with [`MemRow::what`] parsed from its identity columns ([`What::read`]).
-    pub fn typed(mut self) -> MemRow {
-        self.what = What::read(Columns {
-            layout: &self.layout,
-            math: &self.math,
-            branching: self.branching,
-            packet: self.packet,
-            float_controls: "",
-            kernel: &self.kernel,
-            packet_impl: None,
-        });
-        self
-    }
 }
 
 /// The rows of `dir/memory.json`, `None` where there is none.

@@ -2,7 +2,7 @@
 //! identity ([`RowId`]) and status ([`Status`], from [`crate::base`]), and their storage as `results.csv` and
 //! `results.json`, written as they come.
 
-use super::key::{Columns, Keyed, What};
+use super::key::What;
 pub use crate::base::Status;
 use crate::baseline::BaselineId;
 use crate::layout::LayoutId;
@@ -328,33 +328,9 @@ pub fn columns() -> Vec<String> {
     super::csvx::header_of(Row::default())
 }
 
-impl Keyed for Row {
-    fn what(&self) -> &What {
-        &self.what
-    }
-    fn place(&self) -> [&str; 4] {
-        [&self.device, &self.driver, &self.scene, &self.rays]
-    }
-    fn ok(&self) -> bool {
-        self.status.is_ok()
-    }
-}
+super::key::keyed_row!(Row, |r| place: [&r.device, &r.driver, &r.scene, &r.rays], float_controls: &r.float_controls, packet_impl: None);
 
 impl Row {
-    /// The row with [`Row::what`] parsed from its identity columns ([`What::read`]).
-    pub fn typed(mut self) -> Row {
-        self.what = What::read(Columns {
-            layout: &self.layout,
-            math: &self.math,
-            branching: self.branching,
-            packet: self.packet,
-            float_controls: &self.float_controls,
-            kernel: &self.kernel,
-            packet_impl: None,
-        });
-        self
-    }
-
     /// The row's identity.
     pub fn id(&self) -> RowId {
         RowId {

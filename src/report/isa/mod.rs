@@ -10,7 +10,7 @@ mod tables;
 pub use files::{read, write};
 pub use tables::{headline, plot, render, section};
 
-use super::key::{f32_peer, Columns, Keyed, What};
+use super::key::{f32_peer, What};
 use super::rows::{order, Status};
 use crate::vendor::VendorId;
 use serde::{Deserialize, Serialize};
@@ -97,17 +97,7 @@ pub struct IsaRow {
     pub what: What,
 }
 
-impl Keyed for IsaRow {
-    fn what(&self) -> &What {
-        &self.what
-    }
-    fn place(&self) -> [&str; 4] {
-        [&self.device, &self.driver, "", ""]
-    }
-    fn ok(&self) -> bool {
-        self.status.is_ok()
-    }
-}
+super::key::keyed_row!(IsaRow, |r| place: [&r.device, &r.driver, "", ""], float_controls: &r.float_controls, packet_impl: Some(&r.packet_impl));
 
 /// Counts of the disassembly ([`crate::isa::counts`] makes them).
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq, Eq)]
@@ -163,20 +153,6 @@ pub const KNOWN_STATS: &[(&str, &str)] = &[
 ];
 
 impl IsaRow {
-    /// The row with [`IsaRow::what`] parsed from its identity columns ([`What::read`]).
-    pub fn typed(mut self) -> IsaRow {
-        self.what = What::read(Columns {
-            layout: &self.layout,
-            math: &self.math,
-            branching: self.branching,
-            packet: self.packet,
-            float_controls: &self.float_controls,
-            kernel: &self.kernel,
-            packet_impl: Some(&self.packet_impl),
-        });
-        self
-    }
-
     /// Fills the named columns from [`IsaRow::stats`] (RADV's names), then the vendor-neutral
     /// ones from whichever driver's names the row has.
     pub fn fill_known(&mut self) {

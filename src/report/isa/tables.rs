@@ -82,14 +82,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
         .filter(|d| ok.iter().any(|r| r.device_label() == d.0 && r.vendor.stats_are(Stats::Aco)))
         .map(|d| d.0.clone())
         .collect();
-    let mut kernels: Vec<(usize, String, usize)> = Vec::new();
-    for r in ok.iter().filter(|r| r.packet == 1) {
-        let k = (order(&r.layout), r.label(), r.branching);
-        if !kernels.contains(&k) {
-            kernels.push(k);
-        }
-    }
-    kernels.sort();
+    let kernels = kernels_at_p1(ok.iter().copied());
     if !kernels.is_empty() && !cols.is_empty() {
         md += &format!("{h}# Across AMD generations (P = 1): VGPRs / scratch KiB per wave / waves per SIMD\n\n");
         md += &format!("| kernel | B | {} |\n|---|---|{}\n", cols.join(" | "), "---|".repeat(cols.len()));
@@ -182,17 +175,24 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
     md
 }
 
-/// Every device side by side at P = 1: registers per thread / private bytes per thread /
-/// occupancy in the vendor's unit.
-fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str) -> String {
+/// The kernels of `ok` at P = 1 as (layout order, label, B), each once, sorted: the rows of the
+/// tables across devices.
+fn kernels_at_p1<'a>(ok: impl Iterator<Item = &'a IsaRow>) -> Vec<(usize, String, usize)> {
     let mut kernels: Vec<(usize, String, usize)> = Vec::new();
-    for r in ok.iter().filter(|r| r.packet == 1) {
+    for r in ok.filter(|r| r.packet == 1) {
         let k = (order(&r.layout), r.label(), r.branching);
         if !kernels.contains(&k) {
             kernels.push(k);
         }
     }
     kernels.sort();
+    kernels
+}
+
+/// Every device side by side at P = 1: registers per thread / private bytes per thread /
+/// occupancy in the vendor's unit.
+fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str) -> String {
+    let kernels = kernels_at_p1(ok.iter().copied());
     if kernels.is_empty() || devices.len() < 2 {
         return String::new();
     }
