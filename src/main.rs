@@ -14,6 +14,8 @@ fn main() {
         let _ = e.print();
         std::process::exit(code)
     });
+    // A run stopped by SIGTERM or Ctrl-C leaves no lock on its output folder.
+    halftrace::outdir::release_on_signal();
     let r = cli.cmd.run();
     if let Err(e) = r {
         // stdout closed by its reader (`halftrace devices | head`): the reader has what it

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use std::fs::OpenOptions;
 use std::io::Read;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 /// The lock file's name, in the folder it locks.
@@ -128,6 +129,41 @@ pub(super) fn break_stale(dir: &Path, seen: &str) -> bool {
     removed
 }
 
+/// The locks this process holds (folder, holder), so that a signal that ends it releases them
+/// first ([`release_on_signal`]).
+static HELD: Mutex<Vec<(PathBuf, Holder)>> = Mutex::new(Vec::new());
+
+fn held() -> std::sync::MutexGuard<'static, Vec<(PathBuf, Holder)>> {
+    HELD.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Removes `dir`'s lock if it is `holder`'s.
+fn release(dir: &Path, holder: &Holder) {
+    let file = dir.join(LOCK_FILE);
+    // Only our own lock (had it been broken as stale, the file may be another run's now).
+    if serde_json::from_str::<Holder>(&read_lock(&file).0).is_ok_and(|h| h == *holder) {
+        let _ = std::fs::remove_file(&file);
+    }
+}
+
+/// Starts a thread that, on SIGTERM (a batch system stopping or requeueing a job), SIGINT
+/// (Ctrl-C) or SIGHUP, removes every lock this process holds and ends it with 128 + the
+/// signal's number, as the signal would have: a rerun or a requeued task — on this host or
+/// another, where a holder's process cannot be looked up — finds the folder free. What the
+/// run wrote stays whole (every file is written atomically; a sweep resumes from its rows).
+pub fn release_on_signal() {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGTERM, SIGINT, SIGHUP]) else { return };
+    std::thread::spawn(move || {
+        if let Some(sig) = signals.forever().next() {
+            for (dir, holder) in held().iter() {
+                release(dir, holder);
+            }
+            std::process::exit(128 + sig);
+        }
+    });
+}
+
 /// A claimed output folder ([`super::OutDir::claim`]); dropping it releases the folder.
 #[derive(Debug)]
 pub struct OutDirLock {
@@ -137,6 +173,13 @@ pub struct OutDirLock {
 }
 
 impl OutDirLock {
+    /// The lock `holder` took on `dir` (`created`: the folders the claim made), released on
+    /// drop or on a signal that ends the process.
+    pub(super) fn new(dir: PathBuf, holder: Holder, created: Vec<PathBuf>) -> OutDirLock {
+        held().push((dir.clone(), holder.clone()));
+        OutDirLock { dir, holder, created }
+    }
+
     /// The folder.
     pub fn path(&self) -> &Path {
         &self.dir
@@ -145,11 +188,12 @@ impl OutDirLock {
 
 impl Drop for OutDirLock {
     fn drop(&mut self) {
-        let file = self.dir.join(LOCK_FILE);
-        // Only our own lock (had it been broken as stale, the file may be another run's now).
-        if serde_json::from_str::<Holder>(&read_lock(&file).0).is_ok_and(|h| h == self.holder) {
-            let _ = std::fs::remove_file(&file);
+        let mut all = held();
+        release(&self.dir, &self.holder);
+        if let Some(i) = all.iter().position(|(d, h)| *d == self.dir && *h == self.holder) {
+            all.remove(i);
         }
+        drop(all);
         // A run that wrote nothing (a failed one) leaves no folder behind.
         remove_empty(&self.created);
     }

@@ -25,7 +25,7 @@
 mod lock;
 
 use lock::{break_stale, read_lock, remove_empty, BREAK_FILE, UNREADABLE_GRACE};
-pub use lock::{Holder, OutDirLock, LOCK_FILE};
+pub use lock::{release_on_signal, Holder, OutDirLock, LOCK_FILE};
 
 use crate::fsx::kind;
 use std::fs::OpenOptions;
@@ -46,6 +46,11 @@ pub enum OutDirError {
          choose another folder (if that process is gone, remove {lock})"
     )]
     Held { flag: String, path: PathBuf, holder: String, lock: PathBuf },
+    #[error(
+        "{flag} {path}: its {lock_name} is {what}, not the lock file halftrace writes; nothing was changed — remove \
+         {lock} (or choose another folder)"
+    )]
+    LockNotAFile { flag: String, path: PathBuf, lock_name: &'static str, what: &'static str, lock: PathBuf },
     #[error("{flag} {path}: {source}")]
     Io { flag: String, path: PathBuf, source: std::io::Error },
     #[error("--resume and --force exclude each other")]
@@ -108,12 +113,26 @@ impl OutDir {
                         remove_empty(&created);
                         return Err(io(e));
                     }
-                    return Ok(OutDirLock { dir: path.into(), holder, created });
+                    return Ok(OutDirLock::new(path.into(), holder, created));
                 }
                 Err(e) if e.kind() == ErrorKind::AlreadyExists => {}
                 Err(e) => {
                     remove_empty(&created);
                     return Err(io(e));
+                }
+            }
+            // A folder (or anything but a file) in the lock's place is no lock: no run removes it.
+            if let Ok(t) = std::fs::symlink_metadata(&file).map(|m| m.file_type()) {
+                if !t.is_file() {
+                    remove_empty(&created);
+                    let (lock_name, what) = (LOCK_FILE, kind(&t));
+                    return Err(OutDirError::LockNotAFile {
+                        flag: flag.into(),
+                        path: path.into(),
+                        lock_name,
+                        what,
+                        lock: file,
+                    });
                 }
             }
             let (text, age) = read_lock(&file);
@@ -136,17 +155,23 @@ impl OutDir {
                 }
                 // Being written (or its writer died before it could): stale only once old.
                 Err(_) if age.is_some_and(|a| a > UNREADABLE_GRACE) => {
+                    let secs = age.unwrap_or_default().as_secs();
                     if break_stale(path, &text) {
-                        eprintln!(
-                            "warning: {}: replaced an unreadable lock {} s old",
-                            file.display(),
-                            age.unwrap_or_default().as_secs()
+                        eprintln!("warning: {}: replaced an unreadable lock {secs} s old", file.display());
+                    } else {
+                        last = format!(
+                            "an unreadable lock, {secs} s old, which another run is replacing now ({} exists; if no \
+                             run is, remove it too)",
+                            path.join(BREAK_FILE).display()
                         );
                     }
                 }
                 Err(_) => last = "a process that is still writing the lock file".into(),
             }
             std::thread::sleep(Duration::from_millis(if attempt < 20 { 5 } else { 25 }));
+        }
+        if last.is_empty() {
+            last = "an unreadable lock".into();
         }
         Err(OutDirError::Held { flag: flag.into(), path: path.into(), holder: last, lock: file })
     }

@@ -81,6 +81,21 @@ fn stale_and_unreadable_locks() {
     std::fs::File::options().write(true).open(&file).unwrap().set_modified(old).unwrap();
     drop(OutDir::claim(&d, "--out").unwrap());
     assert!(!file.exists());
+    // An old unreadable lock that another run is breaking (a fresh break file): held, and the
+    // message says so instead of naming an empty holder.
+    std::fs::write(&file, "").unwrap();
+    std::fs::File::options().write(true).open(&file).unwrap().set_modified(old).unwrap();
+    std::fs::write(d.join(BREAK_FILE), "").unwrap();
+    let e = OutDir::claim(&d, "--out").unwrap_err().to_string();
+    assert!(e.contains("an unreadable lock, ") && e.contains(BREAK_FILE) && !e.contains("()"), "{e}");
+    std::fs::remove_file(d.join(BREAK_FILE)).unwrap();
+    drop(OutDir::claim(&d, "--out").unwrap());
+    // A folder in the lock's place is no lock: refused at once, naming what to remove, and
+    // left as it is.
+    std::fs::create_dir(&file).unwrap();
+    let e = OutDir::claim(&d, "--out").unwrap_err().to_string();
+    assert!(e.contains(&format!("its {LOCK_FILE} is a folder")) && e.contains("remove"), "{e}");
+    assert!(file.is_dir());
     std::fs::remove_dir_all(&d).unwrap();
 }
 

@@ -39,6 +39,9 @@ fn interrupted_sweep_keeps_finished_rows() {
     assert!(st.success());
     let status = child.wait().unwrap();
     assert!(!status.success(), "the sweep should have been interrupted");
+    // It released its folder: a requeued task (on any host) or a rerun is not refused.
+    assert_eq!(status.code(), Some(143), "ends as SIGTERM would: {status:?}");
+    assert!(!out.join(halftrace::outdir::LOCK_FILE).exists(), "SIGTERM left the lock");
     let rows = read_rows(&out).expect("rows written before the interrupt must parse");
     assert!(rows.len() >= 2 && rows.len() < 112, "{} rows", rows.len());
     assert!(rows.iter().all(|r| r.status.is_ok() && r.mrays_median > 0.0));
