@@ -58,6 +58,9 @@ fn malformed_obj_names_the_line() {
         ("two_f.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n", ":3:", "at least 3"),
         ("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", ":2:", "not finite"),
         ("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 -inf 0\nf 1 2 3\n", ":3:", "not finite"),
+        ("w_only.obj", "v 0 0 0\nv 1 0 0\nv 0.5\nf 1 2 3\n", ":3:", "3 coordinates, found 1"),
+        ("continued.obj", "v 0 0 0\nv 1 0 \\\n 0\nv 0 1 0\nf 1 2 3\n", ":2:", "a line continued on the next"),
+        ("continued_f.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 \\\n3\n", ":4:", "join the two lines"),
     ];
     for (name, text, line, what) in cases {
         let e = trace_scene(&obj(name, text));

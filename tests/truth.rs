@@ -284,3 +284,38 @@ fn one_triangle_column_is_hit_from_every_height() {
     }
     assert_eq!(old_lost, [4.5, 5.0, 10.0, 100.0, 1e4, 1e6], "the box rule's losses moved");
 }
+
+/// A triangle of zero area (three vertices exactly on one line) is counted as such when the
+/// scene loads and never hit: not by a ray aimed at its edge's midpoint, on any conservative
+/// layout, while a triangle of area behind it is. A tiny triangle whose fp32 cross product
+/// underflows has area: it is not counted, and the exact rule hits it.
+#[test]
+fn zero_area_triangles_are_counted_exactly_and_never_hit() {
+    let line = [Vec3::new(-1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0)];
+    let floor = [Vec3::new(-2.0, -2.0, -1.0), Vec3::new(2.0, -2.0, -1.0), Vec3::new(0.0, 2.0, -1.0)];
+    let t = 1e-25f32;
+    let tiny = [Vec3::new(0.0, 0.0, -0.5), Vec3::new(t, 0.0, -0.5), Vec3::new(0.0, t, -0.5)];
+    assert_eq!((tiny[1] - tiny[0]).cross(tiny[2] - tiny[0]), Vec3::ZERO, "fp32's cross product underflows");
+    let scene = Scene::from_triangles("zero", vec![line, floor, tiny]).unwrap();
+    assert_eq!(scene.degenerate, 1, "only the collinear triangle has zero area");
+    // Aimed at the midpoints of the line's two edges and at another point of it, from above.
+    let rays: Vec<Ray> = [-0.5f32, 0.5, 0.75]
+        .iter()
+        .map(|&x| Ray::new(Vec3::new(x, 0.0, 3.0), Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY))
+        .collect();
+    for r in &rays {
+        let (hit, _) = scene.brute_force_counted(r);
+        assert_eq!(hit.prim, 1, "{r:?}: {hit:?}");
+    }
+    let bin = halftrace::bvh::build_binary(&scene);
+    for layout in LayoutId::all().filter(|l| l.info().conservative) {
+        let enc = Encoded::new(&scene, &bin, layout, 4).unwrap();
+        for &math in layout.info().maths {
+            let (got, _) = enc.reference(&rays, 1, math, FloatControls::On);
+            assert!(got.iter().all(|h| h.prim == 1), "{layout} {}: {got:?}", math.name());
+        }
+    }
+    // Through the line's middle vertex (never hit) onto the tiny triangle's vertex (hit).
+    let at_tiny = Ray::new(Vec3::new(0.0, 0.0, 3.0), Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY);
+    assert_eq!(scene.brute_force_counted(&at_tiny).0.prim, 2, "the tiny triangle has area and is hit at its vertex");
+}

@@ -120,6 +120,26 @@ fn det3(p: &[BigInt; 3], q: &[BigInt; 3], d: &[BigInt; 3]) -> BigInt {
         + &p[2] * (&q[0] * &d[1] - &q[1] * &d[0])
 }
 
+/// Whether a triangle's three vertices lie exactly on one line (or coincide): zero area, the
+/// case [`crossing`] never crosses (its determinant is zero for every ray), so no ray hits it.
+/// Decided in f64 where its cross product is clearly not zero, else exactly.
+pub fn collinear(v: &[f32; 9]) -> bool {
+    let p = |k: usize| [0, 1, 2].map(|a| v[3 * k + a] as f64);
+    let (a, b, c) = (p(0), p(1), p(2));
+    let (e, f) = ([0, 1, 2].map(|i| b[i] - a[i]), [0, 1, 2].map(|i| c[i] - a[i]));
+    let n = [e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0]];
+    let size = |x: [f64; 3]| x.iter().map(|y| y.abs()).fold(0.0, f64::max);
+    // f64's differences and products are within 2^-50 of the exact ones relative to this.
+    let scale = size(e) * size(f);
+    if n.iter().any(|x| x.abs() > scale * 1e-12) {
+        return false;
+    }
+    let q = |k: usize| [0, 1, 2].map(|i| big(v[3 * k + i]));
+    let (a, b, c) = (q(0), q(1), q(2));
+    let (e, f) = ([0, 1, 2].map(|i| &b[i] - &a[i]), [0, 1, 2].map(|i| &c[i] - &a[i]));
+    [(1, 2), (2, 0), (0, 1)].iter().all(|&(i, j)| &e[i] * &f[j] == &e[j] * &f[i])
+}
+
 /// The crossing of the exact ray line (`r.o`, `r.d`: the direction as the test uses it, with
 /// zero and subnormal components flushed to +0) with the closed triangle `v` (edges and
 /// vertices included), or `None` where it does not meet it or meets it only edge-on (the line
@@ -162,6 +182,19 @@ mod tests {
     use super::*;
     use crate::base::Ray;
     use glam::Vec3;
+
+    #[test]
+    fn collinear_is_exact() {
+        assert!(collinear(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0]));
+        assert!(collinear(&[0.1, 0.2, 0.3, 0.1, 0.2, 0.3, 5.0, 6.0, 7.0]), "two vertices the same");
+        assert!(!collinear(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]));
+        // fp32's cross product underflows to zero; the triangle has area and can be hit.
+        let t = 1e-25f32;
+        assert!(!collinear(&[0.0, 0.0, 0.0, t, 0.0, 0.0, 0.0, t, 0.0]));
+        // One ulp off the line.
+        let y = f32::from_bits(1);
+        assert!(!collinear(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, y, 0.0]));
+    }
 
     #[test]
     fn big_is_exact() {

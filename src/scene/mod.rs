@@ -56,7 +56,8 @@ pub struct Scene {
     /// Triangles as vertex positions, in `prim` order.
     pub tris: Vec<[Vec3; 3]>,
     pub bounds: Aabb,
-    /// Number of zero-area triangles (loaded, never hit).
+    /// Number of zero-area triangles: three vertices exactly on one line (loaded; the
+    /// closest-hit rule never hits them, `base::exact::collinear`).
     pub degenerate: usize,
     /// Non-fatal problems found while loading (e.g. a missing `.mtl`).
     pub warnings: Vec<String>,
@@ -82,7 +83,8 @@ impl Scene {
                 }
                 bounds.grow(*v);
             }
-            if (t[1] - t[0]).cross(t[2] - t[0]) == Vec3::ZERO {
+            let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
+            if crate::base::exact::collinear(&v) {
                 degenerate += 1;
             }
         }
@@ -317,7 +319,8 @@ fn finish(path: &Path, tris: Vec<[Vec3; 3]>, warnings: Vec<String>) -> Result<Sc
     scene.warnings = warnings;
     if scene.degenerate > 0 {
         scene.warnings.push(format!(
-            "{}: {} zero-area triangles (kept; they are never hit)",
+            "{}: {} zero-area triangles (all three vertices on one line; kept, and never hit: the closest-hit rule \
+             takes only crossings of a triangle with area)",
             path.display(),
             scene.degenerate
         ));

@@ -68,6 +68,15 @@ fn prescan(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
     for (ln, raw) in text.lines().enumerate() {
         let line = ln + 1;
         let l = raw.split('#').next().unwrap_or("").trim();
+        // A line continued on the next (a trailing backslash, which some exporters write):
+        // tobj reads the two lines apart, so the first would lose its last values.
+        if l.ends_with('\\') {
+            return Err(malformed(
+                line,
+                "ends with '\\' (a line continued on the next), which halftrace does not read: join the two lines"
+                    .into(),
+            ));
+        }
         let mut it = l.split_whitespace();
         match it.next() {
             Some("v") => {
