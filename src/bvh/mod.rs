@@ -2,6 +2,7 @@
 //! ([`wide`]), with statistics ([`stats`]). Encoders turn a [`WideBvh`] into GPU layouts.
 
 pub mod build;
+mod bx;
 pub mod exact;
 mod split;
 pub mod stats;

@@ -3,7 +3,7 @@
 //! bins — or, for nodes of at most `SMALL` triangles, by sorting, which finds the split the
 //! bins would — and the node's range partitioned in place.
 
-use super::build::*;
+use super::bx::*;
 use glam::Vec3A;
 
 /// 2^23: adding it to a float in [0, 2^22) leaves that float rounded to the nearest integer in

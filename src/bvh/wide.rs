@@ -2,7 +2,8 @@
 //! children by repeatedly opening the inner child with the largest surface area (the usual
 //! greedy collapse, as in Wald et al. 2008 and tinybvh's `BVH4`/`BVH8` conversions).
 
-use super::build::{BinaryBvh, MAX_LEAF};
+use super::build::BinaryBvh;
+use super::bx::MAX_LEAF;
 use crate::base::Aabb;
 
 /// A child slot of a wide node.
