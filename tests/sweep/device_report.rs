@@ -161,3 +161,71 @@ fn resume_reruns_a_finished_step_whose_file_is_gone() {
     assert_eq!(s["runs"].as_array().unwrap().len(), 1);
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// The child processes of `pid` whose command line holds `word`.
+fn children_running(pid: u32, word: &str) -> Vec<u32> {
+    let mut found = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(p) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let stat = std::fs::read_to_string(format!("/proc/{p}/stat")).unwrap_or_default();
+        let ppid = stat.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().nth(1)?.parse::<u32>().ok());
+        let cmd = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
+        if ppid == Some(pid) && String::from_utf8_lossy(&cmd).split('\0').any(|a| a == word) {
+            found.push(p);
+        }
+    }
+    found
+}
+
+/// A step whose child dies (killed here, as a driver crash or the OOM killer would) stays
+/// failed, naming its log — not "partial … budget reached" — and the report exits non-zero.
+#[test]
+fn a_killed_step_is_failed_not_partial() {
+    use halftrace::devreport::{choose_device, State, StepRecord};
+    let out = tmp("device-report-killed");
+    std::fs::create_dir_all(out.join("conformance")).unwrap();
+    for f in ["devices.txt", "conformance/conformance.md", "conformance/conformance.csv", "bench.md"] {
+        std::fs::write(out.join(f), "earlier").unwrap();
+    }
+    let dev = choose_device(None).unwrap();
+    let done = |status: &str| StepRecord { status: status.into(), seconds: 1.0, done: true, output: String::new() };
+    let record = State {
+        device: dev.name.clone(),
+        driver: dev.driver.clone(),
+        scenes: vec![teapot()],
+        width: 16,
+        height: 16,
+        steps: [("devices", done("ok")), ("conformance", done("ok")), ("bench", done("ok")), ("isa", done("ok"))]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
+        ..Default::default()
+    };
+    std::fs::write(out.join("device-report.json"), serde_json::to_string(&record).unwrap()).unwrap();
+    let mut child = report_cmd(&out, &["--budget", "20m", "--resume"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    let sweep = loop {
+        if let Some(&p) = children_running(child.id(), "sweep").first() {
+            break p;
+        }
+        assert!(child.try_wait().unwrap().is_none(), "the report ended before its sweep started");
+        assert!(t0.elapsed() < Duration::from_secs(300), "no sweep child within 5 minutes");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(Command::new("kill").args(["-KILL", &sweep.to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(!o.status.success(), "a failed step ends the report with an error:\n{stdout}\n{stderr}");
+    assert!(stderr.contains("step(s) failed: sweep") && stderr.contains("logs"), "{stderr}");
+    let s = state(&out);
+    let st = s["steps"]["sweep"]["status"].as_str().unwrap();
+    assert!(st.starts_with("failed (signal 9; see logs/sweep.log)") && !st.contains("partial"), "{st}");
+    assert_eq!(s["steps"]["sweep"]["done"], false, "a failed sweep runs again on --resume: {s}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("failed (signal 9"), "{md}");
+    let _ = std::fs::remove_dir_all(&out);
+}
