@@ -220,6 +220,7 @@ fn bad_files_name_the_file_and_element() {
         ("v1_1.ply", b"ply\nformat binary_little_endian 1.1\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec(), "format version 1.1"),
         ("twice.gltf", gltf_listing("[0, 0]", "[]").into_bytes(), "scene 0 lists node 0 twice"),
         ("child_twice.gltf", gltf_listing("[1]", "[0, 0]").into_bytes(), "node 1 lists child 0 twice"),
+        ("lines.gltf", br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0},"mode":1}]}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],"bufferViews":[{"buffer":0,"byteLength":36}],"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]}"#.to_vec(), "scene has no triangles — mesh 0 ('') primitive 0: Lines skipped"),
     ];
     for (name, bytes, want) in cases {
         let p = d.join(name);

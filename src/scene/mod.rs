@@ -32,8 +32,9 @@ pub enum SceneError {
     /// element).
     #[error("{path}: {msg}")]
     Invalid { path: PathBuf, msg: String },
-    #[error("{path}: scene has no triangles")]
-    NoTriangles { path: PathBuf },
+    /// `skipped`: what the file held that is not triangles (" (…)" or empty).
+    #[error("{path}: scene has no triangles{skipped}")]
+    NoTriangles { path: PathBuf, skipped: String },
     #[error("{path}: scene has {count} triangles; at most {max} are supported")]
     TooLarge { path: PathBuf, count: usize, max: usize },
     /// The path is quoted and escaped: it holds the character the message is about.
@@ -69,7 +70,7 @@ impl Scene {
     pub fn from_triangles(name: &str, tris: Vec<[Vec3; 3]>) -> Result<Scene, SceneError> {
         let path = PathBuf::from(name);
         if tris.is_empty() {
-            return Err(SceneError::NoTriangles { path });
+            return Err(SceneError::NoTriangles { path, skipped: String::new() });
         }
         if tris.len() > MAX_TRIANGLES {
             return Err(SceneError::TooLarge { path, count: tris.len(), max: MAX_TRIANGLES });
@@ -310,7 +311,13 @@ pub fn scene_byte_limit() -> u64 {
 /// The scene of a loaded triangle list, with the file's name on every error and warning.
 fn finish(path: &Path, tris: Vec<[Vec3; 3]>, warnings: Vec<String>) -> Result<Scene, SceneError> {
     let mut scene = Scene::from_triangles(&scene_name(path), tris).map_err(|e| match e {
-        SceneError::NoTriangles { .. } => SceneError::NoTriangles { path: path.into() },
+        SceneError::NoTriangles { .. } => {
+            // What was skipped is why there is nothing (a glTF of lines or points).
+            let prefix = format!("{}: ", path.display());
+            let what: Vec<&str> = warnings.iter().map(|w| w.strip_prefix(&prefix).unwrap_or(w)).collect();
+            let skipped = if what.is_empty() { String::new() } else { format!(" — {}", what.join("; ")) };
+            SceneError::NoTriangles { path: path.into(), skipped }
+        }
         SceneError::TooLarge { count, max, .. } => SceneError::TooLarge { path: path.into(), count, max },
         SceneError::NonFinite { line, text, .. } => SceneError::NonFinite { path: path.into(), line, text },
         other => other,
