@@ -39,6 +39,11 @@ pub struct EstimateArgs {
     /// Replace the estimate files in --out.
     #[arg(long)]
     pub force: bool,
+    /// The other vendors' compilers: `newest` (Debian's newest Mesa,
+    /// scripts/install-newest-compilers.sh) or a compilers folder; default: the pinned build of
+    /// scripts/install-compilers.sh. Each row's driver names its Mesa release.
+    #[arg(long)]
+    pub compilers: Option<String>,
 }
 
 const FILES: &[&str] =
@@ -64,6 +69,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
     // installed RADV opens and every model.
     let (families, models) = isa::families(&a.family, &exe, false)?;
+    let compilers = isa::shim::models_compilers(&models, a.compilers.as_deref())?;
     let kinds: Vec<crate::rays::RayKind> = a
         .rays
         .iter()
@@ -96,6 +102,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
             builds: isa::plan(matrix, &a.layouts),
             disasm: None,
             validation: false,
+            compilers: compilers.clone(),
         };
         isa::run(&cfg, &exe, |_| {})?.rows
     };

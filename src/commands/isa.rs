@@ -65,6 +65,11 @@ pub struct IsaArgs {
     /// No line per kernel.
     #[arg(long)]
     pub quiet: bool,
+    /// The other vendors' compilers: `newest` (Debian's newest Mesa,
+    /// scripts/install-newest-compilers.sh) or a compilers folder; default: the pinned build of
+    /// scripts/install-compilers.sh. Each row's driver names its Mesa release.
+    #[arg(long)]
+    pub compilers: Option<String>,
 }
 
 impl IsaArgs {
@@ -81,6 +86,7 @@ impl IsaArgs {
             .flag("disasm", self.disasm)
             .flag("validation", self.validation)
             .flag("quiet", self.quiet)
+            .opt("compilers", self.compilers.as_ref())
     }
 }
 
@@ -138,6 +144,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;
     let (families, models) = isa::families(&a.family, &exe, a.device.is_empty())?;
+    let compilers = isa::shim::models_compilers(&models, a.compilers.as_deref())?;
     let mut targets: Vec<Target> = families.into_iter().map(Target::Family).collect();
     targets.extend(models.into_iter().map(Target::Model));
     targets.extend(a.device.iter().cloned().map(Target::Device));
@@ -166,6 +173,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         builds: isa::plan(matrix, &a.layouts),
         disasm,
         validation: a.validation,
+        compilers,
     };
     let quiet = a.quiet;
     let mut stdout_err = None;

@@ -78,6 +78,8 @@ pub struct Config {
     /// under `disasm/<device>/` of the output folder.
     pub disasm: Option<PathBuf>,
     pub validation: bool,
+    /// The compilers folder the models are built with ([`shim::compilers_for`]).
+    pub compilers: Option<PathBuf>,
 }
 
 /// What a run produced.
@@ -162,7 +164,10 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
 /// The rows of model `name`, built in its own process.
 fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<shim::ModelRun> {
     let (v, m) = crate::vendor::find_model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
-    let dir = shim::compilers().map_err(anyhow::Error::msg)?;
+    let dir = match &cfg.compilers {
+        Some(d) => d.clone(),
+        None => shim::compilers().map_err(anyhow::Error::msg)?,
+    };
     let args = ModelArgs {
         model: m.name.into(),
         matrix: cfg.matrix.name().into(),

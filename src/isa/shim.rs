@@ -34,13 +34,7 @@ pub fn compilers() -> Result<PathBuf, String> {
             ))
         };
     }
-    let cache = std::env::var_os("HALFTRACE_CACHE").map(PathBuf::from).or_else(|| {
-        std::env::var_os("XDG_CACHE_HOME")
-            .map(PathBuf::from)
-            .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-            .map(|c| c.join("halftrace"))
-    });
-    let dir = cache.map(|c| c.join("compilers"));
+    let dir = cache_dir().map(|c| c.join("compilers"));
     let newest = dir.as_ref().and_then(|d| std::fs::read_dir(d).ok()).and_then(|rd| {
         rd.filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("mesa-")) && complete(p))
@@ -53,6 +47,135 @@ pub fn compilers() -> Result<PathBuf, String> {
             dir.map(|d| format!(" (nothing complete in {})", d.display())).unwrap_or_default()
         )
     })
+}
+
+/// The compilers folder `isa --compilers` names: `newest`, the newest complete
+/// `debian-mesa-*` folder (`scripts/install-newest-compilers.sh`: Debian sid's binaries), or a
+/// folder of either script; without one, the pinned build ([`compilers`]).
+pub fn compilers_for(choice: Option<&str>) -> Result<PathBuf, String> {
+    let complete = |d: &Path| d.join("complete").is_file() && d.join("lib").is_dir() && d.join("icd").is_dir();
+    match choice {
+        None => compilers(),
+        Some("newest") => {
+            let dir = cache_dir().map(|c| c.join("compilers"));
+            dir.as_ref()
+                .and_then(|d| std::fs::read_dir(d).ok())
+                .and_then(|rd| {
+                    rd.filter_map(|e| e.ok().map(|e| e.path()))
+                        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("debian-mesa-")))
+                        .filter(|p| complete(p))
+                        .max_by_key(|p| p.join("complete").metadata().and_then(|m| m.modified()).ok())
+                })
+                .ok_or_else(|| {
+                    format!(
+                        "--compilers newest: no newest Mesa installed{}: run `bash scripts/install-newest-compilers.sh` \
+                         (seconds)",
+                        dir.map(|d| format!(" (no complete debian-mesa-* folder in {})", d.display())).unwrap_or_default()
+                    )
+                })
+        }
+        Some(d) if complete(Path::new(d)) => Ok(PathBuf::from(d)),
+        Some(d) => Err(format!(
+            "--compilers {d}: not a complete compilers folder (scripts/install-compilers.sh and \
+             scripts/install-newest-compilers.sh make them), nor `newest`"
+        )),
+    }
+}
+
+/// halftrace's cache folder: `HALFTRACE_CACHE`, else `${XDG_CACHE_HOME:-~/.cache}/halftrace`.
+pub fn cache_dir() -> Option<PathBuf> {
+    std::env::var_os("HALFTRACE_CACHE").map(PathBuf::from).or_else(|| {
+        std::env::var_os("XDG_CACHE_HOME")
+            .map(PathBuf::from)
+            .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+            .map(|c| c.join("halftrace"))
+    })
+}
+
+/// The Mesa release of a compilers folder: its `RELEASE` file, else the version in its name.
+pub fn release(dir: &Path) -> String {
+    std::fs::read_to_string(dir.join("RELEASE")).map(|t| t.trim().to_string()).unwrap_or_else(|_| {
+        let n = dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        n.trim_start_matches("debian-").trim_start_matches("mesa-").split('-').next().unwrap_or("").to_string()
+    })
+}
+
+/// Whether the folder has the shim of `vendor`'s models: an error naming the models it cannot
+/// build otherwise (sid's amd64 packages have no panfrost, v3d or intel shim).
+pub fn check_models(dir: &Path, models: &[String]) -> Result<(), String> {
+    let missing: Vec<String> = models
+        .iter()
+        .filter_map(|name| {
+            let (v, m) = crate::vendor::find_model(name)?;
+            let shim = v.shim?;
+            (!dir.join("lib").join(shim.library()).is_file() || !dir.join("icd").join(shim.icd).is_file())
+                .then(|| format!("{} ({})", m.name, shim.driver))
+        })
+        .collect();
+    if missing.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "the compilers in {} (Mesa {}) have no drm-shim or driver for {}; leave them out, or use another \
+             --compilers",
+            dir.display(),
+            release(dir),
+            missing.join(", ")
+        ))
+    }
+}
+
+/// The compilers folder for `models` (`None` without models): [`compilers_for`] `choice`,
+/// checked before any work to have each model's shim and driver ([`check_models`]).
+pub fn models_compilers(models: &[String], choice: Option<&str>) -> anyhow::Result<Option<PathBuf>> {
+    if models.is_empty() {
+        anyhow::ensure!(choice.is_none(), "--compilers: no model of the other vendors was asked for (--family)");
+        return Ok(None);
+    }
+    let dir = compilers_for(choice).map_err(anyhow::Error::msg)?;
+    check_models(&dir, models).map_err(anyhow::Error::msg)?;
+    Ok(Some(dir))
+}
+
+/// The binary a model's child runs: this one, or — where the folder carries its own C library
+/// (`root/`, Debian sid's, newer than the host's) — a copy of it whose interpreter and DT_RPATH
+/// point into the folder (made once per binary with the folder's `patchelf`; DT_RPATH, not
+/// RUNPATH, so that the drivers' own dependencies resolve there too).
+pub fn child_exe(exe: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+    let root = dir.join("root");
+    if !root.is_dir() {
+        return Ok(exe.to_path_buf());
+    }
+    let meta = std::fs::metadata(exe).with_context(|| format!("reading {}", exe.display()))?;
+    let stamp = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).unwrap_or_default();
+    let name = format!("halftrace-{:x}-{:x}", meta.len(), stamp.as_nanos());
+    let bin = dir.join("bin");
+    let dest = bin.join(&name);
+    // Models run in parallel threads: one makes the copy, the others wait for it.
+    static MAKING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = MAKING.lock().unwrap_or_else(|e| e.into_inner());
+    if dest.is_file() {
+        return Ok(dest);
+    }
+    std::fs::create_dir_all(&bin).with_context(|| format!("creating {}", bin.display()))?;
+    let tmp = bin.join(format!(".{name}.{}", std::process::id()));
+    std::fs::copy(exe, &tmp).with_context(|| format!("copying {} to {}", exe.display(), tmp.display()))?;
+    let libs = root.join("usr/lib/x86_64-linux-gnu");
+    let out = Command::new(dir.join("patchelf"))
+        .arg("--set-interpreter")
+        .arg(root.join("usr/lib64/ld-linux-x86-64.so.2"))
+        .arg("--force-rpath")
+        .arg("--set-rpath")
+        .arg(&libs)
+        .arg(&tmp)
+        .output()
+        .with_context(|| format!("running {}", dir.join("patchelf").display()))?;
+    if !out.status.success() {
+        let _ = std::fs::remove_file(&tmp);
+        anyhow::bail!("patchelf on a copy of {}: {}", exe.display(), String::from_utf8_lossy(&out.stderr).trim());
+    }
+    std::fs::rename(&tmp, &dest).with_context(|| format!("moving {} into place", dest.display()))?;
+    Ok(dest)
 }
 
 /// The environment that opens model `m`'s driver under its shim `s`.
@@ -109,7 +232,8 @@ pub fn run_model(
     builds: &[KernelSpec],
 ) -> anyhow::Result<ModelRun> {
     let shim = vendor.shim.ok_or_else(|| anyhow::anyhow!("{}: {} has no drm-shim", m.name, vendor.name))?;
-    let (stdout, status, stderr) = run_child(Command::new(exe).args(&args.0).envs(environment(&shim, m, dir)))?;
+    let exe = child_exe(exe, dir)?;
+    let (stdout, status, stderr) = run_child(Command::new(&exe).args(&args.0).envs(environment(&shim, m, dir)))?;
     let mut rows: Vec<IsaRow> = Vec::new();
     let mut bad_lines = 0;
     for line in stdout.lines() {

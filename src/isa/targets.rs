@@ -2,7 +2,6 @@
 //! not know), other vendors' models under their drm-shims, devices by name — what `--family`
 //! names resolved and checked once ([`families`]) for `isa` and `estimate` alike.
 
-use super::shim;
 use crate::gpu::null::{self, Family};
 use std::path::Path;
 
@@ -48,7 +47,7 @@ pub fn known_families(exe: &Path) -> Vec<Family> {
 /// The AMD families and the other vendors' models `--family` names (`vendors`: every model;
 /// `all`: every family the installed RADV opens and every model), each once in the order
 /// asked, checked: an AMD family must be one the installed RADV opens (probed only when one is
-/// asked for), and models need the compilers. `default`: nothing asked means the default
+/// asked for). `default`: nothing asked means the default
 /// families. Returns (families, models).
 pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(Vec<String>, Vec<String>)> {
     let asked: Vec<String> = asked.iter().map(|f| f.to_lowercase()).collect();
@@ -89,10 +88,6 @@ pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(
             names.join(", "),
             all_models.join(", ")
         );
-    }
-    if !models.is_empty() {
-        // Before any work: the compilers must be there.
-        shim::compilers().map_err(anyhow::Error::msg)?;
     }
     Ok((families, models))
 }

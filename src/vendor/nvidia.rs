@@ -15,29 +15,32 @@ pub static NVIDIA: Vendor = Vendor {
     stats: Stats::Own,
     sources: [
         "Number of GPRs",
-        "SLM Size",
+        "SLM Size (Mesa 26: SLM size)",
         "ld.local + st.local (disassembly)",
-        "warps/SM from Number of GPRs (CUDA's occupancy rule; an estimate)",
+        "Max warps/SM (Mesa 26), else warps/SM from Number of GPRs (CUDA's occupancy rule; an estimate)",
         "Instruction count",
-        "–",
+        "Static cycle count (Mesa 26; NAK's static estimate)",
     ],
     neutral,
     disassembly: Some(Disassembly::Nak),
     occupancy: Some(Occupancy { unit: "warps/SM", words: "warps per SM", note: "NVIDIA, estimated from the registers" }),
-    cycles: "no cycle estimate from this driver",
+    cycles: "`Static cycle count` (Mesa 26's NVK): NAK's static estimate of one warp's cycles, its assumptions about \
+             loops not documented by NVK; Mesa 25's NVK gives none",
     quirks: GPU_DEFAULT,
 };
 
+/// Mesa 25's NVK and Mesa 26's: 26 renamed `SLM Size` to `SLM size` and reports its own
+/// occupancy (`Max warps/SM`) and a static cycle estimate.
 fn neutral(s: &Input) -> Neutral {
     let registers = s.get("Number of GPRs");
     let max_warps = if s.generation.contains("Turing") { 32.0 } else { 48.0 };
     Neutral {
         registers,
-        private_bytes: s.get("SLM Size"),
+        private_bytes: s.get("SLM Size").or_else(|| s.get("SLM size")),
         spills: s.private_ops(),
-        occupancy: registers.map(|g| warps(g, max_warps)),
+        occupancy: s.get("Max warps/SM").or_else(|| registers.map(|g| warps(g, max_warps))),
         instructions: s.get("Instruction count"),
-        cycles: None,
+        cycles: s.get("Static cycle count"),
     }
 }
 
