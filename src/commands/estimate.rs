@@ -68,8 +68,8 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let exe = std::env::current_exe()?;
     // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
     // installed RADV opens and every model.
-    let (families, models) = isa::families(&a.family, &exe, false)?;
-    let compilers = isa::shim::models_compilers(&models, a.compilers.as_deref())?;
+    let (families, models, grouped) = isa::families(&a.family, &exe, false)?;
+    let (compilers, models) = isa::shim::models_compilers(models, &grouped, a.compilers.as_deref())?;
     let kinds: Vec<crate::rays::RayKind> = a
         .rays
         .iter()

@@ -143,8 +143,8 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("isa")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;
-    let (families, models) = isa::families(&a.family, &exe, a.device.is_empty())?;
-    let compilers = isa::shim::models_compilers(&models, a.compilers.as_deref())?;
+    let (families, models, grouped) = isa::families(&a.family, &exe, a.device.is_empty())?;
+    let (compilers, models) = isa::shim::models_compilers(models, &grouped, a.compilers.as_deref())?;
     let mut targets: Vec<Target> = families.into_iter().map(Target::Family).collect();
     targets.extend(models.into_iter().map(Target::Model));
     targets.extend(a.device.iter().cloned().map(Target::Device));

@@ -126,15 +126,31 @@ pub fn check_models(dir: &Path, models: &[String]) -> Result<(), String> {
 }
 
 /// The compilers folder for `models` (`None` without models): [`compilers_for`] `choice`,
-/// checked before any work to have each model's shim and driver ([`check_models`]).
-pub fn models_compilers(models: &[String], choice: Option<&str>) -> anyhow::Result<Option<PathBuf>> {
+/// checked before any work to have each model's shim and driver ([`check_models`]) — but for
+/// the models only a group named (`grouped`: `vendors`, `all`), which are left out, said on
+/// stderr, where the release has no shim for them. Returns the folder and the models to build.
+pub fn models_compilers(
+    models: Vec<String>,
+    grouped: &[String],
+    choice: Option<&str>,
+) -> anyhow::Result<(Option<PathBuf>, Vec<String>)> {
     if models.is_empty() {
         anyhow::ensure!(choice.is_none(), "--compilers: no model of the other vendors was asked for (--family)");
-        return Ok(None);
+        return Ok((None, models));
     }
     let dir = compilers_for(choice).map_err(anyhow::Error::msg)?;
-    check_models(&dir, models).map_err(anyhow::Error::msg)?;
-    Ok(Some(dir))
+    let (kept, left): (Vec<String>, Vec<String>) =
+        models.into_iter().partition(|m| !grouped.contains(m) || check_models(&dir, std::slice::from_ref(m)).is_ok());
+    if !left.is_empty() {
+        eprintln!(
+            "note: the compilers in {} (Mesa {}) have no drm-shim or driver for {}: left out",
+            dir.display(),
+            release(&dir),
+            left.join(", ")
+        );
+    }
+    check_models(&dir, &kept).map_err(anyhow::Error::msg)?;
+    Ok((Some(dir), kept))
 }
 
 /// The binary a model's child runs: this one, or — where the folder carries its own C library

@@ -48,8 +48,13 @@ pub fn known_families(exe: &Path) -> Vec<Family> {
 /// `all`: every family the installed RADV opens and every model), each once in the order
 /// asked, checked: an AMD family must be one the installed RADV opens (probed only when one is
 /// asked for). `default`: nothing asked means the default
-/// families. Returns (families, models).
-pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+/// families. Returns (families, models, the models only a group — `vendors`, `all` — named:
+/// those a compilers release lacks are left out rather than refused).
+pub fn families(
+    asked: &[String],
+    exe: &Path,
+    default: bool,
+) -> anyhow::Result<(Vec<String>, Vec<String>, Vec<String>)> {
     let asked: Vec<String> = asked.iter().map(|f| f.to_lowercase()).collect();
     let is_model = |f: &str| crate::vendor::find_model(f).is_some();
     let defaulted = asked.is_empty() && default;
@@ -58,7 +63,7 @@ pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(
     let names: Vec<&str> = known.iter().map(|f| f.name).collect();
     let every_model = || crate::vendor::models().map(|(_, m)| m.name.to_string());
     let mut families = if defaulted { default_families(&known) } else { Vec::new() };
-    let mut models = Vec::new();
+    let (mut models, mut named) = (Vec::new(), Vec::new());
     for f in asked {
         match f.as_str() {
             "all" => {
@@ -66,7 +71,10 @@ pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(
                 models.extend(every_model());
             }
             "vendors" => models.extend(every_model()),
-            _ if is_model(&f) => models.push(f),
+            _ if is_model(&f) => {
+                named.push(f.clone());
+                models.push(f);
+            }
             _ => families.push(f),
         }
     }
@@ -89,7 +97,8 @@ pub fn families(asked: &[String], exe: &Path, default: bool) -> anyhow::Result<(
             all_models.join(", ")
         );
     }
-    Ok((families, models))
+    let grouped = models.iter().filter(|m| !named.contains(m)).cloned().collect();
+    Ok((families, models, grouped))
 }
 
 /// The families `isa` builds for by default: those of [`null::DEFAULT_FAMILIES`] in `known`.

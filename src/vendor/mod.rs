@@ -27,6 +27,7 @@ vendors! {
     intel::INTEL,
     nvidia::NVIDIA,
     broadcom::BROADCOM,
+    apple::APPLE,
     // A vendor no GPU has: the test that a vendor is one file and this one line.
     #[cfg(test)]
     fake::FAKE,

@@ -341,7 +341,7 @@ fn isa_builds_on_every_vendors_compiler() {
 /// binaries, their own glibc): `isa --compilers newest` builds on turnip and NVK there through
 /// a patched copy of the binary, each row's driver naming the release; NVK 26's own occupancy
 /// (`Max warps/SM`), renamed `SLM size` and `Static cycle count` fill the columns; TU102 has
-/// fp16 there. A model whose shim the release lacks (panvk) is refused before any work. CI
+/// fp16 there; Apple's M1 (Honeykrisp, the seventh vendor) builds every kernel in its columns. A model whose shim the release lacks (panvk) is refused before any work. CI
 /// installs both; elsewhere the test says it did not run and how to make it run.
 #[test]
 fn isa_builds_on_the_newest_compilers() {
@@ -360,7 +360,7 @@ fn isa_builds_on_the_newest_compilers() {
         "--compilers",
         "newest",
         "--family",
-        "a740,ga102,tu102",
+        "a740,ga102,tu102,m1",
         "--quick",
         "--layouts",
         "f16h",
@@ -370,7 +370,7 @@ fn isa_builds_on_the_newest_compilers() {
     ]);
     assert!(ok, "isa on the newest compilers failed:\n{stdout}\n{stderr}");
     let rows: Vec<IsaRow> = serde_json::from_str(&std::fs::read_to_string(out.join("isa.json")).unwrap()).unwrap();
-    assert_eq!(rows.len(), 12, "f32 and f16h in three maths on three models");
+    assert_eq!(rows.len(), 16, "f32 and f16h in three maths on four models");
     for r in &rows {
         assert!(r.status.is_ok(), "{} {}: {}", r.family, r.kernel, r.status);
         assert!(r.driver.contains(&release), "{} {}: driver {} is not Mesa {release}", r.family, r.kernel, r.driver);
@@ -381,7 +381,12 @@ fn isa_builds_on_the_newest_compilers() {
             r.kernel,
             r.stats
         );
-        if r.family != "a740" {
+        if r.family == "m1" {
+            // Apple's 16-bit registers, threads in flight and ALU cycles.
+            assert_eq!(r.registers, r.stats.get("GPRs").map(|g| g / 2.0), "m1 {}", r.kernel);
+            assert_eq!((r.vendor.name(), r.occupancy), ("Apple", r.stats.get("Threads").copied()), "m1 {}", r.kernel);
+            assert!(r.cycles.is_some_and(|c| c > 0.0), "m1 {}: no ALU cycles", r.kernel);
+        } else if r.family != "a740" {
             assert_eq!(r.occupancy, r.stats.get("Max warps/SM").copied(), "{} {}", r.family, r.kernel);
             assert_eq!(r.private_bytes, r.stats.get("SLM size").copied(), "{} {}", r.family, r.kernel);
             assert!(r.cycles.is_some_and(|c| c > 0.0), "{} {}: no static cycle count", r.family, r.kernel);

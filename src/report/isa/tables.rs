@@ -175,6 +175,12 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
     md
 }
 
+/// The occupancy units of the vendors with rows in `rows`, in registry order.
+fn shown_units<'a>(rows: impl Iterator<Item = &'a IsaRow>) -> impl Iterator<Item = crate::vendor::Occupancy> {
+    let present: Vec<&'static str> = rows.map(|r| r.vendor.name()).collect();
+    REGISTRY.iter().filter(move |v| present.contains(&v.name)).filter_map(|v| v.occupancy)
+}
+
 /// The kernels of `ok` at P = 1 as (layout order, label, B), each once, sorted: the rows of the
 /// tables across devices.
 fn kernels_at_p1<'a>(ok: impl Iterator<Item = &'a IsaRow>) -> Vec<(usize, String, usize)> {
@@ -197,8 +203,7 @@ fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str) -> Stri
         return String::new();
     }
     let cols: Vec<&String> = devices.iter().map(|d| &d.0).collect();
-    let units: Vec<String> =
-        REGISTRY.iter().filter_map(|v| v.occupancy).map(|o| format!("{} ({})", o.words, o.note)).collect();
+    let units: Vec<String> = shown_units(ok.iter().copied()).map(|o| format!("{} ({})", o.words, o.note)).collect();
     let mut md = format!(
         "{h}# Across vendors (P = 1): registers per thread / private bytes per thread / occupancy\n\n\
          Occupancy in the vendor's unit: {}; – where the driver does not say.\n\n| kernel | B | {} |\n|---|---|{}\n",
@@ -328,7 +333,7 @@ pub fn headline(rows: &[IsaRow]) -> String {
     if devices.is_empty() || kernels.is_empty() {
         return String::new();
     }
-    let units: Vec<&str> = REGISTRY.iter().filter_map(|v| v.occupancy).map(|o| o.words).collect();
+    let units: Vec<&str> = shown_units(ok.iter().copied()).map(|o| o.words).collect();
     let mut md = format!(
         "## Compiler view, B = 4, P = 1: registers per thread / private bytes per thread / occupancy\n\n\
          Each vendor's production compiler without its GPU (RADV null devices, Mesa's drm-shims; nothing ran). \

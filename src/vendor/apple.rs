@@ -1,0 +1,40 @@
+//! Apple: Honeykrisp (Mesa's driver for Apple's AGX GPUs) under the asahi drm-shim — in Debian's
+//! newest Mesa (`isa --compilers newest`), not in the pinned build. The shim fakes an M1 (G13G).
+
+use super::{model, Input, Neutral, Occupancy, Shim, Stats, Vendor, GPU_DEFAULT};
+use ash::vk;
+
+pub static APPLE: Vendor = Vendor {
+    name: "Apple",
+    // Honeykrisp's id (VK_DRIVER_ID_MESA_HONEYKRISP, ash's MESA_AGXV).
+    driver_ids: &[vk::DriverId::MESA_AGXV],
+    driver_names: &["honeykrisp", "agx"],
+    shim: Some(Shim { kernel: "asahi", icd: "asahi.json", driver: "Honeykrisp", summary_env: &[] }),
+    models: &[model("m1", "Apple M1", "G13G (AGX)", &[])],
+    stats: Stats::Own,
+    sources: [
+        "GPRs ÷ 2 (16-bit registers)",
+        "Scratch",
+        "Spills + Fills",
+        "Threads (threads in flight)",
+        "Instructions",
+        "ALU (estimated ALU cycles; FSCIB and IC beside)",
+    ],
+    neutral,
+    disassembly: None,
+    occupancy: Some(Occupancy { unit: "threads", words: "threads in flight", note: "Apple" }),
+    cycles: "`ALU` (Honeykrisp's statistics): the estimated ALU cycles of the whole shader (its `FSCIB` and `IC` \
+             estimates beside in isa.csv), each instruction once as far as its statistics say",
+    quirks: GPU_DEFAULT,
+};
+
+fn neutral(s: &Input) -> Neutral {
+    Neutral {
+        registers: s.get("GPRs").map(|g| g / 2.0),
+        private_bytes: s.get("Scratch"),
+        spills: s.sum("Spills", "Fills"),
+        occupancy: s.get("Threads"),
+        instructions: s.get("Instructions"),
+        cycles: s.get("ALU"),
+    }
+}
