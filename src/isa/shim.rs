@@ -23,7 +23,6 @@ use std::process::{Command, ExitStatus, Stdio};
 /// the newest complete `mesa-*` folder under `${HALFTRACE_CACHE:-${XDG_CACHE_HOME:-~/.cache}/
 /// halftrace}/compilers`. The error says how to install them.
 pub fn compilers() -> Result<PathBuf, String> {
-    let complete = |d: &Path| d.join("complete").is_file() && d.join("lib").is_dir() && d.join("icd").is_dir();
     if let Some(d) = std::env::var_os("HALFTRACE_COMPILERS").map(PathBuf::from) {
         return if complete(&d) {
             Ok(d)
@@ -35,12 +34,7 @@ pub fn compilers() -> Result<PathBuf, String> {
         };
     }
     let dir = cache_dir().map(|c| c.join("compilers"));
-    let newest = dir.as_ref().and_then(|d| std::fs::read_dir(d).ok()).and_then(|rd| {
-        rd.filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("mesa-")) && complete(p))
-            .max_by_key(|p| p.join("complete").metadata().and_then(|m| m.modified()).ok())
-    });
-    newest.ok_or_else(|| {
+    newest_complete(dir.as_deref(), "mesa-").ok_or_else(|| {
         format!(
             "the other vendors' compilers are not installed{}: run `bash scripts/install-compilers.sh` (about 20 \
              minutes, once; AMD's families need nothing)",
@@ -53,26 +47,17 @@ pub fn compilers() -> Result<PathBuf, String> {
 /// `debian-mesa-*` folder (`scripts/install-newest-compilers.sh`: Debian sid's binaries), or a
 /// folder of either script; without one, the pinned build ([`compilers`]).
 pub fn compilers_for(choice: Option<&str>) -> Result<PathBuf, String> {
-    let complete = |d: &Path| d.join("complete").is_file() && d.join("lib").is_dir() && d.join("icd").is_dir();
     match choice {
         None => compilers(),
         Some("newest") => {
             let dir = cache_dir().map(|c| c.join("compilers"));
-            dir.as_ref()
-                .and_then(|d| std::fs::read_dir(d).ok())
-                .and_then(|rd| {
-                    rd.filter_map(|e| e.ok().map(|e| e.path()))
-                        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("debian-mesa-")))
-                        .filter(|p| complete(p))
-                        .max_by_key(|p| p.join("complete").metadata().and_then(|m| m.modified()).ok())
-                })
-                .ok_or_else(|| {
-                    format!(
-                        "--compilers newest: no newest Mesa installed{}: run `bash scripts/install-newest-compilers.sh` \
+            newest_complete(dir.as_deref(), "debian-mesa-").ok_or_else(|| {
+                format!(
+                    "--compilers newest: no newest Mesa installed{}: run `bash scripts/install-newest-compilers.sh` \
                          (seconds)",
-                        dir.map(|d| format!(" (no complete debian-mesa-* folder in {})", d.display())).unwrap_or_default()
-                    )
-                })
+                    dir.map(|d| format!(" (no complete debian-mesa-* folder in {})", d.display())).unwrap_or_default()
+                )
+            })
         }
         Some(d) if complete(Path::new(d)) => Ok(PathBuf::from(d)),
         Some(d) => Err(format!(
@@ -80,6 +65,21 @@ pub fn compilers_for(choice: Option<&str>) -> Result<PathBuf, String> {
              scripts/install-newest-compilers.sh make them), nor `newest`"
         )),
     }
+}
+
+/// Whether `d` is a complete compilers folder (its script finished: `complete`, `lib/`, `icd/`).
+fn complete(d: &Path) -> bool {
+    d.join("complete").is_file() && d.join("lib").is_dir() && d.join("icd").is_dir()
+}
+
+/// The complete compilers folder in `dir` whose name starts with `prefix` and that was
+/// finished last.
+fn newest_complete(dir: Option<&Path>, prefix: &str) -> Option<PathBuf> {
+    std::fs::read_dir(dir?)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with(prefix)) && complete(p))
+        .max_by_key(|p| p.join("complete").metadata().and_then(|m| m.modified()).ok())
 }
 
 /// halftrace's cache folder: `HALFTRACE_CACHE`, else `${XDG_CACHE_HOME:-~/.cache}/halftrace`.

@@ -76,7 +76,6 @@ impl Scene {
             return Err(SceneError::TooLarge { path, count: tris.len(), max: MAX_TRIANGLES });
         }
         let mut bounds = Aabb::EMPTY;
-        let mut degenerate = 0;
         for (i, t) in tris.iter().enumerate() {
             for v in t {
                 if !v.is_finite() {
@@ -84,12 +83,10 @@ impl Scene {
                 }
                 bounds.grow(*v);
             }
-            let v = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z, t[2].x, t[2].y, t[2].z];
-            if crate::base::exact::collinear(&v) {
-                degenerate += 1;
-            }
         }
-        Ok(Scene { name: name.to_string(), path, tris, bounds, degenerate, warnings: Vec::new() })
+        let mut scene = Scene { name: name.to_string(), path, tris, bounds, degenerate: 0, warnings: Vec::new() };
+        scene.degenerate = (0..scene.len()).filter(|&i| crate::base::exact::collinear(&scene.verts(i))).count();
+        Ok(scene)
     }
 
     pub fn len(&self) -> usize {

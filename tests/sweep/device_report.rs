@@ -100,11 +100,29 @@ fn device_report_is_interrupted_refused_and_resumed() {
     let _ = std::fs::remove_dir_all(&merged);
 }
 
+/// Writes `out`'s device-report.json as a report of the default device (the teapot at 16 × 16)
+/// whose `steps` finished with those statuses; returns the device.
+fn record_finished(out: &Path, steps: &[(&str, &str)]) -> halftrace::gpu::DeviceInfo {
+    use halftrace::devreport::{choose_device, State, StepRecord};
+    let dev = choose_device(None).unwrap();
+    let done = |status: &str| StepRecord { status: status.into(), seconds: 1.0, done: true, output: String::new() };
+    let record = State {
+        device: dev.name.clone(),
+        driver: dev.driver.clone(),
+        scenes: vec![teapot()],
+        width: 16,
+        height: 16,
+        steps: steps.iter().map(|(k, v)| (k.to_string(), done(v))).collect(),
+        ..Default::default()
+    };
+    std::fs::write(out.join("device-report.json"), serde_json::to_string(&record).unwrap()).unwrap();
+    dev
+}
+
 /// `--resume` does not trust device-report.json alone: a step recorded as finished whose file
 /// was deleted since runs again; the steps whose files are there do not.
 #[test]
 fn resume_reruns_a_finished_step_whose_file_is_gone() {
-    use halftrace::devreport::{choose_device, State, StepRecord};
     let out = tmp("device-report-gone");
     // A finished report, as far as its record goes: a real one-job sweep, stand-ins for the
     // other steps' files.
@@ -121,27 +139,16 @@ fn resume_reruns_a_finished_step_whose_file_is_gone() {
     {
         std::fs::write(out.join(f), text).unwrap();
     }
-    let dev = choose_device(None).unwrap();
-    let done = |status: &str| StepRecord { status: status.into(), seconds: 1.0, done: true, output: String::new() };
-    let record = State {
-        device: dev.name.clone(),
-        driver: dev.driver.clone(),
-        scenes: vec![teapot()],
-        width: 16,
-        height: 16,
-        steps: [
-            ("devices", done("ok")),
-            ("conformance", done("ok")),
-            ("bench", done("ok")),
-            ("sweep", done("ok: 1 jobs")),
-            ("isa", done("skipped: not asked")),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect(),
-        ..Default::default()
-    };
-    std::fs::write(out.join("device-report.json"), serde_json::to_string(&record).unwrap()).unwrap();
+    let dev = record_finished(
+        &out,
+        &[
+            ("devices", "ok"),
+            ("conformance", "ok"),
+            ("bench", "ok"),
+            ("sweep", "ok: 1 jobs"),
+            ("isa", "skipped: not asked"),
+        ],
+    );
     // devices.txt is not there (deleted, say): devices runs again, nothing else does.
     let o = report_cmd(&out, &["--budget", "60s", "--resume"]).output().unwrap();
     let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
@@ -181,27 +188,12 @@ fn children_running(pid: u32, word: &str) -> Vec<u32> {
 /// failed, naming its log — not "partial … budget reached" — and the report exits non-zero.
 #[test]
 fn a_killed_step_is_failed_not_partial() {
-    use halftrace::devreport::{choose_device, State, StepRecord};
     let out = tmp("device-report-killed");
     std::fs::create_dir_all(out.join("conformance")).unwrap();
     for f in ["devices.txt", "conformance/conformance.md", "conformance/conformance.csv", "bench.md"] {
         std::fs::write(out.join(f), "earlier").unwrap();
     }
-    let dev = choose_device(None).unwrap();
-    let done = |status: &str| StepRecord { status: status.into(), seconds: 1.0, done: true, output: String::new() };
-    let record = State {
-        device: dev.name.clone(),
-        driver: dev.driver.clone(),
-        scenes: vec![teapot()],
-        width: 16,
-        height: 16,
-        steps: [("devices", done("ok")), ("conformance", done("ok")), ("bench", done("ok")), ("isa", done("ok"))]
-            .into_iter()
-            .map(|(k, v)| (k.to_string(), v))
-            .collect(),
-        ..Default::default()
-    };
-    std::fs::write(out.join("device-report.json"), serde_json::to_string(&record).unwrap()).unwrap();
+    record_finished(&out, &[("devices", "ok"), ("conformance", "ok"), ("bench", "ok"), ("isa", "ok")]);
     let mut child = report_cmd(&out, &["--budget", "20m", "--resume"])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
