@@ -519,6 +519,26 @@ fn npy_headers_are_read_as_numpy_reads_them() {
     );
     let e = npy::read_hits(&p).unwrap_err().to_string();
     assert!(e.contains("field_named_shape.npy") && e.contains("structured hits") && e.contains("(1,)"), "{e}");
+    // Hits with every name in double quotes (as a hand-written header has them) read as NumPy's.
+    let one: Vec<u8> = [1.5f32.to_le_bytes(), 7i32.to_le_bytes(), 0.25f32.to_le_bytes(), 0.5f32.to_le_bytes()].concat();
+    let p = write_raw_npy(
+        "hits_quoted.npy",
+        r#"{"descr": [("t", "<f4"), ("prim", "<i4"), ("u", "<f4"), ("v", "<f4")], "fortran_order": False, "shape": (1,)}"#,
+        &one,
+    );
+    let h = npy::read_hits(&p).unwrap_or_else(|e| panic!("hits_quoted.npy: {e}"));
+    assert!(h.len() == 1 && h[0].same_bits(&halftrace::base::Hit { t: 1.5, prim: 7, u: 0.25, v: 0.5 }));
+    // A byte-order mark, before the magic or at the start of the header text: refused naming the
+    // file (NumPy refuses both too), never read as other numbers.
+    let p = write_raw_npy("hits_bom_header.npy", "\u{feff}{'descr': [('t', '<f4'), ('prim', '<i4'), ('u', '<f4'), ('v', '<f4')], 'fortran_order': False, 'shape': (1,), }", &one);
+    let e = npy::read_hits(&p).unwrap_err().to_string();
+    assert!(e.contains("hits_bom_header.npy") && e.contains("not a .npy file"), "{e}");
+    let p = tmp("hits_bom_magic.npy");
+    let mut b = b"\xEF\xBB\xBF".to_vec();
+    b.extend(std::fs::read(tmp("hits_quoted.npy")).unwrap());
+    std::fs::write(&p, b).unwrap();
+    let e = npy::read_hits(&p).unwrap_err().to_string();
+    assert!(e.contains("hits_bom_magic.npy") && e.contains("not a .npy file"), "{e}");
     let p =
         write_raw_npy("huge.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (4611686018427387904, 8), }", &le);
     let e = npy::read_rays(&p).unwrap_err().to_string();

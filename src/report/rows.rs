@@ -241,6 +241,7 @@ pub fn read_rows(dir: &Path) -> anyhow::Result<Vec<Row>> {
     let p = dir.join("results.csv");
     let bytes = crate::fsx::read_regular(&p).with_context(|| format!("reading {}", p.display()))?;
     let mut r = csv::Reader::from_reader(&bytes[..]);
+    // (`csv` strips a UTF-8 byte-order mark and reads quoted names, as a spreadsheet saves them.)
     let header: Vec<String> = r.headers().map(|h| h.iter().map(String::from).collect()).unwrap_or_default();
     for need in ["scene", "rays", "layout", "branching", "packet", "kernel", "device", "status", "mrays_median"] {
         anyhow::ensure!(
@@ -321,6 +322,15 @@ fn current_names(mut r: Row) -> Row {
         }
     }
     r
+}
+
+/// The column names of a results.csv, read as [`read_rows`] reads them: a UTF-8 byte-order
+/// mark and quoted names (`"scene"`, as a spreadsheet re-saves the file) are the names inside.
+pub fn header(path: &Path) -> anyhow::Result<Vec<String>> {
+    let bytes = crate::fsx::read_regular(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut r = csv::Reader::from_reader(&bytes[..]);
+    let h = r.headers().with_context(|| format!("{}: reading the header line", path.display()))?;
+    Ok(h.iter().map(String::from).collect())
 }
 
 /// The columns of `results.csv` this version writes.

@@ -50,13 +50,8 @@ pub fn prepare_out(out: &Claimed) -> anyhow::Result<Vec<Row>> {
     // rows are written again: refuse.
     let csv = out.path().join("results.csv");
     let known = report::rows::columns();
-    let header = std::fs::read_to_string(&csv)
-        .with_context(|| format!("--resume: reading {}", csv.display()))?
-        .lines()
-        .next()
-        .unwrap_or("")
-        .to_string();
-    let unknown: Vec<&str> = header.split(',').filter(|c| !known.iter().any(|k| k == c)).collect();
+    let header = report::rows::header(&csv).context("--resume")?;
+    let unknown: Vec<&str> = header.iter().map(String::as_str).filter(|c| !known.iter().any(|k| k == c)).collect();
     anyhow::ensure!(
         unknown.is_empty(),
         "--resume: {} has column(s) this version does not write ({}); they would be lost — resume with the version \

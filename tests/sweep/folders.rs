@@ -128,8 +128,19 @@ fn resume_runs_what_no_longer_matches_and_keeps_unknown_columns() {
     let o = sweep(&out, &other);
     assert!(o.status.success());
     assert_eq!(read_rows(&out).unwrap().len(), 2);
-    // A column from a newer version: refused, the file untouched.
+    // As a spreadsheet re-saves it: a byte-order mark and every name quoted. The same columns
+    // (this was "column(s) this version does not write" before the header was read as CSV).
     let csv = out.join("results.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let (head, body) = text.split_once('\n').unwrap();
+    let quoted: Vec<String> = head.split(',').map(|c| format!("\"{c}\"")).collect();
+    std::fs::write(&csv, format!("\u{feff}{}\n{body}", quoted.join(","))).unwrap();
+    let ids = |rows: &[halftrace::report::Row]| rows.iter().map(|r| format!("{:?}", r.id())).collect::<Vec<_>>();
+    assert_eq!(ids(&read_rows(&out).unwrap()), ids(&rows), "a BOM and quoted names read as the same rows");
+    let o = sweep(&out, &other);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(ids(&read_rows(&out).unwrap()), ids(&rows), "nothing left to run, the rows kept");
+    // A column from a newer version: refused, the file untouched.
     let text = std::fs::read_to_string(&csv).unwrap();
     let newer: String = text
         .lines()
