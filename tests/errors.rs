@@ -136,7 +136,12 @@ fn durations_are_range_checked() {
         let toml = obj(&format!("timeout-{v}.toml"), &format!("kernel_timeout = {v}\n"));
         let e = fails(&["sweep", "--config", toml.to_str().unwrap(), "--out", tmp("never").to_str().unwrap()]);
         assert!(e.contains("kernel_timeout") && e.contains("timeout-"), "{v}: {e}");
+        let table = format!("[[kernel]]\nname = \"k\"\nlayout = \"f32\"\nfile = {t:?}\nkernel_timeout = {v}\n");
+        let toml = obj(&format!("kernel-timeout-{v}.toml"), &table);
+        let e = fails(&["sweep", "--config", toml.to_str().unwrap(), "--out", tmp("never").to_str().unwrap()]);
+        assert!(e.contains("[[kernel]] 'k'") && e.contains("kernel_timeout"), "{v}: {e}");
     }
+    assert!(!tmp("never").exists());
 }
 
 fn write_raw_npy(name: &str, header: &str, data: &[u8]) -> PathBuf {

@@ -9,7 +9,7 @@ use super::{GpuError, VkResultExt};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
 
 /// How to open a device.
@@ -80,7 +80,8 @@ pub struct Gpu {
     pub validation_enabled: bool,
     /// Pipelines capture their statistics and internal representations ([`ContextOptions::statistics`]).
     pub(crate) capture: bool,
-    kernel_timeout: std::time::Duration,
+    /// Nanoseconds a submission may run before it is declared hung ([`Gpu::set_kernel_timeout`]).
+    kernel_timeout_ns: AtomicU64,
     /// How the device was opened ([`Gpu::sibling`] opens it again).
     opts: ContextOptions,
     /// Set when a submission did not finish in time: the device is still running it, so
@@ -99,6 +100,13 @@ fn env_limit(var: &str) -> Result<Option<u64>, GpuError> {
             .map_err(|_| GpuError::Other(format!("{var}='{v}': give a number of bytes"))),
         Err(_) => Ok(None),
     }
+}
+
+/// `secs` as a fence wait's nanoseconds, clamped into what the wait takes.
+fn timeout_ns(secs: f64) -> u64 {
+    let d = std::time::Duration::try_from_secs_f64(secs.clamp(0.001, crate::units::MAX_SECONDS))
+        .unwrap_or(std::time::Duration::from_secs_f64(DEFAULT_KERNEL_TIMEOUT_S));
+    d.as_nanos().min(u64::MAX as u128) as u64
 }
 
 impl Gpu {
@@ -145,9 +153,9 @@ impl Gpu {
             as u32;
         let logical = Self::create_device(&inst, physical, &info, qfi, opts.statistics)?;
         let queue = unsafe { logical.device.get_device_queue(qfi, 0) };
-        // Parsed values are checked (crate::units); the clamp keeps any other caller's value
-        // convertible.
-        let timeout = opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S).clamp(0.001, crate::units::MAX_SECONDS);
+        // Parsed values are checked (crate::units); timeout_ns's clamp keeps any other caller's
+        // value convertible.
+        let timeout = opts.kernel_timeout_s.unwrap_or(DEFAULT_KERNEL_TIMEOUT_S);
         Ok(Gpu {
             instance,
             physical,
@@ -157,8 +165,7 @@ impl Gpu {
             info,
             validation_enabled: inst.validation(),
             capture: opts.statistics,
-            kernel_timeout: std::time::Duration::try_from_secs_f64(timeout)
-                .unwrap_or(std::time::Duration::from_secs_f64(DEFAULT_KERNEL_TIMEOUT_S)),
+            kernel_timeout_ns: AtomicU64::new(timeout_ns(timeout)),
             hung: AtomicBool::new(false),
             opts: ContextOptions { device: Some(idx.to_string()), ..opts.clone() },
             logical: ManuallyDrop::new(logical),
@@ -298,6 +305,17 @@ impl Gpu {
         self.hung.load(Ordering::SeqCst)
     }
 
+    /// Seconds a submission may run from now on before it is declared hung (a sweep sets each
+    /// job's: a user kernel's own `kernel_timeout` or the sweep's).
+    pub fn set_kernel_timeout(&self, secs: f64) {
+        self.kernel_timeout_ns.store(timeout_ns(secs), Ordering::SeqCst);
+    }
+
+    /// The hang timeout in force, in seconds.
+    pub fn kernel_timeout_s(&self) -> f64 {
+        self.kernel_timeout_ns.load(Ordering::SeqCst) as f64 * 1e-9
+    }
+
     /// The same device opened again, by its index and with the same options, but without the
     /// validation layer: a second queue for work beside this device's, such as warming
     /// pipelines ([`super::pipeline::ComputePipeline::warm`]).
@@ -347,10 +365,10 @@ impl Gpu {
                     d.destroy_fence(fence, None);
                     return Err(GpuError::Vk { call: "vkQueueSubmit", result: r });
                 }
-                match d.wait_for_fences(&[fence], true, self.kernel_timeout.as_nanos().min(u64::MAX as u128) as u64) {
+                match d.wait_for_fences(&[fence], true, self.kernel_timeout_ns.load(Ordering::SeqCst)) {
                     Err(vk::Result::TIMEOUT) => {
                         self.hung.store(true, Ordering::SeqCst);
-                        Err(GpuError::Hung { secs: self.kernel_timeout.as_secs_f64() })
+                        Err(GpuError::Hung { secs: self.kernel_timeout_s() })
                     }
                     r => {
                         d.destroy_fence(fence, None);

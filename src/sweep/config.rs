@@ -80,6 +80,10 @@ pub struct KernelTable {
     pub math: Option<String>,
     /// Default: the sweep's ray kinds.
     pub rays: Option<Vec<String>>,
+    /// Seconds one dispatch of this kernel may run before it is declared hung. Default: the
+    /// sweep's `kernel_timeout` (a kernel under development can have a short one without the
+    /// built-in kernels beside it being judged by it).
+    pub kernel_timeout: Option<f64>,
 }
 
 impl KernelTable {
@@ -238,7 +242,18 @@ impl Config {
                 "[[kernel]] '{}' is named twice",
                 k.name
             );
-            kernels.push(UserKernel { name: k.name.clone(), variant, file: k.file.clone(), rays });
+            if let Some(t) = k.kernel_timeout {
+                crate::units::check_seconds("kernel_timeout", t)
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("[[kernel]] '{}'", k.name))?;
+            }
+            kernels.push(UserKernel {
+                name: k.name.clone(),
+                variant,
+                file: k.file.clone(),
+                rays,
+                kernel_timeout: k.kernel_timeout,
+            });
         }
         let whole = Config { shard: None, budget: None, ..self.clone() };
         Ok(Sweep {
@@ -326,6 +341,8 @@ pub struct UserKernel {
     pub file: PathBuf,
     /// Its ray kinds (`None`: the sweep's).
     pub rays: Option<Vec<RayKind>>,
+    /// Its own hang timeout in seconds (`None`: the sweep's).
+    pub kernel_timeout: Option<f64>,
 }
 
 impl Sweep {

@@ -130,6 +130,9 @@ pub fn run(sweep: &Sweep, out: &Path, quiet: bool, mask: &[String], kept: Vec<Ro
         }
         let job_start = std::time::Instant::now();
         bar.set_message(ex.describe(job));
+        // A user kernel may have its own hang timeout; every other job has the sweep's.
+        let own = job.user.as_ref().and_then(|n| sweep.kernels.iter().find(|k| &k.name == n)?.kernel_timeout);
+        g.set_kernel_timeout(own.unwrap_or(sweep.kernel_timeout));
         let mut row = match ex.run_job(job, &bar) {
             Ok(row) => row,
             Err(e) if g.hung() => {
@@ -144,7 +147,7 @@ pub fn run(sweep: &Sweep, out: &Path, quiet: bool, mask: &[String], kept: Vec<Ro
                     "{} hung (no result within {} s) and was recorded as FAILED in {}; the device stays busy with it, \
                      so the sweep stops here — rerun with --resume to continue after it",
                     ex.describe(job),
-                    sweep.kernel_timeout,
+                    g.kernel_timeout_s(),
                     out.display()
                 );
             }

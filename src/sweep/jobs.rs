@@ -377,6 +377,7 @@ mod tests {
             packet: None,
             math: None,
             rays: None,
+            kernel_timeout: None,
         };
         let cfg = Config {
             scenes: vec!["a.obj".into(), "scenes/teapot.obj".into()],
