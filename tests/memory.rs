@@ -291,6 +291,24 @@ fn the_command_writes_its_files_and_refuses_bad_flags() {
     for row in rows.iter().filter(|r| &r[layout] == "f32") {
         assert_eq!(&row[ratio], "1", "f32's own ratio");
     }
-    assert!(dir.join("memory.json").is_file());
+    // The roofline: the L2 bound is the GPU's L2 bandwidth over the bytes per ray requested from
+    // the L2, and the bound is the lowest of the bounds, named by `binds`.
+    let rows = halftrace::report::memory::read(&dir).unwrap().expect("memory.json");
+    assert_eq!(rows.len(), 2 * 3 * kernels);
+    for r in &rows {
+        let g = gpu(&r.gpu).unwrap();
+        let l2 = r.l2_bound_mrays.expect("an L2 bound");
+        assert!(r.l2_bytes > 0.0 && (l2 * r.l2_bytes / (g.l2_gbs * 1e3) - 1.0).abs() < 1e-9, "{} {}", r.gpu, r.kernel);
+        let bounds = [(r.issue_bound_mrays, "issue"), (Some(l2), "L2"), (Some(r.dram_bound_mrays), "DRAM")];
+        let lowest = bounds.iter().filter_map(|b| b.0).fold(f64::INFINITY, f64::min);
+        assert_eq!(r.bound_mrays, lowest, "{} {}", r.gpu, r.kernel);
+        assert!(
+            bounds.iter().any(|b| b.0 == Some(lowest) && b.1 == r.binds),
+            "{} {}: binds {}",
+            r.gpu,
+            r.kernel,
+            r.binds
+        );
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -28,6 +28,9 @@ pub struct Gpu {
     pub llc_ways: usize,
     pub dram: &'static str,
     pub dram_gbs: f64,
+    /// L2 read bandwidth, GB/s: measured, derived or assumed per GPU (`docs/gpu-memory.md`, "L2
+    /// bandwidth"); the roofline's L2 bound.
+    pub l2_gbs: f64,
     /// DRAM access energy, pJ per bit, for the memory type.
     pub pj_per_bit: f64,
     /// SIMDs per unit that `estimate`'s rays per 1000 clocks per SIMD scale by (AMD: 2 SIMD32
@@ -56,6 +59,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 16,
         dram: "GDDR6",
         dram_gbs: 960.0,
+        l2_gbs: 7680.0,
         pj_per_bit: 7.5,
         simds: 2,
     },
@@ -78,6 +82,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 16,
         dram: "GDDR6",
         dram_gbs: 512.0,
+        l2_gbs: 4608.0,
         pj_per_bit: 7.5,
         simds: 2,
     },
@@ -100,6 +105,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 1,
         dram: "HBM2",
         dram_gbs: 483.8,
+        l2_gbs: 1583.0,
         pj_per_bit: 3.9,
         simds: 4,
     },
@@ -122,6 +128,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 1,
         dram: "LPDDR4X",
         dram_gbs: 33.8,
+        l2_gbs: 256.0,
         pj_per_bit: 4.5,
         simds: 0,
     },
@@ -144,6 +151,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 16,
         dram: "LPDDR5X",
         dram_gbs: 67.2,
+        l2_gbs: 261.0,
         pj_per_bit: 4.0,
         simds: 0,
     },
@@ -166,6 +174,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 16,
         dram: "LPDDR5X",
         dram_gbs: 136.5,
+        l2_gbs: 1050.0,
         pj_per_bit: 4.0,
         simds: 0,
     },
@@ -188,6 +197,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 1,
         dram: "GDDR6X",
         dram_gbs: 936.0,
+        l2_gbs: 2604.0,
         pj_per_bit: 7.25,
         simds: 0,
     },
@@ -210,6 +220,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 1,
         dram: "HBM3",
         dram_gbs: 3350.0,
+        l2_gbs: 9800.0,
         pj_per_bit: 3.5,
         simds: 0,
     },
@@ -232,6 +243,7 @@ pub static GPUS: &[Gpu] = &[
         llc_ways: 1,
         dram: "HBM3e",
         dram_gbs: 4800.0,
+        l2_gbs: 9800.0,
         pj_per_bit: 3.5,
         simds: 0,
     },
@@ -245,11 +257,11 @@ pub fn gpu(id: &str) -> Option<&'static Gpu> {
 /// The table of the models' figures (Markdown), for the report.
 pub fn table(gpus: &[&Gpu]) -> String {
     let mut md = String::from(
-        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit (assumed) | L1/unit KiB, line, ways | L2 KiB, line, ways | LLC KiB, line, ways | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---|---:|---:|\n",
+        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit (assumed) | L1/unit KiB, line, ways | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
     );
     for g in gpus {
         md += &format!(
-            "| {} ({}) | {} {} | {} | {} | {}, {} B, {} | {}, {} B, {} | {} | {} | {:.0} | {} |\n",
+            "| {} ({}) | {} {} | {} | {} | {}, {} B, {} | {}, {} B, {} | {} | {:.0} | {} | {:.0} | {} |\n",
             g.id,
             g.name,
             g.units,
@@ -263,6 +275,7 @@ pub fn table(gpus: &[&Gpu]) -> String {
             g.l2_line,
             g.l2_ways,
             if g.llc_kib > 0 { format!("{}, {} B, {}", g.llc_kib, g.llc_line, g.llc_ways) } else { "none".into() },
+            g.l2_gbs,
             g.dram,
             g.dram_gbs,
             g.pj_per_bit

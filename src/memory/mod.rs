@@ -261,6 +261,13 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         dram_node_bytes: per(h.dram_node_bytes),
                         dram_nj: dram * 8.0 * g.pj_per_bit / 1000.0,
                         dram_bound_mrays: if dram > 0.0 { g.dram_gbs * 1e9 / dram / 1e6 } else { f64::INFINITY },
+                        l2_bound_mrays: Some(per(h.l2.accesses * g.l2_line)).map(|b| {
+                            if b > 0.0 {
+                                g.l2_gbs * 1e9 / b / 1e6
+                            } else {
+                                f64::INFINITY
+                            }
+                        }),
                         issue_bound_mrays: cfg
                             .estimates
                             .iter()

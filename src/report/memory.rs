@@ -59,7 +59,12 @@ pub struct MemRow {
     /// given (`memory --estimate`).
     #[serde(default)]
     pub issue_bound_mrays: Option<f64>,
-    /// The roofline: the lower of the issue and DRAM bounds, which one binds, ÷ f32's bound.
+    /// Rays per second the L2's bandwidth allows (millions): the GPU's L2 GB/s ÷ the bytes per
+    /// ray requested from the L2 (`None` in files written before it was modelled).
+    #[serde(default)]
+    pub l2_bound_mrays: Option<f64>,
+    /// The roofline: the lowest of the issue, L2 and DRAM bounds, which one binds ("issue",
+    /// "L2", "DRAM"), ÷ f32's bound.
     #[serde(default)]
     pub bound_mrays: f64,
     #[serde(default)]
@@ -72,14 +77,17 @@ pub struct MemRow {
 
 super::key::keyed_row!(MemRow, |r| place: [&r.gpu, "", &r.scene, &r.rays], float_controls: "", packet_impl: None);
 
-/// Sets each row's roofline (the lower of its issue and DRAM bounds) and its ratios to its f32
-/// peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
+/// Sets each row's roofline (the lowest of its issue, L2 and DRAM bounds; DRAM on a tie) and
+/// its ratios to its f32 peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
 pub fn set_ratios(rows: &mut [MemRow]) {
     for r in rows.iter_mut() {
-        (r.bound_mrays, r.binds) = match r.issue_bound_mrays {
-            Some(i) if i < r.dram_bound_mrays => (i, "issue".into()),
-            _ => (r.dram_bound_mrays, "DRAM".into()),
-        };
+        let mut bound = (r.dram_bound_mrays, "DRAM");
+        for (b, name) in [(r.l2_bound_mrays, "L2"), (r.issue_bound_mrays, "issue")] {
+            if let Some(b) = b.filter(|&b| b < bound.0) {
+                bound = (b, name);
+            }
+        }
+        (r.bound_mrays, r.binds) = (bound.0, bound.1.into());
     }
     let div = |a: f64, b: f64| (b > 0.0).then(|| a / b);
     let q: Vec<_> = rows
@@ -161,6 +169,8 @@ struct Record<'a> {
     #[serde(serialize_with = "opt_display")]
     dram_node_vs_f32: Option<f64>,
     #[serde(serialize_with = "opt_fixed::<1, _>")]
+    l2_bound_mrays: Option<f64>,
+    #[serde(serialize_with = "opt_fixed::<1, _>")]
     issue_bound_mrays: Option<f64>,
     #[serde(serialize_with = "fixed::<1, _>")]
     bound_mrays: f64,
@@ -206,12 +216,16 @@ pub fn csv(rows: &[MemRow]) -> anyhow::Result<Vec<u8>> {
         dram_bound_mrays: r.dram_bound_mrays,
         dram_vs_f32: r.dram_vs_f32.map(|v| (v * 1e4).round() / 1e4),
         dram_node_vs_f32: r.dram_node_vs_f32.map(|v| (v * 1e4).round() / 1e4),
+        l2_bound_mrays: r.l2_bound_mrays,
         issue_bound_mrays: r.issue_bound_mrays,
         bound_mrays: r.bound_mrays,
         binds: &r.binds,
         bound_vs_f32: r.bound_vs_f32.map(|v| (v * 1e4).round() / 1e4),
     }))
 }
+
+/// What can bind a roofline, as `binds` names it.
+const BINDS: [&str; 3] = ["issue", "L2", "DRAM"];
 
 /// Coherent (primary) or incoherent (every other ray kind) rays.
 fn coherence(rays: &str) -> &'static str {
@@ -228,32 +242,39 @@ fn coherence(rays: &str) -> &'static str {
 /// `estimate` gave them, else DRAM alone).
 pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
     use std::collections::BTreeMap;
-    // (gpu, coherence) → kernel label → (sum of bound ratios, of DRAM ratios, issue-bound count, n)
-    type Acc = BTreeMap<String, (f64, f64, usize, usize)>;
+    // (gpu, coherence) → kernel label → (sum of bound ratios, of DRAM ratios, [issue, L2, DRAM]
+    // bound counts, n)
+    type Acc = BTreeMap<String, (f64, f64, [usize; 3], usize)>;
     let mut acc: BTreeMap<(String, &str), Acc> = BTreeMap::new();
     let conservative = |r: &MemRow| r.what.builtin().is_some_and(|k| k.variant.layout.info().conservative);
     for r in rows.iter().filter(|r| r.ok() && conservative(r)) {
         let (Some(q), Some(d)) = (r.bound_vs_f32, r.dram_vs_f32) else { continue };
         let label = format!("{} {} B={} P={}", r.layout, r.math, r.branching, r.packet);
-        let e = acc.entry((r.gpu.clone(), coherence(&r.rays))).or_default().entry(label).or_insert((0.0, 0.0, 0, 0));
+        let e =
+            acc.entry((r.gpu.clone(), coherence(&r.rays))).or_default().entry(label).or_insert((0.0, 0.0, [0; 3], 0));
         e.0 += q;
         e.1 += d;
-        e.2 += (r.binds == "issue") as usize;
+        if let Some(i) = BINDS.iter().position(|b| *b == r.binds) {
+            e.2[i] += 1;
+        }
         e.3 += 1;
     }
     let mut out = Vec::new();
     for ((gpu, kind), m) in acc {
         let best = m.iter().max_by(|a, b| (a.1 .0 / a.1 .3 as f64).total_cmp(&(b.1 .0 / b.1 .3 as f64)));
-        if let Some((l, (q, d, issue, n))) = best {
-            let n = *n as f64;
+        if let Some((l, (q, d, counts, n))) = best {
             let modelled = rows.iter().any(|r| r.gpu == gpu && r.issue_bound_mrays.is_some());
-            let binds = if !modelled {
-                "DRAM alone: no cycle model joined for this GPU".to_string()
-            } else if *issue == 0 {
-                "DRAM binds in every ray set".to_string()
-            } else {
-                format!("issue binds in {issue} of {n} ray sets")
+            let binds = match counts.iter().position(|&c| c == *n) {
+                Some(i) => format!("{} binds in every ray set", BINDS[i]),
+                None => {
+                    let parts: Vec<String> =
+                        BINDS.iter().zip(counts).filter(|x| *x.1 > 0).map(|(b, c)| format!("{b} in {c}")).collect();
+                    format!("binds: {} of {n} ray sets", parts.join(", "))
+                }
             };
+            let binds =
+                if modelled { binds } else { format!("{binds} (memory alone: no cycle model joined for this GPU)") };
+            let n = *n as f64;
             out.push(format!(
                 "{gpu}, {kind} rays: **{l}**, roofline bound {:.2}× f32's, DRAM bytes {:.2}× f32's; {binds} (model)",
                 q / n,
@@ -268,8 +289,9 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
 pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
     let mut md = String::from("# The memory side of a ray\n\n## Verdict per GPU (the model's)\n\n");
     md += "Among the conservative layouts' kernels, the highest roofline bound as a ratio to f32's at the same \
-           B and P (mean over scenes and ray sets): the lower of the rays/s DRAM bandwidth allows and, where \
-           `memory --estimate` joined AMD's cycle estimate, the rays/s issue allows.\n\n";
+           B and P (mean over scenes and ray sets): the lowest of the rays/s DRAM bandwidth allows, the rays/s the \
+           L2's bandwidth allows and, where `memory --estimate` joined AMD's cycle estimate, the rays/s issue \
+           allows.\n\n";
     for v in verdicts(rows) {
         md += &format!("- {v}\n");
     }
@@ -289,12 +311,12 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
             "\n## {g}, {scene} ({} triangles), {kind} rays ({}, wave {})\n\n",
             rs[0].triangles, rs[0].ray_count, rs[0].wave
         );
-        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | issue-bound | binds | bound ÷ f32 |\n";
-        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
+        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 |\n";
+        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
         for r in rs {
             let q = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.2}"));
             md += &format!(
-                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} |\n",
+                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.node_bytes,
                 r.vert_bytes,
@@ -313,6 +335,7 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
                 q(r.dram_node_vs_f32),
                 r.dram_nj,
                 r.dram_bound_mrays,
+                r.l2_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
                 r.issue_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
                 r.binds,
                 q(r.bound_vs_f32)
