@@ -1,7 +1,7 @@
 //! Apple: Honeykrisp (Mesa's driver for Apple's AGX GPUs) under the asahi drm-shim — in Debian's
 //! newest Mesa (`isa --compilers newest`), not in the pinned build. The shim fakes an M1 (G13G).
 
-use super::{model, Input, Neutral, Occupancy, Shim, Stats, Vendor, GPU_DEFAULT};
+use super::{model, Input, Neutral, Occupancy, Quirks, Shim, Stats, Vendor, GPU_DEFAULT};
 use ash::vk;
 
 pub static APPLE: Vendor = Vendor {
@@ -15,7 +15,8 @@ pub static APPLE: Vendor = Vendor {
     sources: [
         "GPRs ÷ 2 (16-bit registers)",
         "Scratch",
-        "Spills + Fills",
+        "Spills + Fills (every stack_store and stack_load: the kernels' own stacks in scratch as well as register \
+         spills)",
         "Threads (threads in flight)",
         "Instructions",
         "ALU (estimated ALU cycles; FSCIB and IC beside)",
@@ -25,7 +26,10 @@ pub static APPLE: Vendor = Vendor {
     occupancy: Some(Occupancy { unit: "threads", words: "threads in flight", note: "Apple" }),
     cycles: "`ALU` (Honeykrisp's statistics): the estimated ALU cycles of the whole shader (its `FSCIB` and `IC` \
              estimates beside in isa.csv), each instruction once as far as its statistics say",
-    quirks: GPU_DEFAULT,
+    // Honeykrisp keeps private arrays of up to 256 bytes in registers, as turnip does (measured:
+    // f16h's group stack allocated past 192 bytes a field array still filled the 255 16-bit
+    // registers and spilled thousands; past 256 it takes 80 and spills 15).
+    quirks: Quirks { register_array_bytes: 256, ..GPU_DEFAULT },
 };
 
 fn neutral(s: &Input) -> Neutral {
