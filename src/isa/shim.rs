@@ -252,19 +252,29 @@ pub fn run_model(
     let (stdout, status, stderr) = run_child(Command::new(&exe).args(&args.0).envs(environment(&shim, m, dir)))?;
     let mut rows: Vec<IsaRow> = Vec::new();
     let mut bad_lines = 0;
+    let mut other = String::new();
     for line in stdout.lines() {
         match serde_json::from_str::<IsaRow>(line) {
             Ok(r) => rows.push(IsaRow::typed(r)),
-            Err(_) => bad_lines += 1,
+            Err(_) => {
+                bad_lines += 1;
+                other += line;
+                other.push('\n');
+            }
         }
     }
     // The driver's own printout (IR3_SHADER_DEBUG, INTEL_DEBUG, NAK_DEBUG, …) kept for
-    // checking the statistics against: HALFTRACE_DRIVER_STDERR=DIR writes DIR/<model>.txt.
+    // checking the statistics against: HALFTRACE_DRIVER_STDERR=DIR writes DIR/<model>.txt, and
+    // what a driver prints on stdout instead (AGX_MESA_DEBUG=shaders) DIR/<model>.stdout.txt.
     if let Some(d) = std::env::var_os("HALFTRACE_DRIVER_STDERR").map(std::path::PathBuf::from) {
         let p = d.join(format!("{}.txt", m.name));
         std::fs::create_dir_all(&d)
             .and_then(|_| std::fs::write(&p, &stderr))
             .with_context(|| format!("HALFTRACE_DRIVER_STDERR: writing {}", p.display()))?;
+        if !other.is_empty() {
+            let p = d.join(format!("{}.stdout.txt", m.name));
+            std::fs::write(&p, &other).with_context(|| format!("HALFTRACE_DRIVER_STDERR: writing {}", p.display()))?;
+        }
     }
     attach_estimates(&mut rows, &stderr);
     let mut note = None;
