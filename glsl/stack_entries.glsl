@@ -8,8 +8,11 @@
 //   void enter(inout uint ni, inout Entry en, RayPre r, inout Counts c)   after a pop
 // Its state is private globals (inlined into main, they are main's locals).
 
-uint st_node[STACK_SIZE];
-Entry st[STACK_SIZE];
+// STACK_ALLOC >= STACK_SIZE: where a compiler keeps private arrays in registers up to a size,
+// the arrays are allocated long enough that neither fits there (Variant::stack_alloc); only the
+// first STACK_SIZE are ever used.
+uint st_node[STACK_ALLOC];
+Entry st[STACK_ALLOC];
 // Entries on the stack.
 int sp;
 

@@ -58,10 +58,10 @@ pub struct DeviceInfo {
     /// later, 3 on 1.1 (4 with `VK_KHR_spirv_1_4`), 0 on 1.0.
     pub spirv_minor: u8,
     /// The largest private array the driver's compiler keeps in registers rather than in
-    /// memory, in bytes, where it is known to matter: turnip (Adreno) keeps every one of up to
-    /// 256 bytes there, each field of an array of structs on its own (measured with `isa` on
-    /// a740: f16h's group stack at B = 4 needs 192 registers with 64 groups, 128 with 65).
-    /// 0: none known. A vendor quirk ([`DeviceInfo::with_quirks`]).
+    /// memory, in bytes, where it is known to matter: turnip (Adreno) keeps arrays there, each
+    /// field of an array of structs on its own, of up to 256 bytes on Mesa 25.0.7 and up to 768
+    /// on 26.2 (measured with `isa` on a740; the vendor file says how); Honeykrisp (Apple) of
+    /// up to 256. 0: none known. A vendor quirk ([`DeviceInfo::with_quirks`]).
     pub register_array_bytes: u32,
     /// Whether kernels that defer entries keep the entry of the child to enter next in shared
     /// memory rather than in registers (`PENDING_SHARED`): on GPUs it saves registers (isa,

@@ -213,7 +213,8 @@ impl Variant {
     ///   (`glsl/stack_groups.glsl`) instead of an entry per child (`stack_entries.glsl`), and
     ///   `GROUPS_ALLOC`, the groups it is allocated ([`Variant::groups_alloc`]), and
     ///   `PENDING_SHARED` where the device's build keeps the entry of the child to enter next
-    ///   in shared memory ([`DeviceBuild::pending_shared`]).
+    ///   in shared memory ([`DeviceBuild::pending_shared`]); else `STACK_ALLOC`, the entries the
+    ///   entry stack is allocated ([`Variant::stack_alloc`]).
     /// - `PACKET_SUBGROUP` or `PACKET_HYBRID`: a packet's reductions in a subgroup, or a
     ///   subgroup then shared memory; neither: shared memory (`glsl/packet.glsl`).
     /// - `STATS`: the kernel writes the work counters.
@@ -239,6 +240,8 @@ impl Variant {
             if dev.pending_shared {
                 d.push(("PENDING_SHARED".into(), "1".into()));
             }
+        } else {
+            d.push(("STACK_ALLOC".into(), self.stack_alloc(dev).to_string()));
         }
         match imp {
             PacketImpl::Subgroup => d.push(("PACKET_SUBGROUP".into(), "1".into())),
@@ -271,6 +274,18 @@ impl Variant {
         }
         let smallest = self.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
         groups.max(dev.register_array_bytes as usize / smallest + 1)
+    }
+
+    /// The entries the entry stack is allocated (`STACK_ALLOC`): [`stack_entries`], or where the
+    /// device's compiler keeps private arrays of up to `dev.register_array_bytes` in registers,
+    /// enough that the array of the entry's smallest field (or the 4-byte node) is larger.
+    pub fn stack_alloc(&self, dev: DeviceBuild) -> usize {
+        let entries = stack_entries(self.branching);
+        if dev.register_array_bytes == 0 {
+            return entries;
+        }
+        let smallest = self.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
+        entries.max(dev.register_array_bytes as usize / smallest + 1)
     }
 
     /// The layout's stack entry fields in this variant's math.
@@ -354,6 +369,26 @@ mod tests {
     }
 
     #[test]
+    fn the_entry_stack_is_allocated_past_what_registers_hold() {
+        let turnip = DeviceBuild { register_array_bytes: 768, ..DeviceBuild::FULL };
+        for l in LayoutId::all().filter(|l| !l.info().defer_entries) {
+            for &m in l.info().maths {
+                for b in [2, 4, 8, 16] {
+                    let v = Variant::new(l, b, 1).with_math(m);
+                    assert_eq!(v.stack_alloc(DeviceBuild::FULL), stack_entries(b), "{}", v.name(false));
+                    let smallest =
+                        v.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
+                    let n = v.stack_alloc(turnip);
+                    assert!(n >= stack_entries(b) && n * smallest > 768, "{}: {n}", v.name(false));
+                    assert!(n == stack_entries(b) || (n - 1) * smallest <= 768, "{}: {n}", v.name(false));
+                    let defines = v.defines(PacketImpl::Subgroup, false, turnip);
+                    assert!(defines.contains(&("STACK_ALLOC".into(), n.to_string())), "{}", v.name(false));
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_group_stack_is_allocated_past_what_registers_hold() {
         let f16h = LayoutId::parse("f16h").unwrap();
         let poster = LayoutId::parse("f16h-poster").unwrap();
@@ -415,9 +450,9 @@ pub struct DeviceBuild {
     /// (1.0). The same kernel either way; an older device is handed the version it accepts.
     pub spirv_minor: u8,
     /// The largest private array the compiler keeps in registers (bytes; 0: none known,
-    /// [`crate::gpu::DeviceInfo::register_array_bytes`]): the group stack is then allocated
-    /// long enough that each of its fields' arrays is larger (`GROUPS_ALLOC`), so that it is
-    /// kept in memory, as on other devices. Only its length changes.
+    /// [`crate::gpu::DeviceInfo::register_array_bytes`]): the stack is then allocated long
+    /// enough that each of its fields' arrays is larger (`GROUPS_ALLOC`, `STACK_ALLOC`), so that
+    /// it is kept in memory, as on other devices. Only its length changes.
     pub register_array_bytes: u32,
     /// A kernel that defers entries keeps the entry of the child it enters next in shared
     /// memory, one per invocation (`PENDING_SHARED`, `glsl/stack_groups.glsl`), not in

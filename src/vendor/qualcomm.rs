@@ -27,10 +27,13 @@ pub static QUALCOMM: Vendor = Vendor {
     disassembly: Some(Disassembly::Ir3),
     occupancy: Some(Occupancy { unit: "waves/core", words: "waves per core", note: "Adreno" }),
     cycles: "no cycle estimate from this driver",
-    // turnip keeps every private array of up to 256 bytes in registers, each field of an
-    // array of structs on its own (isa on a740: f16h's group stack at B = 4 needs 192
-    // registers with 64 groups, 128 with 65).
-    quirks: Quirks { register_array_bytes: 256, pending_shared: true },
+    // turnip keeps private arrays in registers, each field of an array of structs on its own:
+    // on Mesa 25.0.7 every array of up to 256 bytes (a740: f16h's group stack at B = 4 needs
+    // 192 registers with 64 groups, 128 with 65); on 26.2 arrays of up to 768 bytes, its 48
+    // vec4 registers, while they fit beside each other (a740: f32's two 388-byte stack arrays,
+    // one kept there, 192 registers and 4 waves; each allocated past 704 bytes, the same;
+    // past 768, 76 and 10). The stacks are allocated past 768, which serves both releases.
+    quirks: Quirks { register_array_bytes: 768, pending_shared: true },
 };
 
 fn neutral(s: &Input) -> Neutral {

@@ -400,6 +400,17 @@ fn isa_builds_on_the_newest_compilers() {
             assert!(r.cycles.is_some_and(|c| c > 0.0), "{} {}: no static cycle count", r.family, r.kernel);
         }
     }
+    // turnip on Mesa 26.2 keeps private arrays of up to 768 bytes (its register file) in
+    // registers while they fit: f32's entry stack, one 388-byte field array of it, took all 48
+    // vec4 registers (192). Both stacks are allocated past that on turnip; the targets
+    // on a740: f32 at most 96 registers, f16h's private loads at most f32's + 10.
+    let a740 = |l: &'static str| rows.iter().filter(move |r| r.family == "a740" && r.layout == l);
+    let f32 = a740("f32").next().expect("a740 f32");
+    assert!(f32.registers.is_some_and(|g| g <= 96.0), "a740 f32 on Mesa {release}: {:?}", f32.stats);
+    let ldp = |r: &IsaRow| r.stats.get("LDP Count").copied().unwrap_or(f64::NAN);
+    for h in a740("f16h") {
+        assert!(ldp(h) <= ldp(f32) + 10.0, "a740 {}: {} private loads, f32 {}", h.kernel, ldp(h), ldp(f32));
+    }
     let (ok, _, stderr) = cli(&[
         "isa",
         "--compilers",
