@@ -4,8 +4,9 @@
 //! kernel includes ([`glsl_header`]). Nothing in `glsl/` restates these values by hand.
 //!
 //! Per variant the header also carries the layout's stack entry, declared in Rust by the
-//! layout (`Layout::stack_entry`), so the report's stack bytes and the kernel's stack are the
-//! same figure.
+//! layout (`Layout::stack_entry`), so the report's stack bytes and the part of the kernel's
+//! stack it uses are the same figure (a device's build may allocate more: `STACK_ALLOC`,
+//! `GROUPS_ALLOC`).
 
 use crate::base::glsl::GlslStruct;
 use crate::base::{Counters, Hit};

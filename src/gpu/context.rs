@@ -102,6 +102,11 @@ fn env_limit(var: &str) -> Result<Option<u64>, GpuError> {
     }
 }
 
+/// A fence wait's nanoseconds as seconds, as messages print them (`30`, not `30.000000000000004`).
+fn timeout_secs(ns: u64) -> f64 {
+    std::time::Duration::from_nanos(ns).as_secs_f64()
+}
+
 /// `secs` as a fence wait's nanoseconds, clamped into what the wait takes.
 fn timeout_ns(secs: f64) -> u64 {
     let d = std::time::Duration::try_from_secs_f64(secs.clamp(0.001, crate::units::MAX_SECONDS))
@@ -313,14 +318,18 @@ impl Gpu {
 
     /// The hang timeout in force, in seconds.
     pub fn kernel_timeout_s(&self) -> f64 {
-        self.kernel_timeout_ns.load(Ordering::SeqCst) as f64 * 1e-9
+        timeout_secs(self.kernel_timeout_ns.load(Ordering::SeqCst))
     }
 
     /// The same device opened again, by its index and with the same options, but without the
     /// validation layer: a second queue for work beside this device's, such as warming
     /// pipelines ([`super::pipeline::ComputePipeline::warm`]).
     pub fn sibling(&self) -> Result<Gpu, GpuError> {
-        Gpu::new(&ContextOptions { validation: false, ..self.opts.clone() })
+        Gpu::new(&ContextOptions {
+            validation: false,
+            kernel_timeout_s: Some(self.kernel_timeout_s()),
+            ..self.opts.clone()
+        })
     }
 
     /// Whether the driver compiles a compute pipeline's code at its first dispatch rather than
@@ -396,6 +405,18 @@ impl Drop for Gpu {
         unsafe {
             ManuallyDrop::drop(&mut self.logical);
             ManuallyDrop::drop(&mut self.inst);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// A timeout reads back as it was given: messages say "within 30 s".
+    #[test]
+    fn timeouts_read_back_as_given() {
+        for secs in [0.5, 2.0, 30.0, 120.0, 600.0, 604800.0] {
+            assert_eq!(super::timeout_secs(super::timeout_ns(secs)), secs);
+            assert_eq!(format!("{}", super::timeout_secs(super::timeout_ns(secs))), format!("{secs}"));
         }
     }
 }

@@ -279,10 +279,7 @@ fn device_build(g: &Gpu) -> String {
         if b.storage16 { "16-bit storage" } else { "fp16 nodes from 32-bit words" },
         b.spirv_minor,
         if b.register_array_bytes > 0 {
-            format!(
-                ", group stack allocated past {} B (smaller private arrays stay in registers)",
-                b.register_array_bytes
-            )
+            format!(", stacks allocated past {} B (smaller private arrays stay in registers)", b.register_array_bytes)
         } else {
             String::new()
         },

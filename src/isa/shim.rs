@@ -271,9 +271,12 @@ pub fn run_model(
         std::fs::create_dir_all(&d)
             .and_then(|_| std::fs::write(&p, &stderr))
             .with_context(|| format!("HALFTRACE_DRIVER_STDERR: writing {}", p.display()))?;
+        let p = d.join(format!("{}.stdout.txt", m.name));
         if !other.is_empty() {
-            let p = d.join(format!("{}.stdout.txt", m.name));
             std::fs::write(&p, &other).with_context(|| format!("HALFTRACE_DRIVER_STDERR: writing {}", p.display()))?;
+        } else if p.is_file() {
+            // An earlier run's, which would be taken for this one's.
+            std::fs::remove_file(&p).with_context(|| format!("HALFTRACE_DRIVER_STDERR: removing {}", p.display()))?;
         }
     }
     attach_estimates(&mut rows, &stderr);

@@ -228,6 +228,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                     let rate = |hits: u64, acc: u64| if acc > 0 { hits as f64 / acc as f64 } else { 0.0 };
                     let llc = h.llc.as_ref();
                     let dram = per(h.dram_bytes);
+                    let l2_bytes = per(h.l2.accesses * g.l2_line);
                     MemRow {
                         gpu: g.id.into(),
                         scene: scene.clone(),
@@ -253,7 +254,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         lines128: lines[2],
                         l1_bytes: per(l1_acc * g.l1_line),
                         l1_hit: rate(l1_hits, l1_acc),
-                        l2_bytes: per(h.l2.accesses * g.l2_line),
+                        l2_bytes,
                         l2_hit: rate(h.l2.hits, h.l2.accesses),
                         llc_bytes: llc.map_or(0.0, |c| per(c.accesses * c.line)),
                         llc_hit: llc.map_or(0.0, |c| rate(c.hits, c.accesses)),
@@ -261,7 +262,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         dram_node_bytes: per(h.dram_node_bytes),
                         dram_nj: dram * 8.0 * g.pj_per_bit / 1000.0,
                         dram_bound_mrays: if dram > 0.0 { g.dram_gbs * 1e9 / dram / 1e6 } else { f64::INFINITY },
-                        l2_bound_mrays: Some(per(h.l2.accesses * g.l2_line)).map(|b| {
+                        l2_bound_mrays: Some(l2_bytes).map(|b| {
                             if b > 0.0 {
                                 g.l2_gbs * 1e9 / b / 1e6
                             } else {

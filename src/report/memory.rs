@@ -77,7 +77,8 @@ pub struct MemRow {
 
 super::key::keyed_row!(MemRow, |r| place: [&r.gpu, "", &r.scene, &r.rays], float_controls: "", packet_impl: None);
 
-/// Sets each row's roofline (the lowest of its issue, L2 and DRAM bounds; DRAM on a tie) and
+/// Sets each row's roofline (the lowest of its issue, L2 and DRAM bounds; on a tie DRAM, then
+/// L2) and
 /// its ratios to its f32 peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
 pub fn set_ratios(rows: &mut [MemRow]) {
     for r in rows.iter_mut() {
@@ -274,6 +275,9 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
             };
             let binds =
                 if modelled { binds } else { format!("{binds} (memory alone: no cycle model joined for this GPU)") };
+            // A file written before the L2 bound was modelled.
+            let no_l2 = rows.iter().any(|r| r.gpu == gpu && r.l2_bound_mrays.is_none());
+            let binds = if no_l2 { format!("{binds} (no L2 bound in this file)") } else { binds };
             let n = *n as f64;
             out.push(format!(
                 "{gpu}, {kind} rays: **{l}**, roofline bound {:.2}× f32's, DRAM bytes {:.2}× f32's; {binds} (model)",
