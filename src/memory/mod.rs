@@ -229,6 +229,9 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                     let llc = h.llc.as_ref();
                     let dram = per(h.dram_bytes);
                     let l2_bytes = per(h.l2.accesses * g.l2_line);
+                    // Millions of rays per second `gbs` GB/s allows at `bytes` per ray.
+                    let bound =
+                        |gbs: f64, bytes: f64| if bytes > 0.0 { gbs * 1e9 / bytes / 1e6 } else { f64::INFINITY };
                     MemRow {
                         gpu: g.id.into(),
                         scene: scene.clone(),
@@ -261,14 +264,8 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         dram_bytes: dram,
                         dram_node_bytes: per(h.dram_node_bytes),
                         dram_nj: dram * 8.0 * g.pj_per_bit / 1000.0,
-                        dram_bound_mrays: if dram > 0.0 { g.dram_gbs * 1e9 / dram / 1e6 } else { f64::INFINITY },
-                        l2_bound_mrays: Some(l2_bytes).map(|b| {
-                            if b > 0.0 {
-                                g.l2_gbs * 1e9 / b / 1e6
-                            } else {
-                                f64::INFINITY
-                            }
-                        }),
+                        dram_bound_mrays: bound(g.dram_gbs, dram),
+                        l2_bound_mrays: Some(bound(g.l2_gbs, l2_bytes)),
                         issue_bound_mrays: cfg
                             .estimates
                             .iter()

@@ -78,8 +78,7 @@ pub struct MemRow {
 super::key::keyed_row!(MemRow, |r| place: [&r.gpu, "", &r.scene, &r.rays], float_controls: "", packet_impl: None);
 
 /// Sets each row's roofline (the lowest of its issue, L2 and DRAM bounds; on a tie DRAM, then
-/// L2) and
-/// its ratios to its f32 peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
+/// L2) and its ratios to its f32 peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
 pub fn set_ratios(rows: &mut [MemRow]) {
     for r in rows.iter_mut() {
         let mut bound = (r.dram_bound_mrays, "DRAM");

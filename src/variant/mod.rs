@@ -268,24 +268,25 @@ impl Variant {
     /// enough that the array of the group's smallest field (an entry field, or the 4-byte node
     /// and meta) is larger.
     pub fn groups_alloc(&self, dev: DeviceBuild) -> usize {
-        let groups = stack_groups(self.branching);
-        if dev.register_array_bytes == 0 {
-            return groups;
-        }
-        let smallest = self.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
-        groups.max(dev.register_array_bytes as usize / smallest + 1)
+        self.past_register_arrays(stack_groups(self.branching), dev)
     }
 
     /// The entries the entry stack is allocated (`STACK_ALLOC`): [`stack_entries`], or where the
     /// device's compiler keeps private arrays of up to `dev.register_array_bytes` in registers,
     /// enough that the array of the entry's smallest field (or the 4-byte node) is larger.
     pub fn stack_alloc(&self, dev: DeviceBuild) -> usize {
-        let entries = stack_entries(self.branching);
+        self.past_register_arrays(stack_entries(self.branching), dev)
+    }
+
+    /// A stack of `used` records allocated, where `dev`'s compiler keeps private arrays of up
+    /// to `dev.register_array_bytes` in registers, long enough that the array of its smallest
+    /// field (an entry field, or a 4-byte node) is larger; elsewhere `used`.
+    fn past_register_arrays(&self, used: usize, dev: DeviceBuild) -> usize {
         if dev.register_array_bytes == 0 {
-            return entries;
+            return used;
         }
         let smallest = self.stack_entry().iter().map(|(_, t)| crate::interface::glsl_size(t)).fold(4, usize::min);
-        entries.max(dev.register_array_bytes as usize / smallest + 1)
+        used.max(dev.register_array_bytes as usize / smallest + 1)
     }
 
     /// The layout's stack entry fields in this variant's math.
