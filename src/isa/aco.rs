@@ -201,6 +201,11 @@ impl Replay<'_> {
         let then = self.create(inner, None)?;
         self.region(then, inner)?;
         self.create(d, None)?;
+        // ACO 26 leaves out an empty else side (no invert block, no else blocks): the merge
+        // follows the then side's linear block.
+        if self.block(self.depth.len())?.is("merge") {
+            return self.create(d, Some("merge"));
+        }
         self.create(d, Some("invert"))?;
         let els = self.create(inner, None)?;
         self.region(els, inner)?;
