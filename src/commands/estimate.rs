@@ -39,9 +39,10 @@ pub struct EstimateArgs {
     /// Replace the estimate files in --out.
     #[arg(long)]
     pub force: bool,
-    /// The other vendors' compilers: `newest` (Debian's newest Mesa,
-    /// scripts/install-newest-compilers.sh) or a compilers folder; default: the pinned build of
-    /// scripts/install-compilers.sh. Each row's driver names its Mesa release.
+    /// The compilers release: `newest` (Debian's newest Mesa, scripts/install-newest-compilers.sh:
+    /// AMD's families under its amdgpu shim) or a compilers folder; default: the pinned build of
+    /// scripts/install-compilers.sh for the other vendors, the installed RADV's null devices for
+    /// AMD. Each row's driver names its Mesa release.
     #[arg(long)]
     pub compilers: Option<String>,
 }
@@ -68,8 +69,20 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let exe = std::env::current_exe()?;
     // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
     // installed RADV opens and every model.
-    let (families, models, grouped) = isa::families(&a.family, &exe, false)?;
+    // The release: with one whose folder has the amdgpu shim (Mesa 26 on), AMD's families are
+    // built under it.
+    let folder =
+        a.compilers.as_deref().map(|c| isa::shim::compilers_for(Some(c)).map_err(anyhow::Error::msg)).transpose()?;
+    let amd = folder.filter(|d| isa::shim::amd_shim(d).is_some());
+    let (families, models, grouped) = isa::families(&a.family, &exe, false, amd.as_deref())?;
     let (compilers, models) = isa::shim::models_compilers(models, &grouped, a.compilers.as_deref())?;
+    if let Some(c) = &a.compilers {
+        anyhow::ensure!(
+            !models.is_empty() || (amd.is_some() && !families.is_empty()),
+            "--compilers {c}: nothing asked for builds there: name a model of the other vendors{} (--family)",
+            if amd.is_some() { " or an AMD family" } else { "" }
+        );
+    }
     let kinds: Vec<crate::rays::RayKind> = a
         .rays
         .iter()
@@ -90,19 +103,20 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
         crate::scene::load(scene).with_context(|| format!("--scene {}", scene.display()))?;
     }
     let rays = estimate::Rays { scenes: a.scene.clone(), kinds, res: a.res };
-    let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &rays)?;
+    let (rows, ray_rows) = estimate::run(&exe, &families, matrix, &a.layouts, &rays, amd.as_deref())?;
     // The other vendors: their compilers' whole-shader estimates, beside.
     let vendor_rows = if models.is_empty() {
         Vec::new()
     } else {
+        let dir = compilers.clone().expect("models have a compilers folder");
         let cfg = isa::Config {
-            targets: models.iter().cloned().map(isa::Target::Model).collect(),
+            targets: models.iter().map(|m| isa::Target::Model(m.clone(), dir.clone())).collect(),
             matrix,
             layouts: a.layouts.clone(),
             builds: isa::plan(matrix, &a.layouts),
             disasm: None,
             validation: false,
-            compilers: compilers.clone(),
+            releases: 1,
         };
         isa::run(&cfg, &exe, |_| {})?.rows
     };

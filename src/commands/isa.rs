@@ -65,11 +65,13 @@ pub struct IsaArgs {
     /// No line per kernel.
     #[arg(long)]
     pub quiet: bool,
-    /// The other vendors' compilers: `newest` (Debian's newest Mesa,
-    /// scripts/install-newest-compilers.sh) or a compilers folder; default: the pinned build of
-    /// scripts/install-compilers.sh. Each row's driver names its Mesa release.
-    #[arg(long)]
-    pub compilers: Option<String>,
+    /// The compilers release(s), comma-separated: `pinned` (the default: the other vendors
+    /// from scripts/install-compilers.sh's build, AMD from the installed RADV's null devices),
+    /// `newest` (Debian's newest Mesa, scripts/install-newest-compilers.sh: AMD under its amdgpu
+    /// shim) or a compilers folder. Two or more build everything asked on each, side by side,
+    /// and isa.md shows what the release changes. Each row's driver names its Mesa release.
+    #[arg(long, value_delimiter = ',')]
+    pub compilers: Vec<String>,
 }
 
 impl IsaArgs {
@@ -86,7 +88,7 @@ impl IsaArgs {
             .flag("disasm", self.disasm)
             .flag("validation", self.validation)
             .flag("quiet", self.quiet)
-            .opt("compilers", self.compilers.as_ref())
+            .list("compilers", &self.compilers)
     }
 }
 
@@ -143,10 +145,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("isa")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;
-    let (families, models, grouped) = isa::families(&a.family, &exe, a.device.is_empty())?;
-    let (compilers, models) = isa::shim::models_compilers(models, &grouped, a.compilers.as_deref())?;
-    let mut targets: Vec<Target> = families.into_iter().map(Target::Family).collect();
-    targets.extend(models.into_iter().map(Target::Model));
+    let (mut targets, releases) = isa::releases_targets(&a.family, &exe, a.device.is_empty(), &a.compilers)?;
     targets.extend(a.device.iter().cloned().map(Target::Device));
     // Each device once: a repeated name would give rows `report` refuses as duplicates.
     let mut seen = Vec::new();
@@ -173,7 +172,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         builds: isa::plan(matrix, &a.layouts),
         disasm,
         validation: a.validation,
-        compilers,
+        releases,
     };
     let quiet = a.quiet;
     let mut stdout_err = None;

@@ -144,10 +144,11 @@ pub fn run(
     matrix: Matrix,
     layouts: &[LayoutId],
     rays: &Rays,
+    amd: Option<&Path>,
 ) -> anyhow::Result<(Vec<Row>, Vec<RayRow>)> {
     use rayon::prelude::*;
     let built: Vec<Vec<_>> =
-        families.par_iter().map(|f| isa::aco_programs(exe, f, matrix, layouts)).collect::<anyhow::Result<_>>()?;
+        families.par_iter().map(|f| isa::aco_programs(exe, f, matrix, layouts, amd)).collect::<anyhow::Result<_>>()?;
     let by_family: Vec<(String, &Built)> = families.iter().cloned().zip(built.iter().map(Vec::as_slice)).collect();
     let ray_out = ray_rows(&by_family, rays)?;
     let mut rows = Vec::new();

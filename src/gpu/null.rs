@@ -121,6 +121,14 @@ pub fn open(name: &str, validation: bool) -> Result<Gpu, GpuError> {
     with_family(fam.name, || {
         let devices = list_devices()?;
         let d = null_device(fam, &devices).ok_or_else(|| {
+            if let Some(kernel) = super::device::shim() {
+                return GpuError::Other(format!(
+                    "--family {}: the {kernel} shim opens no device for it (AMDGPU_GPU_ID={}; the shim knows fewer \
+                     families than Mesa)",
+                    fam.name,
+                    std::env::var("AMDGPU_GPU_ID").unwrap_or_default()
+                ));
+            }
             GpuError::Other(format!(
                 "--family {}: the installed RADV opens no null device for it (is RADV — Debian's mesa-vulkan-drivers — \
                  installed, and does this Mesa know the family? `halftrace devices` lists those it does)",

@@ -11,7 +11,7 @@ pub mod mix;
 pub mod shim;
 mod targets;
 
-pub use targets::{default_families, families, known_families, Target};
+pub use targets::{default_families, families, known_families, releases_targets, Target};
 
 use crate::base::Status;
 use crate::gpu::executable::executables;
@@ -78,8 +78,9 @@ pub struct Config {
     /// under `disasm/<device>/` of the output folder.
     pub disasm: Option<PathBuf>,
     pub validation: bool,
-    /// The compilers folder the models are built with ([`shim::compilers_for`]).
-    pub compilers: Option<PathBuf>,
+    /// Whether the targets come from more than one compilers release: each child's
+    /// representations then go under `disasm/<name>-mesa-<release>/`.
+    pub releases: usize,
 }
 
 /// What a run produced.
@@ -94,8 +95,10 @@ pub struct Summary {
 /// Opens a target for statistics.
 fn open(t: &Target, validation: bool) -> Result<(Gpu, Option<Family>), GpuError> {
     match t {
-        Target::Family(f) => Ok((null::open(f, validation)?, null::family(f))),
-        Target::Model(m) => Err(GpuError::Other(format!("model {m} opens in its own process (isa-model)"))),
+        Target::Family(f, None) => Ok((null::open(f, validation)?, null::family(f))),
+        Target::Family(f, Some(_)) | Target::Model(f, _) => {
+            Err(GpuError::Other(format!("{f} opens under its drm-shim in its own process (isa-model)")))
+        }
         Target::Device(d) => {
             let g = Gpu::new(&ContextOptions {
                 device: Some(d.clone()),
@@ -123,19 +126,13 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
     let mut rows = Vec::new();
     let mut messages = Vec::new();
     let mut notes = Vec::new();
-    let models: Vec<&String> = cfg
-        .targets
-        .iter()
-        .filter_map(|t| match t {
-            Target::Model(name) => Some(name),
-            _ => None,
-        })
-        .collect();
+    // Whatever opens under a drm-shim: a child process each, as many at once as there are cores.
+    let children: Vec<&Target> = cfg.targets.iter().filter(|t| child_of(t).is_some()).collect();
     let mut runs: Vec<Option<shim::ModelRun>> =
-        models.par_iter().map(|name| run_model(cfg, exe, name).map(Some)).collect::<anyhow::Result<_>>()?;
+        children.par_iter().map(|t| run_model(cfg, exe, t).map(Some)).collect::<anyhow::Result<_>>()?;
     let mut next_run = runs.iter_mut();
     for t in &cfg.targets {
-        if let Target::Model(_) = t {
+        if child_of(t).is_some() {
             let run = next_run.next().and_then(Option::take).expect("one run per model");
             for r in &run.rows {
                 each(r);
@@ -146,7 +143,7 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
         }
         let (g, fam) = open(t, cfg.validation)?;
         let label = match t {
-            Target::Family(f) => f.clone(),
+            Target::Family(f, _) => f.clone(),
             _ => slug(&g.info.name),
         };
         let who = Who { family: fam, model: None };
@@ -161,21 +158,36 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
     Ok(Summary { rows, validation_messages: messages, notes })
 }
 
-/// The rows of model `name`, built in its own process.
-fn run_model(cfg: &Config, exe: &Path, name: &str) -> anyhow::Result<shim::ModelRun> {
-    let (v, m) = crate::vendor::find_model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?;
-    let dir = match &cfg.compilers {
-        Some(d) => d.clone(),
-        None => shim::compilers().map_err(anyhow::Error::msg)?,
+/// The name and compilers folder of a target built in a child process under its drm-shim: a
+/// model, or an AMD family under the amdgpu shim.
+fn child_of(t: &Target) -> Option<(&str, &Path)> {
+    match t {
+        Target::Model(name, dir) | Target::Family(name, Some(dir)) => Some((name, dir)),
+        _ => None,
+    }
+}
+
+/// The rows of a model or a shimmed AMD family, built in its own process.
+fn run_model(cfg: &Config, exe: &Path, t: &Target) -> anyhow::Result<shim::ModelRun> {
+    let (name, dir) = child_of(t).expect("a child's target");
+    let (v, m) = match t {
+        Target::Family(..) => (
+            &crate::vendor::amd::AMD,
+            shim::family_model(name).ok_or_else(|| anyhow::anyhow!("--family {name}: no such AMD family"))?,
+        ),
+        _ => crate::vendor::find_model(name)
+            .map(|(v, m)| (v, *m))
+            .ok_or_else(|| anyhow::anyhow!("--family {name}: no such model"))?,
     };
+    let sub = if cfg.releases > 1 { format!("{}-mesa-{}", m.name, shim::release(dir)) } else { m.name.to_string() };
     let args = ModelArgs {
         model: m.name.into(),
         matrix: cfg.matrix.name().into(),
         layouts: cfg.layouts.clone(),
         validation: cfg.validation,
-        disasm: cfg.disasm.as_ref().map(|d| d.join(m.name)),
+        disasm: cfg.disasm.as_ref().map(|d| d.join(sub)),
     };
-    shim::run_model(exe, (v, m), &dir, &args.argv(), &cfg.builds)
+    shim::run_model(exe, (v, &m), dir, &args.argv(), &cfg.builds)
 }
 
 /// Builds `builds` in this process (`halftrace isa-model`) on model `name` — a device a
@@ -212,7 +224,8 @@ pub fn run_model_here(
     Ok(g.validation_messages().into_iter().map(|msg| format!("{name}: {msg}")).collect())
 }
 
-/// Builds `builds` on AMD family `family` in a child process (`exe isa-model`) with ACO's
+/// Builds `builds` on AMD family `family` in a child process (`exe isa-model`; under the amdgpu
+/// shim of the compilers folder `amd` where given: [`shim::amd_shim`]) with ACO's
 /// printouts on (`ACO_DEBUG=perfinfo`, `RADV_DEBUG=preoptir`, Mesa's shader cache off so
 /// that every kernel is compiled and printed): each kernel's row beside its program as ACO
 /// estimated it ([`aco::Program`]), or why that printout could not be read.
@@ -221,6 +234,7 @@ pub fn aco_programs(
     family: &str,
     matrix: Matrix,
     layouts: &[LayoutId],
+    amd: Option<&Path>,
 ) -> anyhow::Result<Vec<(IsaRow, Result<aco::Program, String>)>> {
     let args = ModelArgs {
         model: family.into(),
@@ -229,9 +243,15 @@ pub fn aco_programs(
         validation: false,
         disasm: None,
     };
+    // Under the amdgpu shim of a compilers folder (Mesa 26 on), by the folder's copy of this binary.
+    let (exe, env) = match amd.and_then(|d| Some((d, shim::amd_shim(d)?))) {
+        Some((d, s)) => (shim::child_exe(exe, d)?, shim::family_environment(&s, family, d)),
+        None => (exe.to_path_buf(), Vec::new()),
+    };
     let (stdout, status, stderr) = shim::run_child(
-        std::process::Command::new(exe)
+        std::process::Command::new(&exe)
             .args(&args.argv().0)
+            .envs(env)
             .env("ACO_DEBUG", "perfinfo")
             .env("RADV_DEBUG", "preoptir")
             .env("MESA_SHADER_CACHE_DISABLE", "true"),
@@ -303,7 +323,16 @@ fn build_one(
             m.generation.to_string(),
             format!("{} ({})", m.display, v.shim.map_or(v.name, |s| s.driver)),
         ),
-        (None, Some(f)) => (f.name.to_string(), f.generation.to_string(), g.info.name.clone()),
+        // Under the amdgpu shim the device has a real GPU's name: said, so that its label is the
+        // family's as a null device's is.
+        (None, Some(f)) => (
+            f.name.to_string(),
+            f.generation.to_string(),
+            match crate::gpu::device::shim().filter(|_| g.info.compile_only) {
+                Some(kernel) => format!("{} ({kernel} shim)", g.info.name),
+                None => g.info.name.clone(),
+            },
+        ),
         (None, None) => (String::new(), String::new(), g.info.name.clone()),
     };
     let mut row = IsaRow {

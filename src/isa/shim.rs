@@ -125,7 +125,8 @@ pub fn check_models(dir: &Path, models: &[String]) -> Result<(), String> {
     }
 }
 
-/// The compilers folder for `models` (`None` without models): [`compilers_for`] `choice`,
+/// The compilers folder for `models` (`None` without models: the caller refuses a `--compilers`
+/// that nothing uses): [`compilers_for`] `choice`,
 /// checked before any work to have each model's shim and driver ([`check_models`]) — but for
 /// the models only a group named (`grouped`: `vendors`, `all`), which are left out, said on
 /// stderr, where the release has no shim for them. Returns the folder and the models to build.
@@ -135,7 +136,6 @@ pub fn models_compilers(
     choice: Option<&str>,
 ) -> anyhow::Result<(Option<PathBuf>, Vec<String>)> {
     if models.is_empty() {
-        anyhow::ensure!(choice.is_none(), "--compilers: no model of the other vendors was asked for (--family)");
         return Ok((None, models));
     }
     let dir = compilers_for(choice).map_err(anyhow::Error::msg)?;
@@ -209,6 +209,29 @@ pub fn environment(s: &Shim, m: &Model, dir: &Path) -> Vec<(String, String)> {
     env
 }
 
+/// AMD's shim in the compilers folder `dir`, where it has it and RADV's manifest (Mesa 26 on,
+/// which has no null device: Debian's newest carries both; the pinned build neither).
+pub fn amd_shim(dir: &Path) -> Option<Shim> {
+    let s = crate::vendor::amd::AMD.shim?;
+    (dir.join("lib").join(s.library()).is_file() && dir.join("icd").join(s.icd).is_file()).then_some(s)
+}
+
+/// AMD family `family` as the amdgpu shim's model (its environment: [`family_environment`]);
+/// `None` for a name Mesa does not know.
+pub fn family_model(family: &str) -> Option<Model> {
+    let f = crate::gpu::null::family(family)?;
+    Some(Model { name: f.name, display: f.name, generation: f.generation, env: &[] })
+}
+
+/// The environment that opens AMD family `family` under the amdgpu shim `s` of `dir`:
+/// `AMDGPU_GPU_ID` names the family (the shim knows fewer than Mesa: an unknown one opens no
+/// device).
+pub fn family_environment(s: &Shim, family: &str, dir: &Path) -> Vec<(String, String)> {
+    let mut env = environment(s, &Model { name: "", display: "", generation: "", env: &[] }, dir);
+    env.push(("AMDGPU_GPU_ID".to_string(), family.to_string()));
+    env
+}
+
 /// The marker a child prints on stderr before building each kernel, so that the driver's
 /// own printout after it (Mali's shaderdb line) is known to be that kernel's.
 pub const MARKER: &str = "halftrace-isa-kernel ";
@@ -248,8 +271,11 @@ pub fn run_model(
     builds: &[KernelSpec],
 ) -> anyhow::Result<ModelRun> {
     let shim = vendor.shim.ok_or_else(|| anyhow::anyhow!("{}: {} has no drm-shim", m.name, vendor.name))?;
+    // An AMD family is the amdgpu shim's model by its environment.
+    let env =
+        if vendor.models.is_empty() { family_environment(&shim, m.name, dir) } else { environment(&shim, m, dir) };
     let exe = child_exe(exe, dir)?;
-    let (stdout, status, stderr) = run_child(Command::new(&exe).args(&args.0).envs(environment(&shim, m, dir)))?;
+    let (stdout, status, stderr) = run_child(Command::new(&exe).args(&args.0).envs(env))?;
     let mut rows: Vec<IsaRow> = Vec::new();
     let mut bad_lines = 0;
     let mut other = String::new();

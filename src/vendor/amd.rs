@@ -1,14 +1,18 @@
-//! AMD: RADV with ACO, AMD's production compiler, opened as RADV's null device for any family
-//! without the GPU (`gpu::null` lists the families), or on the GPU itself.
+//! AMD: RADV with ACO, AMD's production compiler, opened without the GPU as RADV's null device
+//! for any family (`gpu::null` lists the families; Mesa 25 and before) or under the amdgpu
+//! drm-shim, which fakes the family named in `AMDGPU_GPU_ID` (Mesa 26 removed the null device:
+//! `isa --compilers newest`), or on the GPU itself.
 
-use super::{Disassembly, Input, Neutral, Occupancy, Stats, Vendor, GPU_DEFAULT};
+use super::{Disassembly, Input, Neutral, Occupancy, Shim, Stats, Vendor, GPU_DEFAULT};
 use ash::vk;
 
 pub static AMD: Vendor = Vendor {
     name: "AMD",
     driver_ids: &[vk::DriverId::MESA_RADV, vk::DriverId::AMD_PROPRIETARY, vk::DriverId::AMD_OPEN_SOURCE],
     driver_names: &["radv", "amd"],
-    shim: None,
+    // No models: the families are `gpu::null`'s, opened under this shim where a compilers
+    // folder has it (`isa::shim::amd_shim`), else as RADV's null device.
+    shim: Some(Shim { kernel: "amdgpu", icd: "radeon.json", driver: "radv", summary_env: &[] }),
     models: &[],
     stats: Stats::Aco,
     sources: [

@@ -42,8 +42,8 @@ pub struct Vendor {
     /// Lower-case pieces of a driver's name (`driverName driverInfo`) that mark it: rows read
     /// from files carry the name, not the id.
     pub driver_names: &'static [&'static str],
-    /// Its compiler opened under a drm-shim; `None` where it opens otherwise (AMD: RADV's null
-    /// device, `gpu::null`).
+    /// Its compiler opened under a drm-shim; `None` where it has none (AMD's families open as
+    /// RADV's null device where the release still has one, `gpu::null`).
     pub shim: Option<Shim>,
     /// The GPU models its shim fakes, in table order (`--family` names).
     pub models: &'static [Model],

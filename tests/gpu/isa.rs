@@ -108,7 +108,7 @@ fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
     let bin = std::path::Path::new(env!("CARGO_BIN_EXE_halftrace"));
     let runs: Vec<_> = std::thread::scope(|s| {
         let hs: Vec<_> = ["navi31", "vega10"]
-            .map(|f| s.spawn(move || (f, halftrace::isa::aco_programs(bin, f, Matrix::Default, &[]))))
+            .map(|f| s.spawn(move || (f, halftrace::isa::aco_programs(bin, f, Matrix::Default, &[], None))))
             .into_iter()
             .collect();
         hs.into_iter().map(|h| h.join().unwrap()).collect()
@@ -341,7 +341,9 @@ fn isa_builds_on_every_vendors_compiler() {
 /// binaries, their own glibc): `isa --compilers newest` builds on turnip and NVK there through
 /// a patched copy of the binary, each row's driver naming the release; NVK 26's own occupancy
 /// (`Max warps/SM`), renamed `SLM size` and `Static cycle count` fill the columns; TU102 has
-/// fp16 there; Apple's M1 (Honeykrisp, the seventh vendor) builds every kernel in its columns. A model whose shim the release lacks (panvk) is refused before any work. CI
+/// fp16 there; Apple's M1 (Honeykrisp, the seventh vendor) builds every kernel in its columns;
+/// AMD's navi31 builds under the amdgpu shim, in `isa` and `estimate`; both releases side by
+/// side in one run. A model whose shim the release lacks (panvk) is refused before any work. CI
 /// installs both; elsewhere the test says it did not run and how to make it run.
 #[test]
 fn isa_builds_on_the_newest_compilers() {
@@ -360,7 +362,7 @@ fn isa_builds_on_the_newest_compilers() {
         "--compilers",
         "newest",
         "--family",
-        "a740,ga102,tu102,m1",
+        "a740,ga102,tu102,m1,navi31",
         "--quick",
         "--layouts",
         "f16h",
@@ -370,7 +372,7 @@ fn isa_builds_on_the_newest_compilers() {
     ]);
     assert!(ok, "isa on the newest compilers failed:\n{stdout}\n{stderr}");
     let rows: Vec<IsaRow> = serde_json::from_str(&std::fs::read_to_string(out.join("isa.json")).unwrap()).unwrap();
-    assert_eq!(rows.len(), 16, "f32 and f16h in three maths on four models");
+    assert_eq!(rows.len(), 20, "f32 and f16h in three maths on four models and navi31");
     for r in &rows {
         assert!(r.status.is_ok(), "{} {}: {}", r.family, r.kernel, r.status);
         assert!(r.driver.contains(&release), "{} {}: driver {} is not Mesa {release}", r.family, r.kernel, r.driver);
@@ -381,7 +383,14 @@ fn isa_builds_on_the_newest_compilers() {
             r.kernel,
             r.stats
         );
-        if r.family == "m1" {
+        if r.family == "navi31" {
+            // Mesa 26 has no RADV null device: navi31 is RADV under the amdgpu shim, its label the
+            // family's, its columns ACO's.
+            assert!(r.device.ends_with("(amdgpu shim)") && r.device_label() == "navi31 (RDNA3)", "{}", r.device);
+            assert_eq!((r.vendor.name(), r.registers), ("AMD", r.vgprs), "navi31 {}", r.kernel);
+            assert_eq!(r.occupancy, r.waves_per_simd, "navi31 {}", r.kernel);
+            assert!(r.cycles.is_some_and(|c| c > 0.0), "navi31 {}: no Latency", r.kernel);
+        } else if r.family == "m1" {
             // Apple's 16-bit registers, threads in flight and ALU cycles.
             assert_eq!(r.registers, r.stats.get("GPRs").map(|g| g / 2.0), "m1 {}", r.kernel);
             assert_eq!((r.vendor.name(), r.occupancy), ("Apple", r.stats.get("Threads").copied()), "m1 {}", r.kernel);
@@ -411,6 +420,60 @@ fn isa_builds_on_the_newest_compilers() {
     for h in a740("f16h") {
         assert!(ldp(h) <= ldp(f32) + 10.0, "a740 {}: {} private loads, f32 {}", h.kernel, ldp(h), ldp(f32));
     }
+    // Both releases in one run: every device once per release, the release in each table's
+    // column, and the section of what the release changes with each release's own figures.
+    let both = tmp("both-releases");
+    let (ok, stdout, stderr) = cli(&[
+        "isa",
+        "--compilers",
+        "pinned,newest",
+        "--family",
+        "navi31,a740",
+        "--quick",
+        "--layouts",
+        "f16h",
+        "--out",
+        both.to_str().unwrap(),
+    ]);
+    assert!(ok, "isa on both releases failed:\n{stdout}\n{stderr}");
+    let rows: Vec<IsaRow> = serde_json::from_str(&std::fs::read_to_string(both.join("isa.json")).unwrap()).unwrap();
+    assert_eq!(rows.len(), 16, "f32 and f16h in three maths on two devices and two releases");
+    let md = std::fs::read_to_string(both.join("isa.md")).unwrap();
+    let newest = halftrace::report::isa::release(&format!("Mesa {release}"));
+    assert!(md.contains(&format!("| device | kernel | B | Mesa 25.0.7 | {newest} | verdict |")), "{md}");
+    for r in rows.iter().filter(|r| r.layout == "f32") {
+        let rel = halftrace::report::isa::release(&r.driver);
+        assert!(rel == "Mesa 25.0.7" || rel == newest, "{}: {}", r.kernel, r.driver);
+        assert!(md.contains(&format!("### {} · {rel}", r.device_label())), "{rel}: {md}");
+        let n = |x: Option<f64>| x.map(|v| format!("{v:.0}")).unwrap_or_else(|| "–".into());
+        let cell = format!("{} / {} / {} / {}", n(r.registers), n(r.occupancy), n(r.spills), n(r.cycles));
+        let line = md
+            .lines()
+            .find(|l| l.starts_with(&format!("| {} | f32 | 4 |", r.device_label())))
+            .unwrap_or_else(|| panic!("{md}"));
+        assert!(line.contains(&cell), "{rel} {}: {cell} not in {line}", r.family);
+    }
+    // estimate on the newest release: ACO 26 leaves an empty else side out of a divergent if;
+    // every kernel is still rebuilt exactly from its blocks.
+    let est = tmp("newest-estimate");
+    let (ok, stdout, stderr) = cli(&[
+        "estimate",
+        "--compilers",
+        "newest",
+        "--family",
+        "navi31",
+        "--matrix",
+        "layouts",
+        "--layouts",
+        "f16h",
+        "--rays",
+        "primary",
+        "--res",
+        "32",
+        "--out",
+        est.to_str().unwrap(),
+    ]);
+    assert!(ok && stdout.contains("(4 rebuilt exactly)"), "estimate on the newest release:\n{stdout}\n{stderr}");
     let (ok, _, stderr) = cli(&[
         "isa",
         "--compilers",

@@ -5,9 +5,11 @@
 
 mod columns;
 mod files;
+mod releases;
 mod tables;
 
 pub use files::{read, write};
+pub use releases::release;
 pub use tables::{headline, plot, render, section};
 
 use super::key::{f32_peer, What};
@@ -182,7 +184,8 @@ impl IsaRow {
     /// The device's short name: `navi31 (RDNA3)` for a null device, `a740 (Adreno 7xx)` for a
     /// model under a drm-shim, else the device's name.
     pub fn device_label(&self) -> String {
-        let null = self.device.starts_with("Null hardware");
+        // A null device, or a family under the amdgpu shim (`… (amdgpu shim)`).
+        let null = self.device.starts_with("Null hardware") || self.device.ends_with(" shim)");
         if self.family.is_empty() || (!null && crate::gpu::null::family(&self.family).is_some()) {
             self.device.clone()
         } else {
@@ -220,7 +223,8 @@ pub fn set_ratios(rows: &mut [IsaRow]) {
     }
 }
 
-/// Rows in report order: device, then layout (registry order), math, B, P, kernel.
+/// Rows in report order: device (its releases oldest first), then layout (registry order),
+/// math, B, P, kernel.
 pub fn sorted(rows: &[IsaRow]) -> Vec<IsaRow> {
     let mut v = rows.to_vec();
     // AMD families oldest first, then the other vendors in table order.
@@ -230,9 +234,12 @@ pub fn sorted(rows: &[IsaRow]) -> Vec<IsaRow> {
             .position(|f| f.name == r.family)
             .unwrap_or_else(|| 1000 + r.vendor.get().map_or(crate::vendor::REGISTRY.len(), |v| v.position()) * 100)
     };
+    // One device's releases side by side, oldest first (`isa --compilers pinned,newest`).
+    let rel = |r: &IsaRow| (r.device_label(), releases::version(&releases::release(&r.driver)));
     v.sort_by(|a, b| {
-        (gen(a), &a.device, &a.driver, order(&a.layout), &a.math, a.branching, a.packet, &a.kernel).cmp(&(
+        (gen(a), rel(a), &a.device, &a.driver, order(&a.layout), &a.math, a.branching, a.packet, &a.kernel).cmp(&(
             gen(b),
+            rel(b),
             &b.device,
             &b.driver,
             order(&b.layout),

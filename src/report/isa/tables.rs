@@ -1,6 +1,7 @@
 //! The compiler view's Markdown ([`section`], in `isa.md` and a merged `report.md`) and its
 //! plots.
 
+use super::releases::labeller;
 use super::{sorted, AsmCounts, IsaRow};
 use crate::report::plots;
 use crate::report::rows::{order, Status};
@@ -42,11 +43,13 @@ fn ldst(a: &Option<AsmCounts>) -> String {
 /// or failed.
 pub fn section(rows: &[IsaRow], level: usize) -> String {
     let rows = sorted(rows);
+    let lab = labeller(&rows);
+    let lab = &lab;
     let h = "#".repeat(level);
     let mut md = String::new();
     let mut devices: Vec<(String, String)> = Vec::new();
     for r in &rows {
-        let d = (r.device_label(), r.driver.clone());
+        let d = (lab(r), r.driver.clone());
         if !devices.contains(&d) {
             devices.push(d);
         }
@@ -55,8 +58,8 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
     md += &format!(
         "{h} Compiler view\n\n{} kernel build(s) on {} device(s) ({} ok, {} skipped, {} failed): the statistics the driver \
          reports through VK_KHR_pipeline_executable_properties and the instruction mix of its disassembly. A null \
-         device (RADV_FORCE_FAMILY) is AMD's compiler for that GPU without the GPU, a model under Mesa's drm-shim \
-         another vendor's: nothing ran. Ratios (×) are to the f32 kernel of the same device, B, P and packet \
+         device (RADV_FORCE_FAMILY; the amdgpu drm-shim from Mesa 26 on) is AMD's compiler for that GPU without the \
+         GPU, a model under Mesa's drm-shim another vendor's: nothing ran. Ratios (×) are to the f32 kernel of the same device, B, P and packet \
          implementation (and float controls, where it has them). The vendor-neutral columns and the statistic \
          each comes from per vendor: docs/vendors.md.\n\n",
         rows.len(),
@@ -66,7 +69,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
         rows.iter().filter(|r| r.status.is_failed()).count()
     );
     for (d, drv) in &devices {
-        let first = rows.iter().find(|r| r.device_label() == *d);
+        let first = rows.iter().find(|r| lab(r) == *d);
         let full = first.map(|r| r.device.clone()).unwrap_or_default();
         let build = first.map(|r| r.device_build.clone()).filter(|b| !b.is_empty());
         md += &format!(
@@ -75,11 +78,12 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
         );
     }
     md += "\n";
-    md += &across_vendors(&ok, &devices, &h);
+    md += &across_vendors(&ok, &devices, &h, lab);
+    md += &super::releases::section(&rows, &h);
     // Across AMD generations: VGPRs / scratch KiB per wave / waves per SIMD, P = 1.
     let cols: Vec<String> = devices
         .iter()
-        .filter(|d| ok.iter().any(|r| r.device_label() == d.0 && r.vendor.stats_are(Stats::Aco)))
+        .filter(|d| ok.iter().any(|r| lab(r) == d.0 && r.vendor.stats_are(Stats::Aco)))
         .map(|d| d.0.clone())
         .collect();
     let kernels = kernels_at_p1(ok.iter().copied());
@@ -91,7 +95,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
                 .iter()
                 .map(|c| {
                     ok.iter()
-                        .find(|r| r.packet == 1 && r.branching == *b && r.label() == *label && r.device_label() == *c)
+                        .find(|r| r.packet == 1 && r.branching == *b && r.label() == *label && lab(r) == *c)
                         .map(|r| format!("{} / {} / {}", num(r.vgprs), kib(r.scratch_bytes), num(r.waves_per_simd)))
                         .unwrap_or_else(|| "–".into())
                 })
@@ -101,7 +105,7 @@ pub fn section(rows: &[IsaRow], level: usize) -> String {
         md += "\n";
     }
     for (d, drv) in &devices {
-        let here: Vec<&IsaRow> = rows.iter().filter(|r| r.device_label() == *d && r.driver == *drv).collect();
+        let here: Vec<&IsaRow> = rows.iter().filter(|r| lab(r) == *d && r.driver == *drv).collect();
         md += &format!("{h}# {d}\n\n");
         let one: Vec<&&IsaRow> = here.iter().filter(|r| r.status.is_ok() && r.packet == 1).collect();
         if !one.is_empty() && one[0].vendor.stats_are(Stats::Own) {
@@ -197,7 +201,7 @@ fn kernels_at_p1<'a>(ok: impl Iterator<Item = &'a IsaRow>) -> Vec<(usize, String
 
 /// Every device side by side at P = 1: registers per thread / private bytes per thread /
 /// occupancy in the vendor's unit.
-fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str) -> String {
+fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str, lab: &dyn Fn(&IsaRow) -> String) -> String {
     let kernels = kernels_at_p1(ok.iter().copied());
     if kernels.is_empty() || devices.len() < 2 {
         return String::new();
@@ -216,7 +220,7 @@ fn across_vendors(ok: &[&IsaRow], devices: &[(String, String)], h: &str) -> Stri
             .iter()
             .map(|c| {
                 ok.iter()
-                    .find(|r| r.packet == 1 && r.branching == *b && r.label() == *label && r.device_label() == **c)
+                    .find(|r| r.packet == 1 && r.branching == *b && r.label() == *label && lab(r) == **c)
                     .map(|r| format!("{} / {} / {}", num(r.registers), num(r.private_bytes), num(r.occupancy)))
                     .unwrap_or_else(|| "–".into())
             })
@@ -269,10 +273,11 @@ pub fn render(rows: &[IsaRow], out: &Path) -> anyhow::Result<()> {
 /// SVG: one panel per device, x = B, one line per layout and math (P = 1).
 pub fn plot(rows: &[IsaRow], out: &Path) -> anyhow::Result<()> {
     let rows = sorted(rows);
+    let lab = labeller(&rows);
     let mut devices: Vec<String> = Vec::new();
     for r in rows.iter().filter(|r| r.status.is_ok()) {
-        if !devices.contains(&r.device_label()) {
-            devices.push(r.device_label());
+        if !devices.contains(&lab(r)) {
+            devices.push(lab(r));
         }
     }
     let series = |f: &dyn Fn(&IsaRow) -> Option<f64>| -> Vec<(String, plots::Lines)> {
@@ -280,7 +285,7 @@ pub fn plot(rows: &[IsaRow], out: &Path) -> anyhow::Result<()> {
             .iter()
             .map(|d| {
                 let mut lines: plots::Lines = Vec::new();
-                for r in rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && r.device_label() == *d) {
+                for r in rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && lab(r) == *d) {
                     if let Some(y) = f(r) {
                         match lines.iter_mut().find(|l| l.0 == r.label()) {
                             Some(l) => l.1.push((r.branching, y)),
@@ -315,6 +320,7 @@ pub fn plot(rows: &[IsaRow], out: &Path) -> anyhow::Result<()> {
 /// thread / occupancy; "" without rows.
 pub fn headline(rows: &[IsaRow]) -> String {
     let rows = sorted(rows);
+    let lab = labeller(&rows);
     let ok: Vec<&IsaRow> = rows.iter().filter(|r| r.status.is_ok() && r.packet == 1 && r.branching == 4).collect();
     // A kernel's label without the float-control mode: a device without float controls (Mali,
     // VideoCore) shows its build without them, marked.
@@ -322,8 +328,8 @@ pub fn headline(rows: &[IsaRow]) -> String {
     let mut devices: Vec<String> = Vec::new();
     let mut kernels: Vec<(usize, String)> = Vec::new();
     for r in &ok {
-        if !devices.contains(&r.device_label()) {
-            devices.push(r.device_label());
+        if !devices.contains(&lab(r)) {
+            devices.push(lab(r));
         }
         if !kernels.iter().any(|k| k.1 == base(r)) {
             kernels.push((order(&r.layout), base(r)));
@@ -348,9 +354,8 @@ pub fn headline(rows: &[IsaRow]) -> String {
             .iter()
             .map(|(_, label)| {
                 let of = |fc: &str| {
-                    ok.iter().find(|r| {
-                        r.device_label() == *d && base(r) == *label && (r.float_controls == "off") == (fc == "off")
-                    })
+                    ok.iter()
+                        .find(|r| lab(r) == *d && base(r) == *label && (r.float_controls == "off") == (fc == "off"))
                 };
                 of("on")
                     .map(|r| format!("{} / {} / {}", num(r.registers), num(r.private_bytes), num(r.occupancy)))
