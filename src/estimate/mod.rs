@@ -59,6 +59,8 @@ pub struct LoopCost {
 pub struct Row {
     pub family: String,
     pub generation: String,
+    /// The driver that built it, naming its Mesa release (`radv Mesa 26.2.6-1`).
+    pub driver: String,
     pub kernel: String,
     pub layout: String,
     pub math: String,
@@ -86,6 +88,7 @@ fn row(family: &str, generation: &str, r: &crate::report::isa::IsaRow, p: Result
     let mut row = Row {
         family: family.into(),
         generation: generation.into(),
+        driver: r.driver.clone(),
         kernel: r.kernel.clone(),
         layout: r.layout.clone(),
         math: r.math.clone(),
@@ -198,7 +201,7 @@ fn markdown(rows: &[Row]) -> String {
     families.dedup();
     for f in families {
         let fr: Vec<&Row> = rows.iter().filter(|r| r.family == f).collect();
-        md += &format!("## {f} ({})\n\n", fr[0].generation);
+        md += &format!("## {f} ({}), {}\n\n", fr[0].generation, crate::report::isa::release(&fr[0].driver));
         md += "| kernel | layout | math | B | P | ACO Latency | rebuilt | waves | loops | costliest loops (depth: cycles per pass × passes = share) | outside loops | status |\n";
         md += "|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---|\n";
         for r in fr {
@@ -244,6 +247,7 @@ fn markdown(rows: &[Row]) -> String {
 struct Record<'a> {
     family: &'a str,
     generation: &'a str,
+    driver: &'a str,
     kernel: &'a str,
     layout: &'a str,
     math: &'a str,
@@ -278,6 +282,7 @@ pub fn csv(rows: &[Row]) -> anyhow::Result<Vec<u8>> {
         loops.iter().map(move |l| Record {
             family: &r.family,
             generation: &r.generation,
+            driver: &r.driver,
             kernel: &r.kernel,
             layout: &r.layout,
             math: &r.math,

@@ -159,6 +159,7 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                     let mut row = RayRow {
                         family: family.clone(),
                         generation: generation.into(),
+                        driver: r.driver.clone(),
                         kernel: r.kernel.clone(),
                         layout: r.layout.clone(),
                         math: r.math.clone(),

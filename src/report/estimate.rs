@@ -38,6 +38,10 @@ impl Split {
 pub struct RayRow {
     pub family: String,
     pub generation: String,
+    /// The driver that built the kernel, naming its Mesa release (empty in files written before
+    /// it was recorded).
+    #[serde(default)]
+    pub driver: String,
     pub kernel: String,
     pub layout: String,
     pub math: String,
@@ -100,8 +104,13 @@ pub fn section(rows: &[RayRow]) -> String {
     groups.dedup();
     for (f, scene, kind) in groups {
         let g: Vec<&RayRow> = rows.iter().filter(|r| r.family == f && r.scene == scene && r.rays == kind).collect();
-        md +=
-            &format!("## {f} ({}), {scene}, {kind} rays ({}, wave {})\n\n", g[0].generation, g[0].ray_count, g[0].wave);
+        md += &format!(
+            "## {f} ({}){}, {scene}, {kind} rays ({}, wave {})\n\n",
+            g[0].generation,
+            if g[0].driver.is_empty() { String::new() } else { format!(", {}", super::isa::release(&g[0].driver)) },
+            g[0].ray_count,
+            g[0].wave
+        );
         md += "| kernel | layout | math | B | P | cycles/ray | ÷ f32 | lane avg | set-up | step | slots | triangles | waves | rays/kclk | status |\n";
         md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
         for r in g {
@@ -136,6 +145,7 @@ pub fn section(rows: &[RayRow]) -> String {
 struct RayRecord<'a> {
     family: &'a str,
     generation: &'a str,
+    driver: &'a str,
     kernel: &'a str,
     layout: &'a str,
     math: &'a str,
@@ -175,6 +185,7 @@ pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
     super::csvx::to_bytes(rows.iter().map(|r| RayRecord {
         family: &r.family,
         generation: &r.generation,
+        driver: &r.driver,
         kernel: &r.kernel,
         layout: &r.layout,
         math: &r.math,

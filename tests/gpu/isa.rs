@@ -474,6 +474,12 @@ fn isa_builds_on_the_newest_compilers() {
         est.to_str().unwrap(),
     ]);
     assert!(ok && stdout.contains("(4 rebuilt exactly)"), "estimate on the newest release:\n{stdout}\n{stderr}");
+    // Its rows and headings name the release they were built with.
+    let md = std::fs::read_to_string(est.join("estimate.md")).unwrap();
+    assert!(md.contains(&format!("## navi31 (RDNA3), {newest}\n")), "{md}");
+    assert!(md.contains(&format!("## navi31 (RDNA3), {newest}, teapot, primary rays")), "{md}");
+    let csv = std::fs::read_to_string(est.join("estimate-rays.csv")).unwrap();
+    assert!(csv.starts_with("family,generation,driver,") && csv.contains(&format!("Mesa {release}")), "{csv}");
     let (ok, _, stderr) = cli(&[
         "isa",
         "--compilers",
