@@ -9,7 +9,9 @@ use halftrace::layout::traverse::Reads;
 use halftrace::layout::LayoutId;
 use halftrace::memory::cache::{simulate, Cache};
 use halftrace::memory::gpus::{gpu, GPUS};
-use halftrace::memory::{lines_of, requested, wave_lines, waves, Buffers, WaveTrace};
+use halftrace::memory::{
+    is_write, lines_of, private_offset, requested, wave_lines, waves, Buffers, Stack, WaveTrace, PRIVATE,
+};
 use halftrace::precision::FloatControls;
 
 fn sets() -> (Prepared, Vec<(String, Vec<Ray>)>) {
@@ -90,10 +92,9 @@ fn one_lane_waves_and_doubled_rays_keep_their_lines() {
     }
 }
 
-/// An LRU cache written another way: per set, a list of lines, most recent last.
+/// An LRU cache written another way: per set, a list of (line, dirty), most recent last.
 struct Naive {
-    line: u64,
-    sets: Vec<Vec<u64>>,
+    sets: Vec<Vec<(u64, bool)>>,
     ways: usize,
     hits: u64,
     accesses: u64,
@@ -104,35 +105,105 @@ impl Naive {
         let lines = (bytes / line).max(1);
         let ways = (ways as u64).clamp(1, lines) as usize;
         let sets = (lines / ways as u64).max(1) as usize;
-        Naive { line, sets: vec![Vec::new(); sets], ways, hits: 0, accesses: 0 }
+        Naive { sets: vec![Vec::new(); sets], ways, hits: 0, accesses: 0 }
     }
-    fn access(&mut self, l: u64) -> bool {
+    /// A read (`write` false) or a write of line `l`: whether it hit, and the dirty line a miss
+    /// pushed out. A write hit or miss leaves the line dirty; a read keeps its dirt.
+    fn touch(&mut self, l: u64, write: bool) -> (bool, Option<u64>) {
         self.accesses += 1;
         let n = self.sets.len() as u64;
+        let ways = self.ways;
         let set = &mut self.sets[(l % n) as usize];
-        let hit = if let Some(i) = set.iter().position(|&x| x == l) {
-            set.remove(i);
-            true
-        } else {
-            if set.len() == self.ways {
-                set.remove(0);
+        let (hit, dirty, out) = match set.iter().position(|x| x.0 == l) {
+            Some(i) => (true, set.remove(i).1, None),
+            None => {
+                let out = if set.len() == ways { Some(set.remove(0)).filter(|x| x.1).map(|x| x.0) } else { None };
+                (false, false, out)
             }
-            false
         };
-        set.push(l);
+        set.push((l, dirty || write));
         self.hits += hit as u64;
-        hit
+        (hit, out)
+    }
+    /// A write passing by: a held copy becomes the most recent; nothing counted.
+    fn pass(&mut self, l: u64) {
+        let n = self.sets.len() as u64;
+        let set = &mut self.sets[(l % n) as usize];
+        if let Some(i) = set.iter().position(|x| x.0 == l) {
+            let x = set.remove(i);
+            set.push(x);
+        }
     }
 }
 
 /// The hierarchy of `simulate`, written again with the naive caches and its own schedule
-/// loop: (L1 accesses, L1 hits, L2 accesses, L2 hits, LLC accesses, LLC hits, DRAM bytes).
-fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace]) -> [u64; 7] {
+/// loop: (L1 accesses, L1 hits, L2 accesses, L2 hits, LLC accesses, LLC hits, DRAM bytes). A
+/// wave's private offsets go to its place's region: place `s` at `private + s × region`; a
+/// write goes to a write-back L1, else to the L2 (passing a write-through L1); dirty lines go
+/// down when pushed out.
+fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: u64, region: u64) -> [u64; 7] {
+    struct Levels {
+        l2: Naive,
+        llc: Option<Naive>,
+        dram: u64,
+        l2_line: u64,
+        llc_line: u64,
+    }
+    impl Levels {
+        /// The LLC (or DRAM) takes the dirty L2 line at byte `b`.
+        fn l2_out(&mut self, b: u64) {
+            match self.llc.as_mut() {
+                None => self.dram += self.l2_line,
+                Some(c) => {
+                    let mut x = b / self.llc_line * self.llc_line;
+                    while x < b + self.l2_line {
+                        if c.touch(x / self.llc_line, true).1.is_some() {
+                            self.dram += self.llc_line;
+                        }
+                        x += self.llc_line;
+                    }
+                }
+            }
+        }
+        /// The L2 reads (or takes a write of) the line at byte `b`.
+        fn l2(&mut self, b: u64, write: bool) {
+            let (hit, out) = self.l2.touch(b / self.l2_line, write);
+            if let Some(o) = out {
+                self.l2_out(o * self.l2_line);
+            }
+            if hit || write {
+                return;
+            }
+            match self.llc.as_mut() {
+                None => self.dram += self.l2_line,
+                Some(c) => {
+                    let mut x = b / self.llc_line * self.llc_line;
+                    while x < b + self.l2_line {
+                        let (h, o) = c.touch(x / self.llc_line, false);
+                        self.dram += self.llc_line * (!h as u64 + o.is_some() as u64);
+                        x += self.llc_line;
+                    }
+                }
+            }
+        }
+    }
     let units = g.units as usize;
     let mut l1: Vec<Naive> = (0..units).map(|_| Naive::new(g.l1_kib * 1024, g.l1_line, g.l1_ways)).collect();
-    let mut l2 = Naive::new(g.l2_kib * 1024, g.l2_line, g.l2_ways);
-    let mut llc = (g.llc_kib > 0).then(|| Naive::new(g.llc_kib * 1024, g.llc_line, g.llc_ways));
-    let mut dram = 0;
+    let mut lv = Levels {
+        l2: Naive::new(g.l2_kib * 1024, g.l2_line, g.l2_ways),
+        llc: (g.llc_kib > 0).then(|| Naive::new(g.llc_kib * 1024, g.llc_line, g.llc_ways)),
+        dram: 0,
+        l2_line: g.l2_line,
+        llc_line: g.llc_line,
+    };
+    // The L1 pushes out its dirty line `o`: its bytes into the L2, line by line.
+    let l1_out = |lv: &mut Levels, o: u64| {
+        let mut b = o * g.l1_line / g.l2_line * g.l2_line;
+        while b < (o + 1) * g.l1_line {
+            lv.l2(b, true);
+            b += g.l2_line;
+        }
+    };
     let queue: Vec<&WaveTrace> = ws.iter().filter(|w| !w.steps.is_empty()).collect();
     let slots = units * g.resident;
     let mut slot: Vec<Option<(usize, usize)>> = (0..slots).map(|s| queue.get(s).map(|_| (s, 0))).collect();
@@ -142,38 +213,37 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace]) -> [u64; 
         for s in 0..slots {
             let Some((w, i)) = slot[s] else { continue };
             any = true;
+            let write = queue[w].steps[i].iter().any(|r| r.0 >= PRIVATE && r.0 & halftrace::memory::WRITE != 0);
+            let line = if write && !g.l1_write_back { g.l2_line } else { g.l1_line };
             let mut lines: Vec<u64> = Vec::new();
             for &(a, n) in &queue[w].steps[i] {
-                for l in a / g.l1_line..=(a + n as u64 - 1) / g.l1_line {
+                let a =
+                    if a >= PRIVATE { (a & (halftrace::memory::WRITE - 1)) + private + s as u64 * region } else { a };
+                for l in a / line..=(a + n as u64 - 1) / line {
                     if !lines.contains(&l) {
                         lines.push(l);
                     }
                 }
             }
             lines.sort();
+            let u = &mut l1[s % units];
             for l in lines {
-                if l1[s % units].access(l) {
+                if write && !g.l1_write_back {
+                    u.pass(l * line / g.l1_line);
+                    lv.l2(l * line, true);
+                    continue;
+                }
+                let (hit, out) = u.touch(l, write);
+                if let Some(o) = out {
+                    l1_out(&mut lv, o);
+                }
+                if hit || write {
                     continue;
                 }
                 let (a, end) = (l * g.l1_line, (l + 1) * g.l1_line);
                 let mut b = a / g.l2_line * g.l2_line;
                 while b < end {
-                    if !l2.access(b / g.l2_line) {
-                        match llc.as_mut() {
-                            None => dram += g.l2_line,
-                            Some(c) => {
-                                let mut m = 0;
-                                let mut x = b / c.line * c.line;
-                                while x < b + g.l2_line {
-                                    if !c.access(x / c.line) {
-                                        m += c.line;
-                                    }
-                                    x += c.line;
-                                }
-                                dram += m;
-                            }
-                        }
-                    }
+                    lv.l2(b, false);
                     b += g.l2_line;
                 }
             }
@@ -191,44 +261,134 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace]) -> [u64; 
         }
     }
     let (la, lh) = (l1.iter().map(|c| c.accesses).sum(), l1.iter().map(|c| c.hits).sum());
-    let (ca, ch) = llc.as_ref().map_or((0, 0), |c| (c.accesses, c.hits));
-    [la, lh, l2.accesses, l2.hits, ca, ch, dram]
+    let (ca, ch) = lv.llc.as_ref().map_or((0, 0), |c| (c.accesses, c.hits));
+    [la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram]
 }
 
 /// Equal hit and miss counts at every level, and equal DRAM bytes, on a real trace, for every
-/// modelled GPU (their line sizes, associativities and last-level caches differ).
+/// modelled GPU (their line sizes, associativities and last-level caches differ), with the
+/// stacks in private memory and without them.
 #[test]
 fn the_cache_model_agrees_with_an_independent_implementation() {
     let (p, sets) = sets();
     let layout = LayoutId::parse("q8").unwrap();
     let enc = encode(&p, layout, 4);
-    let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
+    let scene = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
     let (kind, rays) = &sets[2];
     let reads: Vec<Vec<Reads>> = layout.imp().mem_reads(&enc, rays, 1, layout.default_math(), FloatControls::On);
-    for g in GPUS {
-        // A small GPU of the same caches, so that waves queue and caches fill.
-        let small = halftrace::memory::gpus::Gpu {
-            units: 2,
-            resident: 2,
-            l2_kib: 64,
-            llc_kib: g.llc_kib.min(128),
-            ..g.clone()
-        };
-        let ws = waves(&reads, rays.len(), 1, g.wave, &buf);
-        let h = simulate(&small, &ws, small.resident, buf.nodes_end());
-        let got = [
-            h.l1.iter().map(|c| c.accesses).sum(),
-            h.l1.iter().map(|c| c.hits).sum(),
-            h.l2.accesses,
-            h.l2.hits,
-            h.llc.as_ref().map_or(0, |c| c.accesses),
-            h.llc.as_ref().map_or(0, |c| c.hits),
-            h.dram_bytes,
-        ];
-        assert_eq!(got, naive_hierarchy(&small, &ws), "{} on {kind} rays", g.id);
-        assert!(got[1] < got[0] && got[6] > 0, "{}: a trace that both hits and misses", g.id);
+    // Dirty lines written back to DRAM somewhere: the write path is exercised.
+    let mut written_back = 0;
+    for buf in [scene, scene.with_stack(Stack { entry: 8, entries: 24 })] {
+        for g in GPUS {
+            // A small GPU of the same caches, so that waves queue and caches fill.
+            let small = halftrace::memory::gpus::Gpu {
+                units: 2,
+                resident: 2,
+                l2_kib: 64,
+                llc_kib: g.llc_kib.min(128),
+                ..g.clone()
+            };
+            // Both ways an L1 can take the stacks' stores.
+            for wb in [false, true] {
+                let small = halftrace::memory::gpus::Gpu { l1_write_back: wb, ..small.clone() };
+                let ws = waves(&reads, rays.len(), 1, g.wave, &buf);
+                let h = simulate(&small, &ws, small.resident, &buf);
+                let got = [
+                    h.l1.iter().map(|c| c.accesses).sum(),
+                    h.l1.iter().map(|c| c.hits).sum(),
+                    h.l2.accesses,
+                    h.l2.hits,
+                    h.llc.as_ref().map_or(0, |c| c.accesses),
+                    h.llc.as_ref().map_or(0, |c| c.hits),
+                    h.dram_bytes,
+                ];
+                let region = buf.private_region(g.wave);
+                let stack = buf.stack.is_some();
+                assert_eq!(
+                    got,
+                    naive_hierarchy(&small, &ws, buf.private_base(), region),
+                    "{} on {kind} rays, L1 write-back {wb}",
+                    g.id
+                );
+                assert!(got[1] < got[0] && got[6] > 0, "{}: a trace that both hits and misses", g.id);
+                assert!(h.dram_stack_bytes == 0 || stack, "{}: stack bytes from DRAM only with the stacks", g.id);
+                assert!(h.dram_write_bytes <= h.dram_stack_bytes, "{}: only the stacks are written", g.id);
+                written_back += h.dram_write_bytes;
+            }
+        }
     }
+    assert!(written_back > 0, "no dirty line reached DRAM in any run");
     assert!(gpu("navi31").is_some() && gpu("nope").is_none());
+}
+
+/// The stacks in the traces: every lane's pops and pushes move the requested stack bytes (2 ×
+/// entry × pushes) whatever the wave's width; a pop reads an entry a push of its own lane wrote
+/// (its region's offset, never another lane's); a wave's lanes pushing at one depth share lines
+/// (interleaved dwords); without the stack, or at P > 1, the traces hold none.
+#[test]
+fn the_stacks_move_what_the_rays_push_and_pop() {
+    let (p, sets) = sets();
+    let layout = LayoutId::parse("f16w").unwrap();
+    let enc = encode(&p, layout, 4);
+    let scene = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
+    let entry = 12;
+    let buf = scene.with_stack(Stack { entry, entries: 24 });
+    for (kind, rays) in &sets {
+        let reads = layout.imp().mem_reads(&enc, rays, 1, layout.default_math(), FloatControls::On);
+        let q = requested(&reads, &buf, entry);
+        assert!(q.stack > 0, "{kind}: some pushes");
+        for wave in [1, 32, 64] {
+            let ws = waves(&reads, rays.len(), 1, wave, &buf);
+            let mut moved = 0;
+            for w in &ws {
+                for step in &w.steps {
+                    let private: Vec<_> = step.iter().filter(|r| r.0 >= PRIVATE).collect();
+                    assert!(private.is_empty() || private.len() == step.len(), "{kind}: a step of stack and scene");
+                    for &&(a, n) in &private {
+                        moved += n as u64;
+                        let off = private_offset(a).unwrap();
+                        let lane = (off / 4) % wave as u64;
+                        assert!(lane < w.rays as u64, "{kind} wave {wave}: offset {off} of no lane");
+                        assert!(off < buf.private_region(wave), "{kind} wave {wave}: offset {off} past the region");
+                    }
+                }
+            }
+            assert_eq!(moved, q.stack, "{kind}, waves of {wave}: stack bytes moved");
+        }
+        // Pops read what the same lane pushed: replay each wave's steps in order.
+        let ws = waves(&reads, rays.len(), 1, 32, &buf);
+        for w in &ws {
+            let mut live = std::collections::HashSet::new();
+            for step in w.steps.iter().filter(|s| s.first().is_some_and(|r| r.0 >= PRIVATE)) {
+                let offs: Vec<u64> = step.iter().map(|r| private_offset(r.0).unwrap()).collect();
+                if is_write(step[0].0) {
+                    assert!(step.iter().all(|r| is_write(r.0)), "{kind}: a step of pushes and pops");
+                    assert!(offs.iter().all(|o| !live.contains(o)), "{kind}: a push over a live entry");
+                    live.extend(offs);
+                } else {
+                    assert!(offs.iter().all(|o| live.remove(o)), "{kind}: a pop of an entry no push wrote");
+                }
+            }
+            assert!(live.is_empty(), "{kind}: entries pushed and never popped");
+        }
+        // 32 lanes pushing one entry each at depth 0, then popping it: 3 dwords a lane, the
+        // lanes' dword k side by side — 384 contiguous bytes, 6 lines of 64 bytes, each way.
+        let lane = vec![Reads { node: Some(0), tris: vec![], pushes: 1 }, Reads { node: Some(1), ..Reads::default() }];
+        let ws = waves(&vec![lane; 32], 32, 1, 32, &buf);
+        let stack_steps: Vec<&Vec<_>> = ws[0].steps.iter().filter(|s| s[0].0 >= PRIVATE).collect();
+        assert_eq!(stack_steps.len(), 2, "{kind}: one push step, one pop step");
+        for s in stack_steps {
+            let mut v = Vec::new();
+            lines_of(s, 64, &mut v);
+            let first = s.iter().map(|r| private_offset(r.0).unwrap()).min();
+            assert_eq!((s.len(), v.len(), first), (96, 6, Some(0)), "{kind}");
+        }
+        let none = waves(&reads, rays.len(), 1, 32, &scene);
+        assert!(none.iter().flat_map(|w| &w.steps).flatten().all(|r| r.0 < PRIVATE), "{kind}: no stack without it");
+        let packets = layout.imp().mem_reads(&enc, rays, 8, layout.default_math(), FloatControls::On);
+        let p8 = waves(&packets, rays.len(), 8, 32, &buf);
+        assert!(p8.iter().flat_map(|w| &w.steps).flatten().all(|r| r.0 < PRIVATE), "{kind}: no stack at P = 8");
+    }
 }
 
 /// The known answers, through the hierarchy: a stream of distinct lines longer than every level
@@ -239,11 +399,12 @@ fn the_hierarchy_has_the_known_answers() {
     let line = g.l1_line;
     let far = (g.llc_kib * 1024 * 4) / line;
     let stream = WaveTrace { steps: (0..far).map(|i| vec![(i * line, line as u32)]).collect(), rays: 1 };
-    let h = simulate(&g, std::slice::from_ref(&stream), 1, 0);
+    let none = Buffers::new([0, 0, 0]);
+    let h = simulate(&g, std::slice::from_ref(&stream), 1, &none);
     assert_eq!(h.l1[0].hits + h.l2.hits + h.llc.as_ref().unwrap().hits, 0);
     assert_eq!(h.dram_bytes, far * line);
     let small = WaveTrace { steps: (0..1000).map(|i| vec![((i % 10) * line, line as u32)]).collect(), rays: 1 };
-    let h = simulate(&g, std::slice::from_ref(&small), 1, 0);
+    let h = simulate(&g, std::slice::from_ref(&small), 1, &none);
     assert_eq!((h.l1[0].accesses - h.l1[0].hits, h.dram_bytes), (10, 10 * line));
     let _ = Cache::new(1024, 64, 4);
 }

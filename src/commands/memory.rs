@@ -31,6 +31,10 @@ pub struct MemoryArgs {
     /// families it estimated bound their rays/s beside DRAM's (the roofline).
     #[arg(long)]
     pub estimate: Option<std::path::PathBuf>,
+    /// Leave the traversal stacks out of the lines and the cache model (by default a single
+    /// ray's stack is in private memory, as every modelled GPU's compiler keeps it).
+    #[arg(long)]
+    pub no_stack: bool,
     /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
     /// refused unless --force; other files there are left alone.
     #[arg(long)]
@@ -88,6 +92,7 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
             Some(d) => crate::report::estimate::read(d)?
                 .ok_or_else(|| anyhow::anyhow!("--estimate {}: no estimate-rays.json there", d.display()))?,
         },
+        stack: !a.no_stack,
     };
     let rows = memory::run(&cfg, |_| {})?;
     let md = crate::report::memory::markdown(&rows, &gpus::table(&gpus));

@@ -3,22 +3,26 @@
 //! where the GPU has one, then DRAM), fed by the waves the GPU runs at once ([`simulate`]).
 //!
 //! A model, not the hardware: sets are chosen by the line address modulo the set count (real
-//! caches hash it), replacement is true LRU, there is no prefetch, no write traffic (the
-//! traversal only reads the scene), no texture path, no compression, and the L2's slices are
-//! one cache.
+//! caches hash it), replacement is true LRU, there is no prefetch, no texture path, no
+//! compression, and the L2's slices are one cache. Writes (the stacks' pushes) go to the L1 where
+//! the GPU's L1 keeps stores ([`Gpu::l1_write_back`]), else through it (updating a copy it
+//! holds) into the L2; a cache takes a write without reading the line from below (it keeps
+//! which bytes were written) and writes a dirty line back when it evicts it — L1 to L2, L2 to
+//! the last-level cache, else to DRAM; lines still dirty when the run ends are not written.
 
 use super::gpus::Gpu;
-use super::WaveTrace;
+use super::{Buffers, WaveTrace};
 
-/// One set-associative cache, LRU.
+/// One set-associative cache, LRU, write-back.
 #[derive(Clone, Debug)]
 pub struct Cache {
     pub line: u64,
     sets: u64,
     ways: usize,
-    /// Per set, its ways' line numbers (`u64::MAX`: empty) and last-use stamps.
+    /// Per set, its ways' line numbers (`u64::MAX`: empty), last-use stamps and dirty bits.
     tags: Vec<u64>,
     stamps: Vec<u64>,
+    dirty: Vec<bool>,
     clock: u64,
     pub accesses: u64,
     pub hits: u64,
@@ -38,6 +42,7 @@ impl Cache {
             ways: ways as usize,
             tags: vec![u64::MAX; n],
             stamps: vec![0; n],
+            dirty: vec![false; n],
             clock: 0,
             accesses: 0,
             hits: 0,
@@ -47,18 +52,62 @@ impl Cache {
     /// Reads line number `l` (byte address ÷ `line`): whether it hit. A miss fills the line,
     /// evicting the set's least recently used.
     pub fn access(&mut self, l: u64) -> bool {
+        self.read(l).0
+    }
+
+    /// The way holding line `l` in its set, if any.
+    fn find(&self, l: u64) -> (usize, Option<usize>) {
+        let base = ((l % self.sets) as usize) * self.ways;
+        (base, self.tags[base..base + self.ways].iter().position(|&t| t == l).map(|w| base + w))
+    }
+
+    /// Puts line `l` in its set in place of the least recently used: the dirty line it evicts,
+    /// if any.
+    fn fill(&mut self, base: usize, l: u64, dirty: bool) -> Option<u64> {
+        let victim =
+            (base..base + self.ways).min_by_key(|&i| (self.tags[i] != u64::MAX, self.stamps[i])).expect("a way");
+        let evicted = (self.tags[victim] != u64::MAX && self.dirty[victim]).then_some(self.tags[victim]);
+        (self.tags[victim], self.stamps[victim], self.dirty[victim]) = (l, self.clock, dirty);
+        evicted
+    }
+
+    /// [`Cache::access`], with the dirty line the fill evicted (to be written back below).
+    pub fn read(&mut self, l: u64) -> (bool, Option<u64>) {
         self.clock += 1;
         self.accesses += 1;
-        let base = ((l % self.sets) as usize) * self.ways;
-        let set = base..base + self.ways;
-        if let Some(w) = self.tags[set.clone()].iter().position(|&t| t == l) {
-            self.stamps[base + w] = self.clock;
-            self.hits += 1;
-            return true;
+        match self.find(l) {
+            (_, Some(i)) => {
+                self.stamps[i] = self.clock;
+                self.hits += 1;
+                (true, None)
+            }
+            (base, None) => (false, self.fill(base, l, false)),
         }
-        let victim = set.min_by_key(|&i| (self.tags[i] != u64::MAX, self.stamps[i])).expect("a way");
-        (self.tags[victim], self.stamps[victim]) = (l, self.clock);
-        false
+    }
+
+    /// Writes into line `l`: a hit marks it dirty; a miss puts it in dirty without reading it
+    /// from below (the cache keeps which bytes were written, as GPUs' L2s do). Returns whether
+    /// it hit and the dirty line evicted.
+    pub fn write(&mut self, l: u64) -> (bool, Option<u64>) {
+        self.clock += 1;
+        self.accesses += 1;
+        match self.find(l) {
+            (_, Some(i)) => {
+                (self.stamps[i], self.dirty[i]) = (self.clock, true);
+                self.hits += 1;
+                (true, None)
+            }
+            (base, None) => (false, self.fill(base, l, true)),
+        }
+    }
+
+    /// A write passing through (a write-through cache): a copy of line `l`, if held, is
+    /// updated and becomes the most recently used; nothing is counted or filled.
+    pub fn write_through(&mut self, l: u64) {
+        if let (_, Some(i)) = self.find(l) {
+            self.clock += 1;
+            self.stamps[i] = self.clock;
+        }
     }
 
     pub fn misses(&self) -> u64 {
@@ -66,80 +115,183 @@ impl Cache {
     }
 }
 
-/// A GPU's caches: one L1 per unit, the L2, the last-level cache if any, and the bytes that
-/// reached DRAM (all of them, and those of the node buffer).
+/// A GPU's caches: one L1 per unit (write-through), the L2 and the last-level cache if any
+/// (write-back), and the bytes that crossed to DRAM (all of them, those of the node buffer,
+/// those of the waves' private memory).
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
     pub l1: Vec<Cache>,
     pub l2: Cache,
     pub llc: Option<Cache>,
+    /// Bytes read from DRAM and written back to it.
     pub dram_bytes: u64,
+    /// Of them, the node buffer's, and the waves' private memory's (their stacks).
     pub dram_node_bytes: u64,
+    pub dram_stack_bytes: u64,
+    /// Of `dram_bytes`, those written back (dirty lines evicted from the last level).
+    pub dram_write_bytes: u64,
     /// Bytes below this address are the node buffer's.
     nodes_end: u64,
+    /// Bytes from this address on are the waves' private memory.
+    private_base: u64,
+    /// The L1 keeps stores (write-back), else passes them on (write-through).
+    l1_write_back: bool,
 }
 
 impl Hierarchy {
-    pub fn new(g: &Gpu, units: usize, nodes_end: u64) -> Hierarchy {
+    pub fn new(g: &Gpu, units: usize, nodes_end: u64, private_base: u64) -> Hierarchy {
         Hierarchy {
             l1: vec![Cache::new(g.l1_kib * 1024, g.l1_line, g.l1_ways); units.max(1)],
             l2: Cache::new(g.l2_kib * 1024, g.l2_line, g.l2_ways),
             llc: (g.llc_kib > 0).then(|| Cache::new(g.llc_kib * 1024, g.llc_line, g.llc_ways)),
             dram_bytes: 0,
             dram_node_bytes: 0,
+            dram_stack_bytes: 0,
+            dram_write_bytes: 0,
             nodes_end,
+            private_base,
+            l1_write_back: g.l1_write_back,
+        }
+    }
+
+    /// The bytes a write lands on at once: the L1's line where it keeps stores, else the L2's.
+    pub fn write_line(&self) -> u64 {
+        if self.l1_write_back {
+            self.l1[0].line
+        } else {
+            self.l2.line
         }
     }
 
     /// Unit `unit` reads the L1 line holding byte `addr`.
     pub fn read(&mut self, unit: usize, addr: u64) {
         let l1 = &mut self.l1[unit];
-        let a = addr / l1.line * l1.line;
-        if l1.access(a / l1.line) {
+        let span = l1.line;
+        let a = addr / span * span;
+        let (hit, evicted) = l1.read(a / span);
+        if let Some(v) = evicted {
+            self.l1_write_back(v * span);
+        }
+        if hit {
             return;
         }
-        let span = l1.line;
         // The L1 line's bytes in L2 lines (one when the L2's line is the longer).
         let mut b = a / self.l2.line * self.l2.line;
         while b < a + span {
-            if !self.l2.access(b / self.l2.line) {
+            let (hit, evicted) = self.l2.read(b / self.l2.line);
+            if let Some(v) = evicted {
+                self.write_back(v * self.l2.line);
+            }
+            if !hit {
                 self.below_l2(b);
             }
             b += self.l2.line;
         }
     }
 
+    /// Unit `unit` writes into the line holding byte `addr` ([`Hierarchy::write_line`]): kept
+    /// dirty in its L1 where the L1 is write-back, else through the L1 into the L2.
+    pub fn write(&mut self, unit: usize, addr: u64) {
+        let l1 = &mut self.l1[unit];
+        let span = l1.line;
+        if self.l1_write_back {
+            if let (_, Some(v)) = l1.write(addr / span) {
+                self.l1_write_back(v * span);
+            }
+            return;
+        }
+        l1.write_through(addr / span);
+        self.l2_write(addr);
+    }
+
+    /// The L2 takes a write into the line holding byte `addr`.
+    fn l2_write(&mut self, addr: u64) {
+        let b = addr / self.l2.line * self.l2.line;
+        if let (_, Some(v)) = self.l2.write(b / self.l2.line) {
+            self.write_back(v * self.l2.line);
+        }
+    }
+
+    /// A dirty L1 line at `a` leaves the L1: its bytes into the L2.
+    fn l1_write_back(&mut self, a: u64) {
+        let span = self.l1[0].line;
+        let mut b = a / self.l2.line * self.l2.line;
+        while b < a + span {
+            self.l2_write(b);
+            b += self.l2.line;
+        }
+    }
+
+    /// DRAM moves `bytes` at `addr`.
+    fn dram(&mut self, addr: u64, bytes: u64) {
+        self.dram_bytes += bytes;
+        if addr < self.nodes_end {
+            self.dram_node_bytes += bytes;
+        } else if addr >= self.private_base {
+            self.dram_stack_bytes += bytes;
+        }
+    }
+
+    /// A dirty L2 line at `b` leaves the L2: into the last-level cache, else to DRAM.
+    fn write_back(&mut self, b: u64) {
+        let span = self.l2.line;
+        let Some(llc) = self.llc.as_mut() else {
+            self.dram_write_bytes += span;
+            return self.dram(b, span);
+        };
+        let mut out = Vec::new();
+        let mut c = b / llc.line * llc.line;
+        while c < b + span {
+            if let (_, Some(v)) = llc.write(c / llc.line) {
+                out.push(v * llc.line);
+            }
+            c += llc.line;
+        }
+        let line = llc.line;
+        for v in out {
+            self.dram_write_bytes += line;
+            self.dram(v, line);
+        }
+    }
+
+    /// An L2 miss at `b`: its bytes from the last-level cache, else from DRAM.
     fn below_l2(&mut self, b: u64) {
         let span = self.l2.line;
-        let (line, hit) = match self.llc.as_mut() {
-            None => (span, false),
-            Some(llc) => {
-                let mut c = b / llc.line * llc.line;
-                let mut missed = 0;
-                while c < b + span {
-                    if !llc.access(c / llc.line) {
-                        missed += llc.line;
-                    }
-                    c += llc.line;
-                }
-                (missed, missed == 0)
-            }
+        let Some(llc) = self.llc.as_mut() else {
+            return self.dram(b, span);
         };
-        if !hit {
-            self.dram_bytes += line;
-            if b < self.nodes_end {
-                self.dram_node_bytes += line;
+        let (mut missed, mut out) = (Vec::new(), Vec::new());
+        let mut c = b / llc.line * llc.line;
+        while c < b + span {
+            let (hit, evicted) = llc.read(c / llc.line);
+            if !hit {
+                missed.push(c);
             }
+            out.extend(evicted.map(|v| v * llc.line));
+            c += llc.line;
+        }
+        let line = llc.line;
+        for v in out {
+            self.dram_write_bytes += line;
+            self.dram(v, line);
+        }
+        for c in missed {
+            self.dram(c, line);
         }
     }
 }
 
-/// Runs `waves` on `g` as it would run them at once: wave i starts on unit i mod units, each
-/// unit holds `resident` waves, and in each round every resident wave makes one lockstep step
-/// (units in turn); a finished wave's place goes to the next wave not yet started.
-pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, nodes_end: u64) -> Hierarchy {
+/// Runs `waves` (of the buffers `b`) on `g` as it would run them at once: wave i starts on unit
+/// i mod units, each unit holds `resident` waves, and in each round every resident wave makes
+/// one lockstep step (units in turn); a finished wave's place goes to the next wave not yet
+/// started. A wave's private memory (its [`super::PRIVATE`] ranges) is its place's: place `s`
+/// has the `s`-th region after [`Buffers::private_base`], as a driver gives each resident wave
+/// its scratch.
+pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> Hierarchy {
     let units = g.units as usize;
-    let mut h = Hierarchy::new(g, units, nodes_end);
+    let mut h = Hierarchy::new(g, units, b.nodes_end(), b.private_base());
+    let region = b.private_region(g.wave);
+    let mut ranges: Vec<super::Range> = Vec::new();
     // Waves that read nothing (every ray missed the scene's box) take no step.
     let waves: Vec<&WaveTrace> = waves.iter().filter(|w| !w.steps.is_empty()).collect();
     let slots = units * resident.max(1);
@@ -152,9 +304,26 @@ pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, nodes_end: u64) -
             let Some((w, step)) = *r else { continue };
             // The step's lanes coalesce: each distinct L1 line is one request.
             lines.clear();
-            super::lines_of(&waves[w].steps[step], g.l1_line, &mut lines);
-            for &l in &lines {
-                h.read(s % units, l * g.l1_line);
+            ranges.clear();
+            let steps = &waves[w].steps[step];
+            // A step's lanes all read, or all write (a stack's pushes).
+            let write = steps.first().is_some_and(|r| super::is_write(r.0));
+            ranges.extend(steps.iter().map(|&(a, n)| match super::private_offset(a) {
+                Some(off) => (b.private_base() + s as u64 * region + off, n),
+                None => (a, n),
+            }));
+            if write {
+                // The lanes' writes coalesce per line of the level that takes them.
+                let line = h.write_line();
+                super::lines_of(&ranges, line, &mut lines);
+                for &l in &lines {
+                    h.write(s % units, l * line);
+                }
+            } else {
+                super::lines_of(&ranges, g.l1_line, &mut lines);
+                for &l in &lines {
+                    h.read(s % units, l * g.l1_line);
+                }
             }
             *r = if step + 1 < waves[w].steps.len() {
                 Some((w, step + 1))

@@ -19,6 +19,9 @@ pub struct Gpu {
     pub l1_kib: u64,
     pub l1_line: u64,
     pub l1_ways: usize,
+    /// Whether the L1 keeps a store's line dirty (write-back) — else stores pass through it
+    /// into the L2 (write-through). Only the stacks' pushes write (`docs/gpu-memory.md`).
+    pub l1_write_back: bool,
     pub l2_kib: u64,
     pub l2_line: u64,
     pub l2_ways: usize,
@@ -51,6 +54,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 32,
         l1_line: 128,
         l1_ways: 32,
+        l1_write_back: false,
         l2_kib: 6144,
         l2_line: 128,
         l2_ways: 16,
@@ -74,6 +78,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 16,
         l1_line: 128,
         l1_ways: 32,
+        l1_write_back: false,
         l2_kib: 4096,
         l2_line: 128,
         l2_ways: 16,
@@ -97,6 +102,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
+        l1_write_back: false,
         l2_kib: 4096,
         l2_line: 64,
         l2_ways: 16,
@@ -120,6 +126,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
+        l1_write_back: true,
         l2_kib: 1024,
         l2_line: 64,
         l2_ways: 8,
@@ -143,6 +150,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
+        l1_write_back: true,
         l2_kib: 512,
         l2_line: 64,
         l2_ways: 16,
@@ -166,6 +174,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 192,
         l1_line: 64,
         l1_ways: 8,
+        l1_write_back: true,
         l2_kib: 8192,
         l2_line: 64,
         l2_ways: 16,
@@ -189,6 +198,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 128,
         l1_line: 128,
         l1_ways: 256,
+        l1_write_back: true,
         l2_kib: 6144,
         l2_line: 128,
         l2_ways: 16,
@@ -212,6 +222,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 256,
         l1_line: 128,
         l1_ways: 512,
+        l1_write_back: true,
         l2_kib: 51200,
         l2_line: 128,
         l2_ways: 20,
@@ -235,6 +246,7 @@ pub static GPUS: &[Gpu] = &[
         l1_kib: 256,
         l1_line: 128,
         l1_ways: 512,
+        l1_write_back: true,
         l2_kib: 51200,
         l2_line: 128,
         l2_ways: 20,
@@ -257,11 +269,11 @@ pub fn gpu(id: &str) -> Option<&'static Gpu> {
 /// The table of the models' figures (Markdown), for the report.
 pub fn table(gpus: &[&Gpu]) -> String {
     let mut md = String::from(
-        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit (assumed) | L1/unit KiB, line, ways | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
+        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit (assumed) | L1/unit KiB, line, ways, stores | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
     );
     for g in gpus {
         md += &format!(
-            "| {} ({}) | {} {} | {} | {} | {}, {} B, {} | {}, {} B, {} | {} | {:.0} | {} | {:.0} | {} |\n",
+            "| {} ({}) | {} {} | {} | {} | {}, {} B, {}, {} | {}, {} B, {} | {} | {:.0} | {} | {:.0} | {} |\n",
             g.id,
             g.name,
             g.units,
@@ -271,6 +283,7 @@ pub fn table(gpus: &[&Gpu]) -> String {
             g.l1_kib,
             g.l1_line,
             g.l1_ways,
+            if g.l1_write_back { "write-back" } else { "write-through" },
             g.l2_kib,
             g.l2_line,
             g.l2_ways,

@@ -4,10 +4,12 @@
 //! 1. **requested bytes per ray** (exact): nodes (the node record of every node a ray is
 //!    active in), triangle vertices (36 bytes per test), triangle ids (4 bytes per test the
 //!    certified test does not reject: `closest_test` reads it then), and the stack entries
-//!    pushed and popped (entry bytes × 2 per push — what the stack would move were it in
-//!    memory; the compilers keep it in registers, scratch or shared memory: `isa` says);
+//!    pushed and popped (entry bytes × 2 per push: every modelled GPU's compiler keeps the
+//!    single-ray kernels' stack arrays in private memory — scratch, local memory — as `isa`'s
+//!    private bytes show);
 //! 2. **distinct cache lines** (exact) of 32, 64 and 128 bytes, per ray alone and per wave in
-//!    lockstep (at each step the union over the wave's lanes: what coalescing leaves);
+//!    lockstep (at each step the union over the wave's lanes: what coalescing leaves), the
+//!    stacks' pops and pushes among them (single rays, in private memory: [`Stack`]);
 //! 3. **a cache model** ([`cache`]): each GPU's hierarchy ([`gpus`]) fed by the waves it runs
 //!    at once, giving bytes and hit rates at each level and DRAM bytes per ray (a model).
 //!
@@ -25,26 +27,78 @@ use crate::layout::traverse::Reads;
 pub type Range = (u64, u32);
 
 /// A wave's reads in lockstep: per step, the ranges its lanes read in it (a traversal pass
-/// reads the entered nodes, then each pass of the triangle loop a triangle per lane).
+/// pops its stack entries, reads the entered nodes, then each pass of the triangle loop a
+/// triangle per lane, then pushes its new entries). A range at [`PRIVATE`] + offset is in the
+/// wave's own private memory (its lanes' stacks), placed where the wave runs ([`cache`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct WaveTrace {
     pub steps: Vec<Vec<Range>>,
     pub rays: usize,
 }
 
-/// Where the scene's buffers lie.
+/// Addresses from here on are offsets in a wave's private memory ([`WaveTrace`]).
+pub const PRIVATE: u64 = 1 << 62;
+/// Set beside [`PRIVATE`] on a range that is written (a stack push), not read.
+pub const WRITE: u64 = 1 << 61;
+
+/// The offset in the wave's private memory of an address at [`PRIVATE`], if it is one.
+pub fn private_offset(a: u64) -> Option<u64> {
+    (a >= PRIVATE).then_some(a & (WRITE - 1))
+}
+
+/// Whether an address is a write ([`WRITE`]).
+pub fn is_write(a: u64) -> bool {
+    a >= PRIVATE && a & WRITE != 0
+}
+
+/// Where the scene's buffers lie, and the stacks where the kernel keeps them in private memory.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Buffers {
     pub node_size: u64,
     pub nodes: u64,
     pub tris: u64,
+    /// The traversal stack in private memory ([`Stack`]); `None`: left out of the traces.
+    pub stack: Option<Stack>,
+}
+
+/// A lane's traversal stack in private (scratch) memory: `entries` entries of `entry` bytes,
+/// the wave's lanes interleaved dword by dword (AMD's swizzled scratch, NVIDIA's local memory:
+/// dword `k` of lane `l` at `(k × wave + l) × 4` of the wave's region), so a wave's pushes at one
+/// depth are contiguous.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stack {
+    pub entry: u64,
+    pub entries: u64,
 }
 
 const ALIGN: u64 = 64 * 1024;
 
 impl Buffers {
     pub fn new([node_size, nodes, tris]: [usize; 3]) -> Buffers {
-        Buffers { node_size: node_size as u64, nodes: nodes as u64, tris: tris as u64 }
+        Buffers { node_size: node_size as u64, nodes: nodes as u64, tris: tris as u64, stack: None }
+    }
+    /// The same buffers, the stacks in private memory.
+    pub fn with_stack(self, stack: Stack) -> Buffers {
+        Buffers { stack: Some(stack), ..self }
+    }
+    /// Where the waves' private memory starts: after the id buffer, aligned.
+    pub fn private_base(&self) -> u64 {
+        (self.ids_base() + 4 * self.tris).div_ceil(ALIGN) * ALIGN
+    }
+    /// A wave's private region of `wave` lanes, bytes (0 without the stack).
+    pub fn private_region(&self, wave: usize) -> u64 {
+        self.stack.map_or(0, |s| (s.entry * s.entries * wave as u64).div_ceil(256) * 256)
+    }
+    /// The dwords of the stack entry at `depth` of lane `lane` in a wave of `wave` lanes, as
+    /// ranges at [`PRIVATE`] offsets, [`WRITE`] where `write`.
+    fn entry_at(&self, depth: u64, lane: usize, wave: usize, write: bool, out: &mut Vec<Range>) {
+        if let Some(s) = self.stack {
+            let words = s.entry.div_ceil(4);
+            let at = PRIVATE | if write { WRITE } else { 0 };
+            for k in 0..words {
+                out.push((at + ((depth * words + k) * wave as u64 + lane as u64) * 4, 4));
+            }
+        }
     }
     /// Where the node buffer ends (its bytes are the nodes').
     pub fn nodes_end(&self) -> u64 {
@@ -81,12 +135,16 @@ pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
 
 /// The waves of `reads` (each packet's passes × lanes, [`crate::layout::traverse::mem_reads`],
 /// of `rays` rays in packets of `p`: the last may hold fewer) in waves of `wave` lanes:
-/// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its node
-/// step, then its triangle steps.
+/// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its pops,
+/// its node step, its triangle steps and its pushes. The stack's steps are there where `b` has
+/// it and for single rays (P = 1: a packet's stack is the packet's, in shared memory or
+/// registers): a lane's first pass takes the root from registers, every later pass pops one
+/// entry, and a pass's pushes are written after its tests.
 pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffers) -> Vec<WaveTrace> {
     let p = p.max(1);
     let per_wave = (wave / p).max(1);
     let lanes = |k: usize| p.min(rays - k * p);
+    let stack = b.stack.is_some() && p == 1;
     let mut out = Vec::new();
     for (w, packets) in reads.chunks(per_wave).enumerate() {
         let first = w * per_wave;
@@ -95,8 +153,21 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
             packets[k].get(i * n..(i + 1) * n)
         };
         let passes = (0..packets.len()).map(|k| packets[k].len() / lanes(first + k)).max().unwrap_or(0);
+        let mut depth = vec![0u64; packets.len()];
         let mut steps = Vec::new();
         for i in 0..passes {
+            if stack && i > 0 {
+                let mut pops = Vec::new();
+                for (k, d) in depth.iter_mut().enumerate() {
+                    if pass(k, i).is_some() {
+                        *d -= 1;
+                        b.entry_at(*d, k, wave, false, &mut pops);
+                    }
+                }
+                if !pops.is_empty() {
+                    steps.push(pops);
+                }
+            }
             let mut node = Vec::new();
             let mut most = 0;
             for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
@@ -115,6 +186,20 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
                     }
                 }
                 steps.push(t);
+            }
+            if stack {
+                let mut pushes = Vec::new();
+                for (k, d) in depth.iter_mut().enumerate() {
+                    for x in pass(k, i).into_iter().flatten() {
+                        for _ in 0..x.pushes {
+                            b.entry_at(*d, k, wave, true, &mut pushes);
+                            *d += 1;
+                        }
+                    }
+                }
+                if !pushes.is_empty() {
+                    steps.push(pushes);
+                }
             }
         }
         out.push(WaveTrace { steps, rays: (0..packets.len()).map(|k| lanes(first + k)).sum() });
@@ -173,6 +258,9 @@ pub struct Config {
     /// `estimate`'s rows (`estimate-rays.json`): where one names a GPU's family, scene, ray
     /// set and kernel, its issue cycles bound the rays/s beside DRAM's.
     pub estimates: Vec<crate::report::estimate::RayRow>,
+    /// The stacks in the traces and the cache model (single rays; [`Stack`]); `false` leaves
+    /// them out (`memory --no-stack`).
+    pub stack: bool,
 }
 
 /// Every variant of `cfg` on every scene and ray set, each on every GPU model: its rows, with
@@ -201,8 +289,13 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let id = KernelId::new(*v, v.portable_impl(), false);
                 progress(&format!("{scene} {kind} {}", id.name()));
                 let (reads, sizes) = runner.mem_reads(v, set)?;
-                let b = Buffers::new(sizes);
                 let entry = crate::interface::stack_entry_bytes(v.stack_entry()) as u64;
+                let b = Buffers::new(sizes);
+                let b = if cfg.stack {
+                    b.with_stack(Stack { entry, entries: crate::variant::stack_entries(v.branching) as u64 })
+                } else {
+                    b
+                };
                 let q = requested(&reads, &b, entry);
                 let per = |x: u64| x as f64 / n.max(1) as f64;
                 let alone = waves(&reads, n, v.packet, v.packet, &b);
@@ -222,7 +315,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let per_gpu = cfg.gpus.par_iter().map(|g| {
                     let (_, ws, lines) = by_width.iter().find(|x| x.0 == g.wave).expect("every width made");
                     let (ws, lines) = (ws.as_slice(), *lines);
-                    let h = cache::simulate(g, ws, g.resident, b.nodes_end());
+                    let h = cache::simulate(g, ws, g.resident, &b);
                     let l1_acc: u64 = h.l1.iter().map(|c| c.accesses).sum();
                     let l1_hits: u64 = h.l1.iter().map(|c| c.hits).sum();
                     let rate = |hits: u64, acc: u64| if acc > 0 { hits as f64 / acc as f64 } else { 0.0 };
@@ -263,6 +356,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         llc_hit: llc.map_or(0.0, |c| rate(c.hits, c.accesses)),
                         dram_bytes: dram,
                         dram_node_bytes: per(h.dram_node_bytes),
+                        dram_stack_bytes: per(h.dram_stack_bytes),
                         dram_nj: dram * 8.0 * g.pj_per_bit / 1000.0,
                         dram_bound_mrays: bound(g.dram_gbs, dram),
                         l2_bound_mrays: Some(bound(g.l2_gbs, l2_bytes)),

@@ -47,6 +47,9 @@ pub struct MemRow {
     pub llc_hit: f64,
     pub dram_bytes: f64,
     pub dram_node_bytes: f64,
+    /// Of `dram_bytes`, the stacks' (private memory: single rays, unless `memory --no-stack`).
+    #[serde(default)]
+    pub dram_stack_bytes: f64,
     /// DRAM energy per ray, nJ (DRAM bytes × 8 × the GPU's pJ per bit).
     pub dram_nj: f64,
     /// Rays per second DRAM bandwidth allows (millions).
@@ -160,6 +163,8 @@ struct Record<'a> {
     dram_bytes: f64,
     #[serde(serialize_with = "fixed::<1, _>")]
     dram_node_bytes: f64,
+    #[serde(serialize_with = "fixed::<1, _>")]
+    dram_stack_bytes: f64,
     #[serde(serialize_with = "fixed::<3, _>")]
     dram_nj: f64,
     #[serde(serialize_with = "fixed::<1, _>")]
@@ -212,6 +217,7 @@ pub fn csv(rows: &[MemRow]) -> anyhow::Result<Vec<u8>> {
         llc_hit: r.llc_hit,
         dram_bytes: r.dram_bytes,
         dram_node_bytes: r.dram_node_bytes,
+        dram_stack_bytes: r.dram_stack_bytes,
         dram_nj: r.dram_nj,
         dram_bound_mrays: r.dram_bound_mrays,
         dram_vs_f32: r.dram_vs_f32.map(|v| (v * 1e4).round() / 1e4),
@@ -300,10 +306,12 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
     }
     md += "\n## What each tier is\n\n- requested bytes per ray (exact, from the CPU reference's walk): nodes, \
            triangle vertices (36 B a test), ids (4 B a test the certified test does not reject), stack (entries \
-           pushed and popped × entry bytes, were the stack in memory; not fed to the model);\n- distinct lines \
-           (exact): per ray alone and per wave with its lanes coalesced at each lockstep step;\n- the cache model: \
-           an L1 per unit shared by its resident waves, the L2, the last-level cache, DRAM (LRU, sets by address \
-           modulo, no prefetch, no compression, no texture path): a model, not a measurement.\n\n";
+           pushed and popped × entry bytes);\n- distinct lines (exact): per ray alone and per wave with its lanes \
+           coalesced at each lockstep step — the stacks' too, for single rays: in private memory, each wave's \
+           lanes interleaved dword by dword (unless `--no-stack`);\n- the cache model: an L1 per unit shared by \
+           its resident waves, the L2, the last-level cache, DRAM (LRU, sets by address modulo, no prefetch, no \
+           compression, no texture path, pushes allocate as reads do, no write-back traffic counted), each \
+           resident wave's stacks in a private region of its own: a model, not a measurement.\n\n";
     md += gpus_table;
     let mut groups: Vec<(&str, &str, &str)> =
         rows.iter().map(|r| (r.gpu.as_str(), r.scene.as_str(), r.rays.as_str())).collect();
@@ -314,12 +322,12 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
             "\n## {g}, {scene} ({} triangles), {kind} rays ({}, wave {})\n\n",
             rs[0].triangles, rs[0].ray_count, rs[0].wave
         );
-        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 |\n";
-        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
+        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 |\n";
+        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
         for r in rs {
             let q = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.2}"));
             md += &format!(
-                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} |\n",
+                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.node_bytes,
                 r.vert_bytes,
@@ -334,6 +342,7 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
                 r.llc_hit,
                 r.dram_bytes,
                 r.dram_node_bytes,
+                r.dram_stack_bytes,
                 q(r.dram_vs_f32),
                 q(r.dram_node_vs_f32),
                 r.dram_nj,
