@@ -36,7 +36,7 @@ fn requested_bytes_are_the_counters_times_the_record_sizes() {
                         let what = format!("{layout} {} B={b} P={pk} {kind}", math.name());
                         let (_, c) = layout.imp().trace(&enc, rays, pk, math, FloatControls::On);
                         let reads = layout.imp().mem_reads(&enc, rays, pk, math, FloatControls::On);
-                        let q = requested(&reads, &buf, 8);
+                        let q = requested(&reads, &buf, &Stack { entry: 8, slots: 97, meta: None }, pk);
                         let nodes: u64 = c.iter().map(|c| c.nodes as u64).sum();
                         let tests: u64 = c.iter().map(|c| c.tri_tests as u64).sum();
                         assert_eq!((q.visits, q.tests), (nodes, tests), "{what}: visits and tests");
@@ -278,7 +278,11 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
     let reads: Vec<Vec<Reads>> = layout.imp().mem_reads(&enc, rays, 1, layout.default_math(), FloatControls::On);
     // Dirty lines written back to DRAM somewhere: the write path is exercised.
     let mut written_back = 0;
-    for buf in [scene, scene.with_stack(Stack { entry: 8, entries: 24 })] {
+    for buf in [
+        scene,
+        scene.with_stack(Stack { entry: 8, slots: 97, meta: None }),
+        scene.with_stack(Stack { entry: 20, slots: 31, meta: Some(4) }),
+    ] {
         for g in GPUS {
             // A small GPU of the same caches, so that waves queue and caches fill.
             let small = halftrace::memory::gpus::Gpu {
@@ -321,73 +325,97 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
     assert!(gpu("navi31").is_some() && gpu("nope").is_none());
 }
 
-/// The stacks in the traces: every lane's pops and pushes move the requested stack bytes (2 ×
-/// entry × pushes) whatever the wave's width; a pop reads an entry a push of its own lane wrote
-/// (its region's offset, never another lane's); a wave's lanes pushing at one depth share lines
-/// (interleaved dwords); without the stack, or at P > 1, the traces hold none.
+/// The stacks in the traces, in both of the kernels' disciplines. An entry per child
+/// (`stack_entries.glsl`): a visit writes every inner child it hit but the nearest, a pass
+/// that entered nothing pops one — 2 × entry × Σ max(n − 1, 0) bytes per ray, counted here from
+/// the reads, equal to what the traces move at every wave width. A group per visit
+/// (`stack_groups.glsl`): a visit with two or more inner children writes one group, a pop reads
+/// the top group and writes its order word back while children are left. Either way a pop
+/// reads what its own lane wrote and offsets stay in the lane's region; entries are never
+/// pushed over a live one and all are popped by the end; lanes pushing at one depth share lines; without
+/// the stack, or at P > 1, the traces hold none.
 #[test]
 fn the_stacks_move_what_the_rays_push_and_pop() {
     let (p, sets) = sets();
     let layout = LayoutId::parse("f16w").unwrap();
     let enc = encode(&p, layout, 4);
     let scene = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]);
-    let entry = 12;
-    let buf = scene.with_stack(Stack { entry, entries: 24 });
+    let entries = Stack { entry: 12, slots: 97, meta: None };
+    let groups = Stack { entry: 20, slots: 31, meta: Some(4) };
     for (kind, rays) in &sets {
         let reads = layout.imp().mem_reads(&enc, rays, 1, layout.default_math(), FloatControls::On);
-        let q = requested(&reads, &buf, entry);
-        assert!(q.stack > 0, "{kind}: some pushes");
-        for wave in [1, 32, 64] {
-            let ws = waves(&reads, rays.len(), 1, wave, &buf);
-            let mut moved = 0;
-            for w in &ws {
-                for step in &w.steps {
-                    let private: Vec<_> = step.iter().filter(|r| r.0 >= PRIVATE).collect();
-                    assert!(private.is_empty() || private.len() == step.len(), "{kind}: a step of stack and scene");
-                    for &&(a, n) in &private {
-                        moved += n as u64;
-                        let off = private_offset(a).unwrap();
-                        let lane = (off / 4) % wave as u64;
-                        assert!(lane < w.rays as u64, "{kind} wave {wave}: offset {off} of no lane");
-                        assert!(off < buf.private_region(wave), "{kind} wave {wave}: offset {off} past the region");
+        // The entry discipline's bytes from the reads alone.
+        let expect: u64 = reads.iter().flatten().map(|x| 2 * 12 * (x.pushes.max(1) as u64 - 1)).sum();
+        assert!(expect > 0, "{kind}: some pushes");
+        assert_eq!(requested(&reads, &scene, &entries, 1).stack, expect, "{kind}: requested stack bytes");
+        for st in [entries, groups] {
+            let buf = scene.with_stack(st);
+            let q = requested(&reads, &buf, &st, 1);
+            for wave in [1, 32, 64] {
+                let ws = waves(&reads, rays.len(), 1, wave, &buf);
+                let mut moved = 0;
+                for w in &ws {
+                    // Live dwords (by lane offset) and the step kinds, replayed in order.
+                    let mut live = std::collections::HashSet::new();
+                    for step in &w.steps {
+                        let private: Vec<_> = step.iter().filter(|r| r.0 >= PRIVATE).collect();
+                        if private.is_empty() {
+                            continue;
+                        }
+                        assert_eq!(private.len(), step.len(), "{kind}: a step of stack and scene");
+                        let write = is_write(step[0].0);
+                        assert!(step.iter().all(|r| is_write(r.0) == write), "{kind}: reads and writes in a step");
+                        for &&(a, n) in &private {
+                            moved += n as u64;
+                            let off = private_offset(a).unwrap();
+                            assert!((off / 4) % (wave as u64) < w.rays as u64, "{kind} wave {wave}: no lane's offset");
+                            assert!(off < buf.private_region(wave), "{kind} wave {wave}: offset {off} past the region");
+                        }
+                        let offs: Vec<u64> = step.iter().map(|r| private_offset(r.0).unwrap()).collect();
+                        if !write {
+                            assert!(
+                                offs.iter().all(|o| live.contains(o)),
+                                "{kind} {st:?}: a pop of what no push wrote"
+                            );
+                            if st.meta.is_none() {
+                                offs.iter().for_each(|o| {
+                                    live.remove(o);
+                                });
+                            }
+                        } else if st.meta.is_none() {
+                            assert!(offs.iter().all(|o| live.insert(*o)), "{kind}: a push over a live entry");
+                        } else {
+                            // Groups: a pop reads dwords a push of its lane wrote (a discarded
+                            // group's slot is written again by the next group there).
+                            live.extend(offs);
+                        }
+                    }
+                    if st.meta.is_none() {
+                        assert!(live.is_empty(), "{kind}: entries pushed and never popped");
                     }
                 }
+                assert_eq!(moved, q.stack, "{kind} {st:?}, waves of {wave}: stack bytes moved");
             }
-            assert_eq!(moved, q.stack, "{kind}, waves of {wave}: stack bytes moved");
-        }
-        // Pops read what the same lane pushed: replay each wave's steps in order.
-        let ws = waves(&reads, rays.len(), 1, 32, &buf);
-        for w in &ws {
-            let mut live = std::collections::HashSet::new();
-            for step in w.steps.iter().filter(|s| s.first().is_some_and(|r| r.0 >= PRIVATE)) {
-                let offs: Vec<u64> = step.iter().map(|r| private_offset(r.0).unwrap()).collect();
-                if is_write(step[0].0) {
-                    assert!(step.iter().all(|r| is_write(r.0)), "{kind}: a step of pushes and pops");
-                    assert!(offs.iter().all(|o| !live.contains(o)), "{kind}: a push over a live entry");
-                    live.extend(offs);
-                } else {
-                    assert!(offs.iter().all(|o| live.remove(o)), "{kind}: a pop of an entry no push wrote");
-                }
-            }
-            assert!(live.is_empty(), "{kind}: entries pushed and never popped");
-        }
-        // 32 lanes pushing one entry each at depth 0, then popping it: 3 dwords a lane, the
-        // lanes' dword k side by side — 384 contiguous bytes, 6 lines of 64 bytes, each way.
-        let lane = vec![Reads { node: Some(0), tris: vec![], pushes: 1 }, Reads { node: Some(1), ..Reads::default() }];
-        let ws = waves(&vec![lane; 32], 32, 1, 32, &buf);
-        let stack_steps: Vec<&Vec<_>> = ws[0].steps.iter().filter(|s| s[0].0 >= PRIVATE).collect();
-        assert_eq!(stack_steps.len(), 2, "{kind}: one push step, one pop step");
-        for s in stack_steps {
-            let mut v = Vec::new();
-            lines_of(s, 64, &mut v);
-            let first = s.iter().map(|r| private_offset(r.0).unwrap()).min();
-            assert_eq!((s.len(), v.len(), first), (96, 6, Some(0)), "{kind}");
         }
         let none = waves(&reads, rays.len(), 1, 32, &scene);
         assert!(none.iter().flat_map(|w| &w.steps).flatten().all(|r| r.0 < PRIVATE), "{kind}: no stack without it");
         let packets = layout.imp().mem_reads(&enc, rays, 8, layout.default_math(), FloatControls::On);
-        let p8 = waves(&packets, rays.len(), 8, 32, &buf);
+        let p8 = waves(&packets, rays.len(), 8, 32, &scene.with_stack(entries));
         assert!(p8.iter().flat_map(|w| &w.steps).flatten().all(|r| r.0 < PRIVATE), "{kind}: no stack at P = 8");
+    }
+    // 32 lanes each visiting a node with two inner children (one written, the nearest entered),
+    // a leaf-less child (nothing), then popping the written one: 3 dwords a lane, the lanes'
+    // dword k side by side — 384 contiguous bytes, 6 lines of 64 bytes, each way.
+    let buf = scene.with_stack(entries);
+    let visit = |pushes: u32| Reads { node: Some(0), tris: vec![], pushes };
+    let ws = waves(&vec![vec![visit(2), visit(0), visit(0)]; 32], 32, 1, 32, &buf);
+    let stack_steps: Vec<&Vec<_>> = ws[0].steps.iter().filter(|s| s[0].0 >= PRIVATE).collect();
+    assert_eq!(stack_steps.len(), 2, "one push step, one pop step");
+    for s in stack_steps {
+        let mut v = Vec::new();
+        lines_of(s, 64, &mut v);
+        let first = s.iter().map(|r| private_offset(r.0).unwrap()).min();
+        assert_eq!((s.len(), v.len(), first), (96, 6, Some(0)));
     }
 }
 

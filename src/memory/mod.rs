@@ -61,14 +61,115 @@ pub struct Buffers {
     pub stack: Option<Stack>,
 }
 
-/// A lane's traversal stack in private (scratch) memory: `entries` entries of `entry` bytes,
-/// the wave's lanes interleaved dword by dword (AMD's swizzled scratch, NVIDIA's local memory:
-/// dword `k` of lane `l` at `(k × wave + l) × 4` of the wave's region), so a wave's pushes at one
-/// depth are contiguous.
+/// A lane's traversal stack in private (scratch) memory, in the kernel's discipline: `slots`
+/// entries of `entry` bytes (`stack_entries.glsl`: a visit pushes every inner child it hit but
+/// the nearest, which it enters directly; a pass that enters nothing pops one), or — `meta`
+/// given — `slots` groups of `entry + meta` bytes (`stack_groups.glsl`: a visit that hit two or
+/// more inner children writes one group; a pop reads the top group and writes its order word
+/// back while children are left in it). The wave's lanes are interleaved dword by dword (AMD's
+/// swizzled scratch, NVIDIA's local memory: dword `k` of lane `l` at `(k × wave + l) × 4` of
+/// the wave's region), so a wave's pushes at one depth are contiguous.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stack {
     pub entry: u64,
-    pub entries: u64,
+    pub slots: u64,
+    pub meta: Option<u64>,
+}
+
+/// One pass's stack traffic of one lane, in dwords of its own stack (first dword, dwords): the
+/// pop before the pass (a read, then — groups — the order word written back) and the pushes
+/// after it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PassOps {
+    pub pop: Option<(u64, u64)>,
+    pub pop_write: Option<(u64, u64)>,
+    pub push: Vec<(u64, u64)>,
+}
+
+impl Stack {
+    /// A slot's dwords.
+    fn words(&self) -> u64 {
+        (self.entry + self.meta.unwrap_or(0)).div_ceil(4)
+    }
+
+    /// A lane's stack, dwords.
+    pub fn lane_words(&self) -> u64 {
+        self.slots * self.words()
+    }
+
+    /// The stack traffic of a lane whose passes pushed `pushes` inner children each (the CPU
+    /// reference's [`Reads::pushes`]), pass by pass, as the kernel moves it.
+    pub fn ops(&self, pushes: impl Iterator<Item = u32>) -> Vec<PassOps> {
+        let w = self.words();
+        let mut out = Vec::new();
+        // Entries (or groups) on the stack; each group's children left; whether the pass ahead
+        // pops (the last entered nothing).
+        let (mut depth, mut left, mut pop) = (0u64, Vec::<u32>::new(), false);
+        for (i, n) in pushes.enumerate() {
+            let mut ops = PassOps::default();
+            if i > 0 && pop {
+                match self.meta {
+                    None => {
+                        depth -= 1;
+                        ops.pop = Some((depth * w, w));
+                    }
+                    Some(meta) => {
+                        let g = left.len() as u64 - 1;
+                        ops.pop = Some((g * w, w));
+                        let last = left.last_mut().expect("a group to pop");
+                        *last -= 1;
+                        if *last == 0 {
+                            left.pop();
+                        } else {
+                            let mw = meta.div_ceil(4);
+                            ops.pop_write = Some((g * w + w - mw, mw));
+                        }
+                    }
+                }
+            }
+            match (self.meta, n) {
+                (_, 0) => {}
+                (None, n) => {
+                    for _ in 1..n {
+                        ops.push.push((depth * w, w));
+                        depth += 1;
+                    }
+                }
+                (Some(_), 1) => {}
+                (Some(_), n) => {
+                    ops.push.push((left.len() as u64 * w, w));
+                    left.push(n - 1);
+                }
+            }
+            pop = n == 0;
+            out.push(ops);
+        }
+        out
+    }
+
+    /// A variant's stack: its entry (node index and the layout's fields), in groups where its
+    /// kernels defer entries (the order word: 4 bytes, 12 at B = 16).
+    pub fn of(v: &crate::variant::Variant) -> Stack {
+        let entry = crate::interface::stack_entry_bytes(v.stack_entry()) as u64;
+        if v.defers_entries() {
+            let meta = if v.branching > 8 { 12 } else { 4 };
+            Stack { entry, slots: crate::variant::stack_groups(v.branching) as u64, meta: Some(meta) }
+        } else {
+            Stack { entry, slots: crate::variant::stack_entries(v.branching) as u64, meta: None }
+        }
+    }
+
+    /// Bytes a lane's passes move through its stack (reads and writes).
+    pub fn bytes(&self, pushes: impl Iterator<Item = u32>) -> u64 {
+        self.ops(pushes)
+            .iter()
+            .map(|o| {
+                4 * (o.pop.map_or(0, |r| r.1)
+                    + o.pop_write.map_or(0, |r| r.1)
+                    + o.push.iter().map(|r| r.1).sum::<u64>())
+            })
+            .sum()
+    }
 }
 
 const ALIGN: u64 = 64 * 1024;
@@ -87,18 +188,7 @@ impl Buffers {
     }
     /// A wave's private region of `wave` lanes, bytes (0 without the stack).
     pub fn private_region(&self, wave: usize) -> u64 {
-        self.stack.map_or(0, |s| (s.entry * s.entries * wave as u64).div_ceil(256) * 256)
-    }
-    /// The dwords of the stack entry at `depth` of lane `lane` in a wave of `wave` lanes, as
-    /// ranges at [`PRIVATE`] offsets, [`WRITE`] where `write`.
-    fn entry_at(&self, depth: u64, lane: usize, wave: usize, write: bool, out: &mut Vec<Range>) {
-        if let Some(s) = self.stack {
-            let words = s.entry.div_ceil(4);
-            let at = PRIVATE | if write { WRITE } else { 0 };
-            for k in 0..words {
-                out.push((at + ((depth * words + k) * wave as u64 + lane as u64) * 4, 4));
-            }
-        }
+        self.stack.map_or(0, |s| (s.lane_words() * 4 * wave as u64).div_ceil(256) * 256)
     }
     /// Where the node buffer ends (its bytes are the nodes').
     pub fn nodes_end(&self) -> u64 {
@@ -121,6 +211,15 @@ impl Buffers {
     }
 }
 
+/// The dwords `(first, count)` of lane `lane`'s stack in a wave of `wave` lanes, as ranges at
+/// [`PRIVATE`] offsets, [`WRITE`] where `write`.
+fn lane_words((first, count): (u64, u64), lane: usize, wave: usize, write: bool, out: &mut Vec<Range>) {
+    let at = PRIVATE | if write { WRITE } else { 0 };
+    for k in first..first + count {
+        out.push((at + (k * wave as u64 + lane as u64) * 4, 4));
+    }
+}
+
 /// The distinct lines of `line` bytes that `ranges` touch, appended to `out` (sorted).
 pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
     let start = out.len();
@@ -136,10 +235,9 @@ pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
 /// The waves of `reads` (each packet's passes × lanes, [`crate::layout::traverse::mem_reads`],
 /// of `rays` rays in packets of `p`: the last may hold fewer) in waves of `wave` lanes:
 /// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its pops,
-/// its node step, its triangle steps and its pushes. The stack's steps are there where `b` has
-/// it and for single rays (P = 1: a packet's stack is the packet's, in shared memory or
-/// registers): a lane's first pass takes the root from registers, every later pass pops one
-/// entry, and a pass's pushes are written after its tests.
+/// its node step, its triangle steps and its pushes. The stack's steps ([`Stack::ops`]) are
+/// there where `b` has it and for single rays (P = 1: a packet's stack is the packet's, in
+/// shared memory or registers).
 pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffers) -> Vec<WaveTrace> {
     let p = p.max(1);
     let per_wave = (wave / p).max(1);
@@ -153,21 +251,26 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
             packets[k].get(i * n..(i + 1) * n)
         };
         let passes = (0..packets.len()).map(|k| packets[k].len() / lanes(first + k)).max().unwrap_or(0);
-        let mut depth = vec![0u64; packets.len()];
+        // Each lane's stack traffic pass by pass (single rays: a packet is one lane).
+        let ops: Vec<Vec<PassOps>> = match b.stack.filter(|_| stack) {
+            Some(st) => packets.iter().map(|k| st.ops(k.iter().map(|x| x.pushes))).collect(),
+            None => Vec::new(),
+        };
         let mut steps = Vec::new();
         for i in 0..passes {
-            if stack && i > 0 {
-                let mut pops = Vec::new();
-                for (k, d) in depth.iter_mut().enumerate() {
-                    if pass(k, i).is_some() {
-                        *d -= 1;
-                        b.entry_at(*d, k, wave, false, &mut pops);
+            let at = |k: usize| ops.get(k).and_then(|o| o.get(i));
+            let (mut pops, mut back) = (Vec::new(), Vec::new());
+            for k in 0..packets.len() {
+                if let Some(o) = at(k) {
+                    if let Some(r) = o.pop {
+                        lane_words(r, k, wave, false, &mut pops);
+                    }
+                    if let Some(r) = o.pop_write {
+                        lane_words(r, k, wave, true, &mut back);
                     }
                 }
-                if !pops.is_empty() {
-                    steps.push(pops);
-                }
             }
+            steps.extend([pops, back].into_iter().filter(|s| !s.is_empty()));
             let mut node = Vec::new();
             let mut most = 0;
             for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
@@ -187,19 +290,14 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
                 }
                 steps.push(t);
             }
-            if stack {
-                let mut pushes = Vec::new();
-                for (k, d) in depth.iter_mut().enumerate() {
-                    for x in pass(k, i).into_iter().flatten() {
-                        for _ in 0..x.pushes {
-                            b.entry_at(*d, k, wave, true, &mut pushes);
-                            *d += 1;
-                        }
-                    }
+            let mut pushes = Vec::new();
+            for k in 0..packets.len() {
+                for &r in at(k).map_or(&[][..], |o| &o.push[..]) {
+                    lane_words(r, k, wave, true, &mut pushes);
                 }
-                if !pushes.is_empty() {
-                    steps.push(pushes);
-                }
+            }
+            if !pushes.is_empty() {
+                steps.push(pushes);
             }
         }
         out.push(WaveTrace { steps, rays: (0..packets.len()).map(|k| lanes(first + k)).sum() });
@@ -219,14 +317,21 @@ pub struct Requested {
     pub tests: u64,
 }
 
-/// The bytes every lane of `reads` requests; `entry`: a stack entry's bytes.
-pub fn requested(reads: &[Vec<Reads>], b: &Buffers, entry: u64) -> Requested {
+/// The bytes every lane of `reads` (packets of `p` rays) requests. The stack's: single rays'
+/// as the kernel moves it ([`Stack::ops`]); a packet's (P > 1, in shared memory or registers)
+/// two entries' bytes per child pushed, what it would move in memory.
+pub fn requested(reads: &[Vec<Reads>], b: &Buffers, stack: &Stack, p: usize) -> Requested {
     let mut q = Requested::default();
     for x in reads.iter().flatten() {
         q.visits += x.node.is_some() as u64;
         q.tests += x.tris.len() as u64;
         q.ids += 4 * x.tris.iter().filter(|t| t.1).count() as u64;
-        q.stack += 2 * entry * x.pushes as u64;
+        if p > 1 {
+            q.stack += 2 * stack.entry * x.pushes as u64;
+        }
+    }
+    if p <= 1 {
+        q.stack = reads.iter().map(|lane| stack.bytes(lane.iter().map(|x| x.pushes))).sum();
     }
     q.nodes = q.visits * b.node_size;
     q.verts = 36 * q.tests;
@@ -289,14 +394,10 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let id = KernelId::new(*v, v.portable_impl(), false);
                 progress(&format!("{scene} {kind} {}", id.name()));
                 let (reads, sizes) = runner.mem_reads(v, set)?;
-                let entry = crate::interface::stack_entry_bytes(v.stack_entry()) as u64;
+                let stack = Stack::of(v);
                 let b = Buffers::new(sizes);
-                let b = if cfg.stack {
-                    b.with_stack(Stack { entry, entries: crate::variant::stack_entries(v.branching) as u64 })
-                } else {
-                    b
-                };
-                let q = requested(&reads, &b, entry);
+                let b = if cfg.stack { b.with_stack(stack) } else { b };
+                let q = requested(&reads, &b, &stack, v.packet);
                 let per = |x: u64| x as f64 / n.max(1) as f64;
                 let alone = waves(&reads, n, v.packet, v.packet, &b);
                 let alone_lines = [32, 64, 128].map(|l| per(wave_lines(&alone, l)));
@@ -398,4 +499,31 @@ pub fn default_variants(branchings: &[usize], layouts: &[crate::layout::LayoutId
         }
     }
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The two disciplines on one lane's passes: a visit with three inner children, then three
+    /// passes that enter nothing (the nearest child entered directly, the other two popped).
+    #[test]
+    fn each_discipline_moves_what_its_kernel_moves() {
+        let pushes = [3u32, 0, 0, 0];
+        let entries = Stack { entry: 12, slots: 97, meta: None };
+        let ops = entries.ops(pushes.into_iter());
+        // Two entries written (the nearest entered), popped at passes 2 and 3, top first.
+        assert_eq!(ops[0].push, vec![(0, 3), (3, 3)]);
+        assert_eq!((ops[1].pop, ops[2].pop, ops[3].pop), (None, Some((3, 3)), Some((0, 3))));
+        assert_eq!(entries.bytes(pushes.into_iter()), 4 * 12);
+        let groups = Stack { entry: 20, slots: 31, meta: Some(4) };
+        let ops = groups.ops(pushes.into_iter());
+        // One group of six dwords; the first pop writes its order word back, the last frees it.
+        assert_eq!(ops[0].push, vec![(0, 6)]);
+        assert_eq!((ops[2].pop, ops[2].pop_write), (Some((0, 6)), Some((5, 1))));
+        assert_eq!((ops[3].pop, ops[3].pop_write), (Some((0, 6)), None));
+        assert_eq!(groups.bytes(pushes.into_iter()), 4 * (6 + 6 + 1 + 6));
+        // One inner child: entered directly, nothing on either stack.
+        assert_eq!((entries.bytes([1u32, 0].into_iter()), groups.bytes([1u32, 0].into_iter())), (0, 0));
+    }
 }

@@ -305,13 +305,15 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
         md += &format!("- {v}\n");
     }
     md += "\n## What each tier is\n\n- requested bytes per ray (exact, from the CPU reference's walk): nodes, \
-           triangle vertices (36 B a test), ids (4 B a test the certified test does not reject), stack (entries \
-           pushed and popped × entry bytes);\n- distinct lines (exact): per ray alone and per wave with its lanes \
-           coalesced at each lockstep step — the stacks' too, for single rays: in private memory, each wave's \
-           lanes interleaved dword by dword (unless `--no-stack`);\n- the cache model: an L1 per unit shared by \
-           its resident waves, the L2, the last-level cache, DRAM (LRU, sets by address modulo, no prefetch, no \
-           compression, no texture path, pushes allocate as reads do, no write-back traffic counted), each \
-           resident wave's stacks in a private region of its own: a model, not a measurement.\n\n";
+           triangle vertices (36 B a test), ids (4 B a test the certified test does not reject), stack (what the \
+           kernel's pushes and pops move: an entry per inner child but the nearest, or a group per visit);\n- \
+           distinct lines (exact): per ray alone and per wave with its lanes coalesced at each lockstep step — the \
+           stacks' too, for single rays: in private memory, each wave's lanes interleaved dword by dword (unless \
+           `--no-stack`);\n- the cache model: an L1 per unit shared by its resident waves, the L2, the last-level \
+           cache, DRAM (LRU, sets by address modulo, no prefetch, no compression, no texture path; stores kept by a \
+           write-back L1 or passed through a write-through one, taken without a fill, dirty lines written back \
+           when evicted), each resident wave's stacks in a private region of its own: a model, not a \
+           measurement.\n\n";
     md += gpus_table;
     let mut groups: Vec<(&str, &str, &str)> =
         rows.iter().map(|r| (r.gpu.as_str(), r.scene.as_str(), r.rays.as_str())).collect();
