@@ -453,6 +453,9 @@ fn the_command_writes_its_files_and_refuses_bad_flags() {
     let out = run(&["--branchings", "3", "--out", dir.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("--branchings"), "{err}");
+    let out = run(&["--node-align", "48", "--out", dir.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--node-align 48"), "{err}");
     let teapot = scene_path("teapot.obj");
     let out = run(&[
         "--gpu",

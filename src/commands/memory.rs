@@ -35,6 +35,10 @@ pub struct MemoryArgs {
     /// ray's stack is in private memory, as every modelled GPU's compiler keeps it).
     #[arg(long)]
     pub no_stack: bool,
+    /// What-if: every layout's nodes padded to a multiple of this many bytes (e.g. 64: q8's 56-byte
+    /// node in one 64-byte line) — no kernel places them so; the model says what it would save.
+    #[arg(long, default_value_t = 0)]
+    pub node_align: u64,
     /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
     /// refused unless --force; other files there are left alone.
     #[arg(long)]
@@ -76,6 +80,11 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         .map(|k| k.parse().map_err(|e| anyhow::anyhow!("--rays {k}: {e}")))
         .collect::<anyhow::Result<_>>()?;
     anyhow::ensure!(a.res > 0, "--res must be at least 1");
+    anyhow::ensure!(
+        a.node_align == 0 || (a.node_align.is_power_of_two() && (4..=4096).contains(&a.node_align)),
+        "--node-align {}: 0 (nodes as the layouts pack them) or a power of two from 4 to 4096 bytes",
+        a.node_align
+    );
     for scene in &a.scene {
         anyhow::ensure!(scene.exists(), "--scene {}: no such file", scene.display());
     }
@@ -93,9 +102,18 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
                 .ok_or_else(|| anyhow::anyhow!("--estimate {}: no estimate-rays.json there", d.display()))?,
         },
         stack: !a.no_stack,
+        node_align: a.node_align,
     };
     let rows = memory::run(&cfg, |_| {})?;
-    let md = crate::report::memory::markdown(&rows, &gpus::table(&gpus));
+    let mut gpus_table = gpus::table(&gpus);
+    if a.node_align > 0 {
+        gpus_table += &format!(
+            "**What-if (`--node-align {}`)**: every layout's nodes padded to a multiple of {} bytes; no kernel \
+             places them so. Requested node bytes stay the records'; lines and the cache model see the padding.\n\n",
+            a.node_align, a.node_align
+        );
+    }
+    let md = crate::report::memory::markdown(&rows, &gpus_table);
     crate::fsx::write_atomic(&out.join("memory.csv"), &crate::report::memory::csv(&rows)?)?;
     crate::fsx::write_atomic(&out.join("memory.json"), serde_json::to_string_pretty(&rows)?.as_bytes())?;
     crate::fsx::write_atomic(&out.join("memory.md"), md.as_bytes())?;

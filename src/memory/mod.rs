@@ -55,6 +55,9 @@ pub fn is_write(a: u64) -> bool {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Buffers {
     pub node_size: u64,
+    /// Where node `i` starts: `i × stride` (the node size as the layouts pack them; larger in
+    /// `memory --node-align`'s what-if, each node padded to a multiple of its alignment).
+    pub stride: u64,
     pub nodes: u64,
     pub tris: u64,
     /// The traversal stack in private memory ([`Stack`]); `None`: left out of the traces.
@@ -176,7 +179,18 @@ const ALIGN: u64 = 64 * 1024;
 
 impl Buffers {
     pub fn new([node_size, nodes, tris]: [usize; 3]) -> Buffers {
-        Buffers { node_size: node_size as u64, nodes: nodes as u64, tris: tris as u64, stack: None }
+        Buffers {
+            node_size: node_size as u64,
+            stride: node_size as u64,
+            nodes: nodes as u64,
+            tris: tris as u64,
+            stack: None,
+        }
+    }
+    /// The same buffers, each node padded to a multiple of `align` bytes (a what-if: no layout
+    /// places its nodes so; 0 or 1 leaves them packed).
+    pub fn with_node_align(self, align: u64) -> Buffers {
+        Buffers { stride: self.node_size.div_ceil(align.max(1)) * align.max(1), ..self }
     }
     /// The same buffers, the stacks in private memory.
     pub fn with_stack(self, stack: Stack) -> Buffers {
@@ -192,7 +206,7 @@ impl Buffers {
     }
     /// Where the node buffer ends (its bytes are the nodes').
     pub fn nodes_end(&self) -> u64 {
-        self.nodes * self.node_size
+        self.nodes * self.stride
     }
     fn verts_base(&self) -> u64 {
         self.nodes_end().div_ceil(ALIGN) * ALIGN
@@ -201,7 +215,7 @@ impl Buffers {
         (self.verts_base() + 36 * self.tris).div_ceil(ALIGN) * ALIGN
     }
     pub fn node(&self, i: u32) -> Range {
-        (i as u64 * self.node_size, self.node_size as u32)
+        (i as u64 * self.stride, self.node_size as u32)
     }
     pub fn verts(&self, i: u32) -> Range {
         (self.verts_base() + 36 * i as u64, 36)
@@ -366,6 +380,9 @@ pub struct Config {
     /// The stacks in the traces and the cache model (single rays; [`Stack`]); `false` leaves
     /// them out (`memory --no-stack`).
     pub stack: bool,
+    /// Nodes padded to a multiple of this many bytes (`memory --node-align`, a what-if; 0: as
+    /// the layouts pack them).
+    pub node_align: u64,
 }
 
 /// Every variant of `cfg` on every scene and ray set, each on every GPU model: its rows, with
@@ -395,7 +412,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 progress(&format!("{scene} {kind} {}", id.name()));
                 let (reads, sizes) = runner.mem_reads(v, set)?;
                 let stack = Stack::of(v);
-                let b = Buffers::new(sizes);
+                let b = Buffers::new(sizes).with_node_align(cfg.node_align);
                 let b = if cfg.stack { b.with_stack(stack) } else { b };
                 let q = requested(&reads, &b, &stack, v.packet);
                 let per = |x: u64| x as f64 / n.max(1) as f64;
@@ -504,6 +521,25 @@ pub fn default_variants(branchings: &[usize], layouts: &[crate::layout::LayoutId
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The what-if of padded nodes: node i starts at i × the padded stride, keeps its own
+    /// bytes, and the buffers after the nodes move past the padded ones.
+    #[test]
+    fn padded_nodes_start_on_their_stride() {
+        let b = Buffers::new([56, 1000, 10]);
+        let p = b.with_node_align(64);
+        assert_eq!((b.node(3), p.node(3)), ((168, 56), (192, 56)));
+        assert_eq!((b.nodes_end(), p.nodes_end()), (56_000, 64_000));
+        assert!(p.verts(0).0 >= p.nodes_end());
+        // 56-byte nodes packed: node 1 straddles two 64-byte lines; padded: one each.
+        let lines = |b: &Buffers| {
+            let mut v = Vec::new();
+            lines_of(&[b.node(1)], 64, &mut v);
+            v.len()
+        };
+        assert_eq!((lines(&b), lines(&p)), (2, 1));
+        assert_eq!(Buffers::new([112, 4, 4]).with_node_align(0).node(1), (112, 112));
+    }
 
     /// The two disciplines on one lane's passes: a visit with three inner children, then three
     /// passes that enter nothing (the nearest child entered directly, the other two popped).
