@@ -137,15 +137,17 @@ impl Naive {
 }
 
 /// The hierarchy of `simulate`, written again with the naive caches and its own schedule
-/// loop: (L1 accesses, L1 hits, L2 accesses, L2 hits, LLC accesses, LLC hits, DRAM bytes). A
+/// loop: (L1 accesses, L1 hits, L2 accesses, L2 hits, LLC accesses, LLC hits, DRAM bytes, of
+/// them written back). A
 /// wave's private offsets go to its place's region: place `s` at `private + s × region`; a
 /// write goes to a write-back L1, else to the L2 (passing a write-through L1); dirty lines go
 /// down when pushed out.
-fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: u64, region: u64) -> [u64; 7] {
+fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: u64, region: u64) -> [u64; 8] {
     struct Levels {
         l2: Naive,
         llc: Option<Naive>,
         dram: u64,
+        written: u64,
         l2_line: u64,
         llc_line: u64,
     }
@@ -153,12 +155,16 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
         /// The LLC (or DRAM) takes the dirty L2 line at byte `b`.
         fn l2_out(&mut self, b: u64) {
             match self.llc.as_mut() {
-                None => self.dram += self.l2_line,
+                None => {
+                    self.dram += self.l2_line;
+                    self.written += self.l2_line;
+                }
                 Some(c) => {
                     let mut x = b / self.llc_line * self.llc_line;
                     while x < b + self.l2_line {
                         if c.touch(x / self.llc_line, true).1.is_some() {
                             self.dram += self.llc_line;
+                            self.written += self.llc_line;
                         }
                         x += self.llc_line;
                     }
@@ -181,6 +187,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
                     while x < b + self.l2_line {
                         let (h, o) = c.touch(x / self.llc_line, false);
                         self.dram += self.llc_line * (!h as u64 + o.is_some() as u64);
+                        self.written += self.llc_line * o.is_some() as u64;
                         x += self.llc_line;
                     }
                 }
@@ -193,6 +200,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
         l2: Naive::new(g.l2_kib * 1024, g.l2_line, g.l2_ways),
         llc: (g.llc_kib > 0).then(|| Naive::new(g.llc_kib * 1024, g.llc_line, g.llc_ways)),
         dram: 0,
+        written: 0,
         l2_line: g.l2_line,
         llc_line: g.llc_line,
     };
@@ -262,7 +270,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
     }
     let (la, lh) = (l1.iter().map(|c| c.accesses).sum(), l1.iter().map(|c| c.hits).sum());
     let (ca, ch) = lv.llc.as_ref().map_or((0, 0), |c| (c.accesses, c.hits));
-    [la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram]
+    [la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram, lv.written]
 }
 
 /// Equal hit and miss counts at every level, and equal DRAM bytes, on a real trace, for every
@@ -305,6 +313,7 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
                     h.llc.as_ref().map_or(0, |c| c.accesses),
                     h.llc.as_ref().map_or(0, |c| c.hits),
                     h.dram_bytes,
+                    h.dram_write_bytes,
                 ];
                 let region = buf.private_region(g.wave);
                 let stack = buf.stack.is_some();

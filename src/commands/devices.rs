@@ -94,7 +94,7 @@ pub fn devices(a: &DevicesArgs) -> anyhow::Result<()> {
             outln!("   {}", if d.compile_only { line.replace("runs", "builds") } else { line });
         }
     }
-    let known = crate::isa::known_families(&std::env::current_exe()?, None);
+    let known = crate::isa::known_families(&std::env::current_exe()?, None)?;
     if known.is_empty() {
         outln!("\nRADV null devices (isa --family): none open here (RADV is Debian's mesa-vulkan-drivers)");
     } else {

@@ -7,6 +7,7 @@ use crate::estimate;
 use crate::isa::{self, Matrix};
 use crate::outdir::{OutDir, OutMode, Outputs};
 use anyhow::Context as _;
+use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -67,21 +68,25 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("estimate")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;
-    // As `isa` takes them: `vendors` is every other vendor's model, `all` every AMD family the
-    // installed RADV opens and every model.
-    // The release: with one whose folder has the amdgpu shim (Mesa 26 on), AMD's families are
-    // built under it.
-    let folder =
-        a.compilers.as_deref().map(|c| isa::shim::compilers_for(Some(c)).map_err(anyhow::Error::msg)).transpose()?;
-    let amd = folder.filter(|d| isa::shim::amd_shim(d).is_some());
-    let (families, models, grouped) = isa::families(&a.family, &exe, false, amd.as_deref())?;
-    let (compilers, models) = isa::shim::models_compilers(models, &grouped, a.compilers.as_deref())?;
-    if let Some(c) = &a.compilers {
-        anyhow::ensure!(
-            !models.is_empty() || (amd.is_some() && !families.is_empty()),
-            "--compilers {c}: nothing asked for builds there: name a model of the other vendors{} (--family)",
-            if amd.is_some() { " or an AMD family" } else { "" }
-        );
+    // As `isa` takes them (`vendors` is every other vendor's model, `all` every AMD family and
+    // every model), on one release: with one whose folder has the amdgpu shim (Mesa 26 on),
+    // AMD's families are built under it.
+    let choice = a.compilers.as_deref().filter(|c| *c != "pinned");
+    let mut families: Vec<String> = Vec::new();
+    let (mut amd, mut compilers, mut models): (Option<PathBuf>, Option<PathBuf>, Vec<String>) =
+        (None, None, Vec::new());
+    for t in isa::release_targets(&a.family, &exe, false, choice, false)? {
+        match t {
+            isa::Target::Family(f, dir) => {
+                families.push(f);
+                amd = dir;
+            }
+            isa::Target::Model(m, dir) => {
+                models.push(m);
+                compilers = Some(dir);
+            }
+            isa::Target::Device(_) => {}
+        }
     }
     let kinds: Vec<crate::rays::RayKind> = a
         .rays

@@ -442,6 +442,47 @@ mod tests {
         assert_eq!(p.cycles(|_| 3.0), 8.0 + 3.0 * 22.5);
     }
 
+    /// ACO 26 leaves an empty else side out: the merge follows the then side's linear block,
+    /// with no invert block and no else blocks.
+    #[test]
+    fn a_divergent_if_without_an_else_side_is_read() {
+        let block = |i: usize, lp: &str, linp: &str, kind: &str, instrs: &[&str]| {
+            let mut s = format!("BB{i}\n/* logical preds: {lp}/ linear preds: {linp}/ kind: {kind}*/\n");
+            for x in instrs {
+                s += &format!("\t{x}\n");
+            }
+            s
+        };
+        let isel = [
+            block(0, "", "", "top-level, loop-preheader, ", &["p_logical_start", "p_logical_end", "p_branch BB1"]),
+            block(1, "BB0, BB4, ", "BB0, BB4, ", "loop-header, branch, ", &["p_cbranch_z %1"]),
+            block(2, "BB1, ", "BB1, ", "uniform, ", &["s_nop", "p_branch BB4"]),
+            block(3, "", "BB1, ", "uniform, ", &["p_branch BB4"]),
+            block(4, "BB1, ", "BB2, BB3, ", "uniform, merge, ", &["p_logical_start", "p_logical_end", "p_branch BB5"]),
+            block(5, "BB4, ", "BB4, ", "loop-exit, ", &["s_endpgm"]),
+        ]
+        .concat();
+        let fin = [
+            block(0, "", "", "top-level, loop-preheader, ", &["(  3 clk)   s_mov_b32"]),
+            block(1, "BB0, BB4, ", "BB0, BB4, ", "loop-header, branch, ", &["( 10 clk)   s_cbranch_execz"]),
+            block(2, "BB1, ", "BB1, ", "uniform, ", &["(  4 clk)   v_add"]),
+            block(3, "", "BB1, ", "uniform, ", &["(  8 clk)   s_branch"]),
+            block(4, "BB1, ", "BB2, BB3, ", "uniform, merge, ", &["(  1 clk)   s_cbranch_scc1"]),
+            block(5, "BB4, ", "BB4, ", "loop-exit, ", &["(  5 clk)   s_endpgm"]),
+        ]
+        .concat();
+        let text = format!(
+            "After Instruction Selection:\n{isel}After lowering to hw instructions:\n{fin}num_waves: 16\nlatency: 0\nwave64_per_cycle: 1\n"
+        );
+        let p = Program::from_printout(&text).unwrap();
+        assert_eq!(p.loops, vec![Loop { header: 1, exit: 5, depth: 1, at: Depth::default() }]);
+        let d = |i: usize| p.blocks.iter().find(|b| b.index == i).unwrap();
+        assert_eq!(d(2).depth.divergent_ifs, 1);
+        assert!(d(3).skip_side && d(4).depth.divergent_ifs == 0);
+        // 3 + 8·(10 + 0.75·4 + 0.25·8 + 1) + 5, by hand.
+        assert_eq!(p.aco_latency(), 3.0 + 8.0 * (10.0 + 0.75 * 4.0 + 0.25 * 8.0 + 1.0) + 5.0);
+    }
+
     #[test]
     fn a_printout_without_its_parts_is_refused() {
         let e = Program::from_printout("After lowering to hw instructions:\nBB0\n").unwrap_err();

@@ -11,7 +11,7 @@ pub mod mix;
 pub mod shim;
 mod targets;
 
-pub use targets::{default_families, families, known_families, releases_targets, Target};
+pub use targets::{default_families, families, known_families, release_targets, releases_targets, Target};
 
 use crate::base::Status;
 use crate::gpu::executable::executables;

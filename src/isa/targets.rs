@@ -24,8 +24,20 @@ pub enum Target {
 /// process on a family it does not know, so each is tried in a child process: `exe
 /// probe-family` (the halftrace binary, or the folder's copy of it) with `RADV_FORCE_FAMILY` or
 /// `AMDGPU_GPU_ID` set, a few tens of milliseconds each, eight at a time.
-pub fn known_families(exe: &Path, amd: Option<&Path>) -> Vec<Family> {
-    let under = amd.and_then(|d| Some((d, shim::amd_shim(d)?, shim::child_exe(exe, d).ok()?)));
+pub fn known_families(exe: &Path, amd: Option<&Path>) -> anyhow::Result<Vec<Family>> {
+    let under = match amd {
+        Some(d) => {
+            let s = shim::amd_shim(d).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: no amdgpu drm-shim or RADV manifest there (Mesa {})",
+                    d.display(),
+                    shim::release(d)
+                )
+            })?;
+            Some((d, s, shim::child_exe(exe, d)?))
+        }
+        None => None,
+    };
     let probe = |f: &Family| -> bool {
         let mut cmd = match &under {
             Some((dir, s, child)) => {
@@ -47,9 +59,6 @@ pub fn known_families(exe: &Path, amd: Option<&Path>) -> Vec<Family> {
                 o.status.success() && String::from_utf8_lossy(&o.stdout).lines().any(|l| null::family_of(l) == Some(*f))
             })
     };
-    if amd.is_some() && under.is_none() {
-        return Vec::new();
-    }
     let mut ok = vec![false; null::FAMILIES.len()];
     for (chunk, flags) in null::FAMILIES.chunks(8).zip(ok.chunks_mut(8)) {
         std::thread::scope(|s| {
@@ -59,7 +68,7 @@ pub fn known_families(exe: &Path, amd: Option<&Path>) -> Vec<Family> {
             }
         });
     }
-    null::FAMILIES.iter().zip(ok).filter(|(_, k)| *k).map(|(f, _)| *f).collect()
+    Ok(null::FAMILIES.iter().zip(ok).filter(|(_, k)| *k).map(|(f, _)| *f).collect())
 }
 
 /// The AMD families and the other vendors' models `--family` names (`vendors`: every model;
@@ -79,7 +88,7 @@ pub fn families(
     let is_model = |f: &str| crate::vendor::find_model(f).is_some();
     let defaulted = asked.is_empty() && default;
     let amd_asked = defaulted || asked.iter().any(|f| f != "vendors" && !is_model(f));
-    let known = if amd_asked { known_families(exe, amd) } else { Vec::new() };
+    let known = if amd_asked { known_families(exe, amd)? } else { Vec::new() };
     // Who opens the families, for the messages.
     let opener = match amd.filter(|d| shim::amd_shim(d).is_some()) {
         Some(d) => format!("the amdgpu shim of Mesa {} opens", shim::release(d)),
@@ -144,12 +153,32 @@ pub fn default_families(known: &[Family]) -> Vec<String> {
 /// pinned one (`pinned`, or nothing asked).
 pub fn releases(asked: &[String]) -> anyhow::Result<Vec<Option<String>>> {
     let mut out: Vec<Option<String>> = Vec::new();
+    // Each named folder resolved (`newest` and its folder by path are one release), with its
+    // Mesa release: two folders of one release would give the same rows twice.
+    let mut seen: Vec<(PathBuf, String, String)> = Vec::new();
     for c in asked {
         anyhow::ensure!(!c.trim().is_empty(), "--compilers: an empty name (pinned, newest or a compilers folder)");
         let r = (c != "pinned").then(|| c.clone());
-        if !out.contains(&r) {
-            out.push(r);
+        if out.contains(&r) {
+            continue;
         }
+        let dir = match &r {
+            Some(c) => Some(shim::compilers_for(Some(c)).map_err(anyhow::Error::msg)?),
+            None => shim::compilers().ok(),
+        };
+        if let Some(dir) = dir {
+            let canon = dir.canonicalize().unwrap_or(dir.clone());
+            let rel = shim::release(&dir);
+            if let Some((_, _, first)) = seen.iter().find(|(p, _, _)| *p == canon) {
+                eprintln!("note: --compilers {c} is the same folder as {first}: built once");
+                continue;
+            }
+            if let Some((_, _, first)) = seen.iter().find(|(_, r2, _)| *r2 == rel) {
+                anyhow::bail!("--compilers {c} and {first} are both Mesa {rel}: name one of them");
+            }
+            seen.push((canon, rel, c.clone()));
+        }
+        out.push(r);
     }
     if out.is_empty() {
         out.push(None);

@@ -86,8 +86,10 @@ impl Cache {
     }
 
     /// Writes into line `l`: a hit marks it dirty; a miss puts it in dirty without reading it
-    /// from below (the cache keeps which bytes were written, as GPUs' L2s do). Returns whether
-    /// it hit and the dirty line evicted.
+    /// from below (GPUs' L2s keep which bytes a store wrote). The model then holds the line as
+    /// whole: a later read of bytes the store did not write hits — an undercount where a live
+    /// stack line was evicted and another lane's store brought it back (`docs/memory.md`).
+    /// Returns whether it hit and the dirty line evicted.
     pub fn write(&mut self, l: u64) -> (bool, Option<u64>) {
         self.clock += 1;
         self.accesses += 1;
@@ -115,9 +117,9 @@ impl Cache {
     }
 }
 
-/// A GPU's caches: one L1 per unit (write-through), the L2 and the last-level cache if any
-/// (write-back), and the bytes that crossed to DRAM (all of them, those of the node buffer,
-/// those of the waves' private memory).
+/// A GPU's caches: one L1 per unit (write-back or write-through as the GPU's: `Gpu::l1_write_back`),
+/// the L2 and the last-level cache if any (write-back), and the bytes that crossed to DRAM (all
+/// of them, those of the node buffer, those of the waves' private memory).
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
     pub l1: Vec<Cache>,

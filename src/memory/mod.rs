@@ -3,10 +3,10 @@
 //!
 //! 1. **requested bytes per ray** (exact): nodes (the node record of every node a ray is
 //!    active in), triangle vertices (36 bytes per test), triangle ids (4 bytes per test the
-//!    certified test does not reject: `closest_test` reads it then), and the stack entries
-//!    pushed and popped (entry bytes × 2 per push: every modelled GPU's compiler keeps the
-//!    single-ray kernels' stack arrays in private memory — scratch, local memory — as `isa`'s
-//!    private bytes show);
+//!    certified test does not reject: `closest_test` reads it then), and the stack's bytes
+//!    as the kernel's discipline moves them ([`Stack::ops`]; every modelled GPU's compiler
+//!    keeps the single-ray kernels' stack arrays in private memory — scratch, local memory —
+//!    as `isa`'s private bytes show);
 //! 2. **distinct cache lines** (exact) of 32, 64 and 128 bytes, per ray alone and per wave in
 //!    lockstep (at each step the union over the wave's lanes: what coalescing leaves), the
 //!    stacks' pops and pushes among them (single rays, in private memory: [`Stack`]);
@@ -27,8 +27,8 @@ use crate::layout::traverse::Reads;
 pub type Range = (u64, u32);
 
 /// A wave's reads in lockstep: per step, the ranges its lanes read in it (a traversal pass
-/// pops its stack entries, reads the entered nodes, then each pass of the triangle loop a
-/// triangle per lane, then pushes its new entries). A range at [`PRIVATE`] + offset is in the
+/// pops its stack entries, reads the entered nodes, pushes its new entries, then each pass of
+/// the triangle loop reads a triangle per lane). A range at [`PRIVATE`] + offset is in the
 /// wave's own private memory (its lanes' stacks), placed where the wave runs ([`cache`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct WaveTrace {
@@ -249,7 +249,8 @@ pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
 /// The waves of `reads` (each packet's passes × lanes, [`crate::layout::traverse::mem_reads`],
 /// of `rays` rays in packets of `p`: the last may hold fewer) in waves of `wave` lanes:
 /// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its pops,
-/// its node step, its triangle steps and its pushes. The stack's steps ([`Stack::ops`]) are
+/// its node step, its pushes and its triangle steps (the kernels push a visit's children
+/// before testing its leaves). The stack's steps ([`Stack::ops`]) are
 /// there where `b` has it and for single rays (P = 1: a packet's stack is the packet's, in
 /// shared memory or registers).
 pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffers) -> Vec<WaveTrace> {
@@ -292,6 +293,17 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
                 most = most.max(x.tris.len());
             }
             steps.push(node);
+            // The visit pushes its inner children before it tests its leaves' triangles
+            // (trav.comp: push_children, then test_leaves).
+            let mut pushes = Vec::new();
+            for k in 0..packets.len() {
+                for &r in at(k).map_or(&[][..], |o| &o.push[..]) {
+                    lane_words(r, k, wave, true, &mut pushes);
+                }
+            }
+            if !pushes.is_empty() {
+                steps.push(pushes);
+            }
             for j in 0..most {
                 let mut t = Vec::new();
                 for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
@@ -303,15 +315,6 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
                     }
                 }
                 steps.push(t);
-            }
-            let mut pushes = Vec::new();
-            for k in 0..packets.len() {
-                for &r in at(k).map_or(&[][..], |o| &o.push[..]) {
-                    lane_words(r, k, wave, true, &mut pushes);
-                }
-            }
-            if !pushes.is_empty() {
-                steps.push(pushes);
             }
         }
         out.push(WaveTrace { steps, rays: (0..packets.len()).map(|k| lanes(first + k)).sum() });

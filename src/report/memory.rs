@@ -28,7 +28,8 @@ pub struct MemRow {
     pub node_bytes: f64,
     pub vert_bytes: f64,
     pub id_bytes: f64,
-    /// Stack entries pushed and popped × entry bytes (were the stack in memory).
+    /// The bytes the kernel's stack pushes and pops move (`memory::Stack::ops`; packets: two
+    /// entries' bytes per child pushed).
     pub stack_bytes: f64,
     /// Tier 2, exact: distinct lines per ray, the ray alone (its packet alone for P > 1).
     pub lines32_alone: f64,

@@ -107,8 +107,6 @@ fn cell(r: Option<&IsaRow>) -> String {
 /// verdicts' classes differ; then each device's best reduced-precision kernel per release.
 pub fn section(rows: &[IsaRow], h: &str) -> String {
     let rows = sorted(rows);
-    let all: Vec<&IsaRow> = rows.iter().collect();
-    let rels = releases(&all);
     // Devices with rows on two releases or more, in report order.
     let mut devices: Vec<String> = Vec::new();
     for r in &rows {
@@ -122,6 +120,9 @@ pub fn section(rows: &[IsaRow], h: &str) -> String {
     if devices.is_empty() {
         return String::new();
     }
+    // The releases those devices were built on (a device on one release only adds none).
+    let theirs: Vec<&IsaRow> = rows.iter().filter(|r| devices.contains(&r.device_label())).collect();
+    let rels = releases(&theirs);
     let mut md = format!(
         "{h}# What the compilers release changes (P = 1)\n\nEach device built on more than one release: registers per \
          thread / occupancy / spills and fills / the compiler's cycles, per release, and each kernel's verdict against \
@@ -193,7 +194,8 @@ pub fn section(rows: &[IsaRow], h: &str) -> String {
                     .unwrap_or_else(|| "–".into())
             })
             .collect();
-        let differ = bests.windows(2).any(|w| w[0] != w[1] && w[0] != "–" && w[1] != "–");
+        let known: Vec<&String> = bests.iter().filter(|b| *b != "–").collect();
+        let differ = known.windows(2).any(|w| w[0] != w[1]);
         best += &format!("| {d} | {}{} |\n", bests.join(" | "), if differ { " **changed**" } else { "" });
     }
     md += &format!(
@@ -274,6 +276,13 @@ mod tests {
             (lab(&rows[0]), lab(&rows[3])),
             ("navi31 (RDNA3) · Mesa 26.2.6".into(), "navi31 (RDNA3) · Mesa 25.0.7".into())
         );
+        // A device on one release of its own (a real GPU's driver) adds no column.
+        let mut other = row("f32", false, 60.0, 24.0);
+        (other.device, other.family, other.driver) = ("Some GPU".into(), String::new(), "NVIDIA 580.95.05".into());
+        let mut with_other = rows.clone();
+        with_other.push(other);
+        let md2 = section(&with_other, "##");
+        assert!(md2.contains("| Mesa 25.0.7 | Mesa 26.2.6 | verdict |") && !md2.contains("NVIDIA"), "{md2}");
         let one: Vec<IsaRow> = rows.iter().filter(|r| r.driver.contains("26.2")).cloned().collect();
         assert_eq!(section(&one, "##"), "");
         assert_eq!(labeller(&one)(&one[0]), "navi31 (RDNA3)");
