@@ -386,17 +386,29 @@ impl Program {
 mod tests {
     use super::*;
 
+    /// One block of a printout: its line, its preds-and-kind line, its instructions.
+    fn block(i: usize, lp: &str, linp: &str, kind: &str, instrs: &[&str]) -> String {
+        let mut s = format!("BB{i}\n/* logical preds: {lp}/ linear preds: {linp}/ kind: {kind}*/\n");
+        for x in instrs {
+            s += &format!("\t{x}\n");
+        }
+        s
+    }
+
+    /// A compile's printout: the blocks after instruction selection, the final ones, and the
+    /// statistics (`latency` is not read: the test rebuilds it).
+    fn compile(isel: &[String], fin: &[String]) -> String {
+        format!(
+            "After Instruction Selection:\n{}After lowering to hw instructions:\n{}num_waves: 16\nlatency: 0\nwave64_per_cycle: 1\n",
+            isel.concat(),
+            fin.concat()
+        )
+    }
+
     /// A kernel's printout cut to a loop around a divergent if: block 0 runs once; 1..6 are
     /// a loop (header 1, exit 6) holding a divergent if (2 then, 3 then-linear, 4 invert, 5
     /// else, … merge). Hand-built to the shapes `aco_instruction_selection.cpp` makes.
     fn printout() -> String {
-        let block = |i: usize, lp: &str, linp: &str, kind: &str, instrs: &[&str]| {
-            let mut s = format!("BB{i}\n/* logical preds: {lp}/ linear preds: {linp}/ kind: {kind}*/\n");
-            for x in instrs {
-                s += &format!("\t{x}\n");
-            }
-            s
-        };
         let isel = [
             block(0, "", "", "top-level, loop-preheader, ", &["p_logical_start", "p_logical_end", "p_branch BB1"]),
             block(1, "BB0, BB9, ", "BB0, BB9, ", "loop-header, branch, ", &["p_cbranch_z %1"]),
@@ -407,8 +419,7 @@ mod tests {
             block(6, "", "BB4, ", "uniform, ", &["p_branch BB7"]),
             block(7, "BB2, BB5, ", "BB5, BB6, ", "merge, ", &["p_logical_start", "p_logical_end", "p_branch BB8"]),
             block(8, "BB7, ", "BB7, ", "loop-exit, ", &["s_endpgm"]),
-        ]
-        .concat();
+        ];
         let fin = [
             block(0, "", "", "top-level, loop-preheader, ", &["(  3 clk)   s_mov_b32"]),
             block(1, "BB0, BB7, ", "BB0, BB7, ", "loop-header, branch, ", &["( 10 clk)   s_cbranch_execz"]),
@@ -418,9 +429,8 @@ mod tests {
             block(5, "BB1, ", "BB4, ", "uniform, ", &["(  6 clk)   v_mul"]),
             block(7, "BB2, BB5, ", "BB5, BB4, ", "merge, ", &["(  1 clk)   s_cbranch_scc1"]),
             block(8, "BB7, ", "BB7, ", "loop-exit, ", &["(  5 clk)   s_endpgm"]),
-        ]
-        .concat();
-        format!("After Instruction Selection:\n{isel}After lowering to hw instructions:\n{fin}num_waves: 16\nlatency: 0\nwave64_per_cycle: 1\n")
+        ];
+        compile(&isel, &fin)
     }
 
     #[test]
@@ -446,13 +456,6 @@ mod tests {
     /// with no invert block and no else blocks.
     #[test]
     fn a_divergent_if_without_an_else_side_is_read() {
-        let block = |i: usize, lp: &str, linp: &str, kind: &str, instrs: &[&str]| {
-            let mut s = format!("BB{i}\n/* logical preds: {lp}/ linear preds: {linp}/ kind: {kind}*/\n");
-            for x in instrs {
-                s += &format!("\t{x}\n");
-            }
-            s
-        };
         let isel = [
             block(0, "", "", "top-level, loop-preheader, ", &["p_logical_start", "p_logical_end", "p_branch BB1"]),
             block(1, "BB0, BB4, ", "BB0, BB4, ", "loop-header, branch, ", &["p_cbranch_z %1"]),
@@ -460,8 +463,7 @@ mod tests {
             block(3, "", "BB1, ", "uniform, ", &["p_branch BB4"]),
             block(4, "BB1, ", "BB2, BB3, ", "uniform, merge, ", &["p_logical_start", "p_logical_end", "p_branch BB5"]),
             block(5, "BB4, ", "BB4, ", "loop-exit, ", &["s_endpgm"]),
-        ]
-        .concat();
+        ];
         let fin = [
             block(0, "", "", "top-level, loop-preheader, ", &["(  3 clk)   s_mov_b32"]),
             block(1, "BB0, BB4, ", "BB0, BB4, ", "loop-header, branch, ", &["( 10 clk)   s_cbranch_execz"]),
@@ -469,12 +471,8 @@ mod tests {
             block(3, "", "BB1, ", "uniform, ", &["(  8 clk)   s_branch"]),
             block(4, "BB1, ", "BB2, BB3, ", "uniform, merge, ", &["(  1 clk)   s_cbranch_scc1"]),
             block(5, "BB4, ", "BB4, ", "loop-exit, ", &["(  5 clk)   s_endpgm"]),
-        ]
-        .concat();
-        let text = format!(
-            "After Instruction Selection:\n{isel}After lowering to hw instructions:\n{fin}num_waves: 16\nlatency: 0\nwave64_per_cycle: 1\n"
-        );
-        let p = Program::from_printout(&text).unwrap();
+        ];
+        let p = Program::from_printout(&compile(&isel, &fin)).unwrap();
         assert_eq!(p.loops, vec![Loop { header: 1, exit: 5, depth: 1, at: Depth::default() }]);
         let d = |i: usize| p.blocks.iter().find(|b| b.index == i).unwrap();
         assert_eq!(d(2).depth.divergent_ifs, 1);

@@ -194,8 +194,10 @@ pub fn child_exe(exe: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
     Ok(dest)
 }
 
-/// The environment that opens model `m`'s driver under its shim `s`.
-pub fn environment(s: &Shim, m: &Model, dir: &Path) -> Vec<(String, String)> {
+/// The environment that opens a model's driver under its shim `s` of `dir`: the shim, the
+/// driver's manifest, the model's own variables `model` (its `Model::env`), and the compiler's
+/// summary where the vendor needs it.
+pub fn environment(s: &Shim, model: &[(&str, &str)], dir: &Path) -> Vec<(String, String)> {
     let icd = dir.join("icd").join(s.icd).display().to_string();
     let mut env = vec![
         ("LD_PRELOAD".to_string(), dir.join("lib").join(s.library()).display().to_string()),
@@ -203,7 +205,7 @@ pub fn environment(s: &Shim, m: &Model, dir: &Path) -> Vec<(String, String)> {
         // The loader's newer spelling would win over VK_ICD_FILENAMES.
         ("VK_DRIVER_FILES".to_string(), icd),
     ];
-    env.extend(m.env.iter().map(|(k, v)| (k.to_string(), v.to_string())));
+    env.extend(model.iter().map(|(k, v)| (k.to_string(), v.to_string())));
     // The compiler's own one-line summary per shader on stderr, where the vendor needs it.
     env.extend(s.summary_env.iter().map(|(k, v)| (k.to_string(), v.to_string())));
     env
@@ -227,9 +229,7 @@ pub fn family_model(family: &str) -> Option<Model> {
 /// `AMDGPU_GPU_ID` names the family (the shim knows fewer than Mesa: an unknown one opens no
 /// device).
 pub fn family_environment(s: &Shim, family: &str, dir: &Path) -> Vec<(String, String)> {
-    let mut env = environment(s, &Model { name: "", display: "", generation: "", env: &[] }, dir);
-    env.push(("AMDGPU_GPU_ID".to_string(), family.to_string()));
-    env
+    environment(s, &[("AMDGPU_GPU_ID", family)], dir)
 }
 
 /// The marker a child prints on stderr before building each kernel, so that the driver's
@@ -273,7 +273,7 @@ pub fn run_model(
     let shim = vendor.shim.ok_or_else(|| anyhow::anyhow!("{}: {} has no drm-shim", m.name, vendor.name))?;
     // An AMD family is the amdgpu shim's model by its environment.
     let env =
-        if vendor.models.is_empty() { family_environment(&shim, m.name, dir) } else { environment(&shim, m, dir) };
+        if vendor.models.is_empty() { family_environment(&shim, m.name, dir) } else { environment(&shim, m.env, dir) };
     let exe = child_exe(exe, dir)?;
     let (stdout, status, stderr) = run_child(Command::new(&exe).args(&args.0).envs(env))?;
     let mut rows: Vec<IsaRow> = Vec::new();

@@ -252,32 +252,40 @@ pub fn sorted(rows: &[IsaRow]) -> Vec<IsaRow> {
     v
 }
 
+/// A test's row: `layout`'s kernel at B = 4, P = 1 (its default math) on the device `place`
+/// names — (device, family, generation, driver) — untyped, its figures unset.
+#[cfg(test)]
+pub(crate) fn test_row(layout: &str, (device, family, generation, driver): (&str, &str, &str, &str)) -> IsaRow {
+    use crate::variant::{KernelId, PacketImpl, Variant};
+    let v = Variant::new(crate::layout::LayoutId::parse(layout).unwrap(), 4, 1);
+    IsaRow {
+        device: device.into(),
+        family: family.into(),
+        generation: generation.into(),
+        driver: driver.into(),
+        kernel: KernelId::new(v, PacketImpl::Single, false).name(),
+        layout: layout.into(),
+        math: v.math.name().into(),
+        branching: 4,
+        packet: 1,
+        packet_impl: "single".into(),
+        float_controls: v.fc.name().into(),
+        ..IsaRow::default()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::layout::LayoutId;
-    use crate::variant::{KernelId, PacketImpl, Variant};
 
     /// A kernel at B = 4, P = 1 built by `crate::vendor::fake`'s compiler, which names its
     /// statistics its own way.
     fn fake_row(layout: &str, regs: f64) -> IsaRow {
-        let v = Variant::new(LayoutId::parse(layout).unwrap(), 4, 1);
         let mut r = IsaRow {
-            device: "Fake GPU One (fakedrv)".into(),
-            family: "fk1".into(),
-            generation: "Fake 1".into(),
-            driver: "fakedrv 1.0".into(),
-            kernel: KernelId::new(v, PacketImpl::Single, false).name(),
-            layout: layout.into(),
-            math: v.math.name().into(),
-            branching: 4,
-            packet: 1,
-            packet_impl: "single".into(),
-            float_controls: v.fc.name().into(),
             stats: [("Fake regs", regs), ("Fake lanes", 12.0), ("Fake ops", 900.0), ("Fake spills", 3.0)]
                 .map(|(k, v)| (k.to_string(), v))
                 .into(),
-            ..IsaRow::default()
+            ..test_row(layout, ("Fake GPU One (fakedrv)", "fk1", "Fake 1", "fakedrv 1.0"))
         }
         .typed();
         r.fill_known();

@@ -211,34 +211,19 @@ pub fn section(rows: &[IsaRow], h: &str) -> String {
 mod tests {
     use super::*;
 
-    use crate::layout::LayoutId;
-    use crate::variant::{KernelId, PacketImpl, Variant};
-
     /// navi31's `layout` at B = 4, P = 1 on a release: a null device on 25.0.7, the amdgpu
     /// shim's device on 26.2.6.
     fn row(layout: &str, newest: bool, registers: f64, occupancy: f64) -> IsaRow {
-        let v = Variant::new(LayoutId::parse(layout).unwrap(), 4, 1);
         let (device, driver) = if newest {
             ("AMD Radeon RX 7900 XTX (RADV NAVI31) (amdgpu shim)", "radv Mesa 26.2.6-1")
         } else {
             ("Null hardware (RADV NAVI31)", "radv Mesa 25.0.7-2~bpo12+1")
         };
         IsaRow {
-            device: device.into(),
-            family: "navi31".into(),
-            generation: "RDNA3".into(),
-            driver: driver.into(),
-            kernel: KernelId::new(v, PacketImpl::Single, false).name(),
-            layout: layout.into(),
-            math: v.math.name().into(),
-            branching: 4,
-            packet: 1,
-            packet_impl: "single".into(),
-            float_controls: v.fc.name().into(),
             registers: Some(registers),
             occupancy: Some(occupancy),
             spills: Some(10.0),
-            ..IsaRow::default()
+            ..super::super::test_row(layout, (device, "navi31", "RDNA3", driver))
         }
         .typed()
     }
