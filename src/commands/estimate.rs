@@ -64,7 +64,7 @@ const OUTPUTS: Outputs = Outputs {
 pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let matrix = Matrix::parse(&a.matrix)
-        .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default or full", a.matrix))?;
+        .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default, full or singles", a.matrix))?;
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("estimate")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
     let exe = std::env::current_exe()?;

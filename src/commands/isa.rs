@@ -242,7 +242,7 @@ pub fn isa_model(a: &IsaModelArgs) -> anyhow::Result<()> {
         a.model
     );
     let matrix = Matrix::parse(&a.matrix)
-        .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default or full", a.matrix))?;
+        .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default, full or singles", a.matrix))?;
     let messages = isa::run_model_here(&a.model, &isa::plan(matrix, &a.layouts), a.validation, a.disasm.as_deref())?;
     anyhow::ensure!(
         messages.is_empty(),

@@ -31,6 +31,13 @@ pub struct MemoryArgs {
     /// families it estimated bound their rays/s beside DRAM's (the roofline).
     #[arg(long)]
     pub estimate: Option<std::path::PathBuf>,
+    /// The compilers release whose occupancy sets each kernel's resident waves per unit in the
+    /// cache model: `pinned`, `newest` or a compilers folder (as `isa --compilers`). Every
+    /// single-ray kernel is built first on the compilers of navi31, navi21, vega10 (RADV), a740
+    /// (turnip) and ga102 (NVK), those asked; the other models keep their assumed figure.
+    /// Default: every model's assumed figure.
+    #[arg(long)]
+    pub compilers: Option<String>,
     /// Leave the traversal stacks out of the lines and the cache model (by default a single
     /// ray's stack is in private memory, as every modelled GPU's compiler keeps it).
     #[arg(long)]
@@ -90,22 +97,33 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
     }
     let out = a.out.clone().unwrap_or_else(|| crate::outdir::default_out(Some("memory")));
     let _out = OutDir::claim_for(&out, "--out", OutMode::from_flags(false, a.force)?, &OUTPUTS)?;
+    let estimates = match &a.estimate {
+        None => Vec::new(),
+        Some(d) => crate::report::estimate::read(d)?
+            .ok_or_else(|| anyhow::anyhow!("--estimate {}: no estimate-rays.json there", d.display()))?,
+    };
+    let (isa_rows, release) = match &a.compilers {
+        None => (Vec::new(), None),
+        Some(c) => {
+            let rows = occupancy(&gpus, &a.layouts, c)?;
+            check_estimate_release(&rows, &estimates, a.estimate.as_deref())?;
+            let release = rows.first().map(|r| crate::report::isa::release(&r.driver));
+            (rows, release)
+        }
+    };
     let cfg = memory::Config {
         scenes: a.scene.clone(),
         kinds,
         res: a.res,
         gpus: gpus.clone(),
         variants: memory::default_variants(&a.branchings, &a.layouts),
-        estimates: match &a.estimate {
-            None => Vec::new(),
-            Some(d) => crate::report::estimate::read(d)?
-                .ok_or_else(|| anyhow::anyhow!("--estimate {}: no estimate-rays.json there", d.display()))?,
-        },
+        estimates,
         stack: !a.no_stack,
         node_align: a.node_align,
+        isa_rows,
     };
     let rows = memory::run(&cfg, |_| {})?;
-    let mut gpus_table = gpus::table(&gpus);
+    let mut gpus_table = gpus::table(&gpus, release.as_deref());
     if a.node_align > 0 {
         gpus_table += &format!(
             "**What-if (`--node-align {}`)**: every layout's nodes padded to a multiple of {} bytes; no kernel \
@@ -126,5 +144,73 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         t0.elapsed().as_secs_f64(),
         out.join("memory.md").display()
     );
+    Ok(())
+}
+
+/// `isa`'s rows of every single-ray kernel (of `layouts` and f32) on the compilers of the GPU
+/// models in `gpus` that have one ([`gpus::Gpu::compiler`]), on release `compilers`.
+fn occupancy(
+    gpus: &[&gpus::Gpu],
+    layouts: &[crate::layout::LayoutId],
+    compilers: &str,
+) -> anyhow::Result<Vec<crate::report::isa::IsaRow>> {
+    use crate::isa;
+    let names: Vec<String> = gpus.iter().filter_map(|g| g.compiler.map(|c| c.0.to_string())).collect();
+    anyhow::ensure!(
+        !names.is_empty(),
+        "--compilers {compilers}: none of the GPU models asked ({}) has a compiler here that reports its \
+         occupancy (those that do: {})",
+        gpus.iter().map(|g| g.id).collect::<Vec<_>>().join(", "),
+        gpus::GPUS.iter().filter(|g| g.compiler.is_some()).map(|g| g.id).collect::<Vec<_>>().join(", ")
+    );
+    let exe = std::env::current_exe()?;
+    let choice = Some(compilers).filter(|c| *c != "pinned");
+    let targets = isa::release_targets(&names, &exe, false, choice, false)
+        .map_err(|e| anyhow::anyhow!("--compilers {compilers}: {e:#}"))?;
+    let matrix = isa::Matrix::Singles;
+    let cfg = isa::Config {
+        targets,
+        matrix,
+        layouts: layouts.to_vec(),
+        builds: isa::plan(matrix, layouts),
+        disasm: None,
+        validation: false,
+        releases: 1,
+    };
+    let t0 = Instant::now();
+    let s = isa::run(&cfg, &exe, |_| {})?;
+    for n in &s.notes {
+        eprintln!("note: {n}");
+    }
+    outln!(
+        "{} single-ray kernels built on {} for their occupancy in {:.1} s",
+        s.rows.len(),
+        names.join(", "),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(s.rows)
+}
+
+/// With `--estimate` and `--compilers` both: the estimate's rows of a family built here must
+/// name the same compilers release, or its issue bound and the cache model's waves would come
+/// from two compilers.
+fn check_estimate_release(
+    rows: &[crate::report::isa::IsaRow],
+    estimates: &[crate::report::estimate::RayRow],
+    dir: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    use crate::report::isa::release;
+    for e in estimates.iter().filter(|e| !e.driver.is_empty()) {
+        if let Some(r) = rows.iter().find(|r| r.family == e.family) {
+            let (a, b) = (release(&e.driver), release(&r.driver));
+            anyhow::ensure!(
+                a == b,
+                "--estimate {}: its {} rows were built on {a}, --compilers on {b}: estimate on the same release \
+                 (`halftrace estimate --compilers …`)",
+                dir.map_or(String::new(), |d| d.display().to_string()),
+                e.family
+            );
+        }
+    }
     Ok(())
 }

@@ -42,7 +42,7 @@ pub struct ModelArgs {
     /// A model under its drm-shim (this process has its environment) or an AMD family.
     #[arg(long)]
     pub model: String,
-    /// layouts (isa --quick), cover, default or full (`variant::Matrix`).
+    /// layouts (isa --quick), cover, default, full or singles (`variant::Matrix`).
     #[arg(long, default_value = "default")]
     pub matrix: String,
     #[arg(long, value_delimiter = ',')]

@@ -14,8 +14,15 @@ pub struct Gpu {
     /// Lanes in lockstep (the wave, warp or SIMD width the compiler uses for compute).
     pub wave: usize,
     /// Waves resident per unit, interleaved step by step (an assumption of the model: the
-    /// kernels' occupancy differs per kernel and compiler; `isa` reports it).
+    /// kernels' occupancy differs per kernel and compiler; `isa` reports it, and `memory
+    /// --compilers` takes it from there where [`Gpu::compiler`] names a build).
     pub resident: usize,
+    /// The `isa` family or model whose compiler builds this GPU's kernels, and the waves per
+    /// unit one of its occupancy units makes (AMD: SIMDs per CU, the occupancy being waves per
+    /// SIMD; Adreno: waves per core; NVIDIA: warps per SM). `None` where no compiler here
+    /// reports a wave count: Mali's shaderdb gives a thread class (full or half), Intel's
+    /// driver no occupancy, and no Mesa shim builds for Hopper.
+    pub compiler: Option<(&'static str, u32)>,
     pub l1_kib: u64,
     pub l1_line: u64,
     pub l1_ways: usize,
@@ -51,6 +58,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 2500,
         wave: 32,
         resident: 8,
+        compiler: Some(("navi31", 2)),
         l1_kib: 32,
         l1_line: 128,
         l1_ways: 32,
@@ -75,6 +83,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 2250,
         wave: 32,
         resident: 8,
+        compiler: Some(("navi21", 2)),
         l1_kib: 16,
         l1_line: 128,
         l1_ways: 32,
@@ -99,6 +108,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1546,
         wave: 64,
         resident: 8,
+        compiler: Some(("vega10", 4)),
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
@@ -123,6 +133,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1000,
         wave: 16,
         resident: 16,
+        compiler: None,
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
@@ -147,6 +158,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 680,
         wave: 64,
         resident: 8,
+        compiler: Some(("a740", 1)),
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
@@ -171,6 +183,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 2050,
         wave: 16,
         resident: 32,
+        compiler: None,
         l1_kib: 192,
         l1_line: 64,
         l1_ways: 8,
@@ -195,6 +208,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1695,
         wave: 32,
         resident: 16,
+        compiler: Some(("ga102", 1)),
         l1_kib: 128,
         l1_line: 128,
         l1_ways: 256,
@@ -219,6 +233,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1980,
         wave: 32,
         resident: 16,
+        compiler: None,
         l1_kib: 256,
         l1_line: 128,
         l1_ways: 512,
@@ -243,6 +258,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1980,
         wave: 32,
         resident: 16,
+        compiler: None,
         l1_kib: 256,
         l1_line: 128,
         l1_ways: 512,
@@ -266,10 +282,11 @@ pub fn gpu(id: &str) -> Option<&'static Gpu> {
     GPUS.iter().find(|g| g.id == id)
 }
 
-/// The table of the models' figures (Markdown), for the report.
-pub fn table(gpus: &[&Gpu]) -> String {
+/// The table of the models' figures (Markdown), for the report. `compilers`: the release
+/// whose occupancy set the resident waves (`memory --compilers`), where one did.
+pub fn table(gpus: &[&Gpu], compilers: Option<&str>) -> String {
     let mut md = String::from(
-        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit (assumed) | L1/unit KiB, line, ways, stores | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
+        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit | L1/unit KiB, line, ways, stores | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
     );
     for g in gpus {
         md += &format!(
@@ -279,7 +296,10 @@ pub fn table(gpus: &[&Gpu]) -> String {
             g.units,
             g.unit,
             g.wave,
-            g.resident,
+            match (compilers, g.compiler) {
+                (Some(c), Some((t, _))) => format!("per kernel: {t}'s occupancy on {c}"),
+                _ => format!("{} (assumed)", g.resident),
+            },
             g.l1_kib,
             g.l1_line,
             g.l1_ways,

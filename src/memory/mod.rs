@@ -386,6 +386,56 @@ pub struct Config {
     /// Nodes padded to a multiple of this many bytes (`memory --node-align`, a what-if; 0: as
     /// the layouts pack them).
     pub node_align: u64,
+    /// `isa`'s rows of the single-ray kernels on one compilers release (`memory --compilers`):
+    /// where a GPU's compiler ([`gpus::Gpu::compiler`]) built a kernel and gave its occupancy,
+    /// that sets the kernel's resident waves per unit ([`resident`]); empty: every GPU's
+    /// assumed figure.
+    pub isa_rows: Vec<crate::report::isa::IsaRow>,
+}
+
+/// How many waves share a unit's L1 in the cache model, and where the figure comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resident {
+    pub waves: usize,
+    /// `assumed`, or the compiler's occupancy it was made from (`radv … Mesa 26.2.6-1: 24
+    /// waves/SIMD × 2 SIMDs`).
+    pub from: String,
+}
+
+/// The resident waves per unit of variant `v` on GPU `g`: the occupancy `g`'s compiler gave
+/// the kernel in `rows` (`isa`'s, [`Config::isa_rows`]) in waves per unit, where it built it
+/// and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]), saying why where
+/// `rows` were given.
+pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::report::isa::IsaRow]) -> Resident {
+    let assumed = |why: &str| Resident { waves: g.resident, from: format!("assumed{why}") };
+    if rows.is_empty() {
+        return assumed("");
+    }
+    let Some((target, per_unit)) = g.compiler else {
+        return assumed(" (no compiler here reports its wave count)");
+    };
+    let row = rows.iter().find(|r| {
+        r.family == target
+            && r.layout == v.layout.name()
+            && r.math == v.math.name()
+            && r.branching == v.branching
+            && r.packet == v.packet
+    });
+    match row {
+        None => assumed(&format!(" ({target}: not built)")),
+        Some(r) if !r.status.is_ok() => assumed(&format!(" ({target}: {})", r.status)),
+        Some(r) => match r.occupancy.filter(|&o| o >= 1.0) {
+            None => assumed(&format!(" ({target}: no occupancy reported)")),
+            Some(o) => Resident {
+                waves: (o.round() as usize) * per_unit as usize,
+                from: if per_unit > 1 {
+                    format!("{}: {o} {} × {per_unit}", r.driver, r.occupancy_unit)
+                } else {
+                    format!("{}: {o} {}", r.driver, r.occupancy_unit)
+                },
+            },
+        },
+    }
 }
 
 /// Every variant of `cfg` on every scene and ray set, each on every GPU model: its rows, with
@@ -436,7 +486,8 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let per_gpu = cfg.gpus.par_iter().map(|g| {
                     let (_, ws, lines) = by_width.iter().find(|x| x.0 == g.wave).expect("every width made");
                     let (ws, lines) = (ws.as_slice(), *lines);
-                    let h = cache::simulate(g, ws, g.resident, &b);
+                    let res = resident(g, v, &cfg.isa_rows);
+                    let h = cache::simulate(g, ws, res.waves, &b);
                     let l1_acc: u64 = h.l1.iter().map(|c| c.accesses).sum();
                     let l1_hits: u64 = h.l1.iter().map(|c| c.hits).sum();
                     let rate = |hits: u64, acc: u64| if acc > 0 { hits as f64 / acc as f64 } else { 0.0 };
@@ -458,6 +509,8 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         branching: v.branching,
                         packet: v.packet,
                         wave: g.wave,
+                        resident: res.waves,
+                        resident_from: res.from,
                         status: Default::default(),
                         node_bytes: per(q.nodes),
                         vert_bytes: per(q.verts),
@@ -564,5 +617,36 @@ mod tests {
         assert_eq!(groups.bytes(pushes.into_iter()), 4 * (6 + 6 + 1 + 6));
         // One inner child: entered directly, nothing on either stack.
         assert_eq!((entries.bytes([1u32, 0].into_iter()), groups.bytes([1u32, 0].into_iter())), (0, 0));
+    }
+
+    /// The resident waves: the compiler's occupancy in waves per unit where the GPU's compiler
+    /// built the kernel and gave one (AMD: waves per SIMD × SIMDs per CU), else the assumed
+    /// figure, saying why once rows were given.
+    #[test]
+    fn resident_waves_come_from_the_compilers_occupancy() {
+        use crate::report::isa::{test_row, IsaRow};
+        let (navi31, a740, g610) =
+            (gpus::gpu("navi31").unwrap(), gpus::gpu("a740").unwrap(), gpus::gpu("g610").unwrap());
+        let v = crate::variant::Variant::new(crate::layout::LayoutId::parse("f16h").unwrap(), 4, 1);
+        let row = |family: &str, occupancy: Option<f64>, unit: &str| IsaRow {
+            occupancy,
+            occupancy_unit: unit.into(),
+            ..test_row("f16h", ("dev", family, "gen", "drv Mesa 26.2.6-1"))
+        };
+        // No rows: the assumed figure, said plainly.
+        assert_eq!(resident(navi31, &v, &[]), Resident { waves: navi31.resident, from: "assumed".into() });
+        let rows = [row("navi31", Some(18.0), "waves/SIMD"), row("a740", Some(6.0), "waves/core")];
+        let r = resident(navi31, &v, &rows);
+        assert_eq!(r.waves, 36);
+        assert_eq!(r.from, "drv Mesa 26.2.6-1: 18 waves/SIMD × 2");
+        assert_eq!(resident(a740, &v, &rows).waves, 6);
+        // Another kernel (B = 8) was not built; Mali has no compiler that counts its waves; a
+        // failed build or a missing occupancy falls back too.
+        let b8 = crate::variant::Variant { branching: 8, ..v };
+        assert_eq!(resident(a740, &b8, &rows).from, "assumed (a740: not built)");
+        assert!(resident(g610, &v, &rows).from.starts_with("assumed (no compiler"));
+        let failed = IsaRow { status: crate::base::Status::Failed("no".into()), ..rows[1].clone() };
+        assert!(resident(a740, &v, &[failed]).from.starts_with("assumed (a740: "));
+        assert_eq!(resident(a740, &v, &[row("a740", None, "")]).from, "assumed (a740: no occupancy reported)");
     }
 }

@@ -23,6 +23,13 @@ pub struct MemRow {
     pub packet: usize,
     /// Lanes in lockstep on the GPU.
     pub wave: usize,
+    /// Waves per unit sharing its L1 in the cache model, and where that figure comes from
+    /// (`assumed`, or the compiler's occupancy: `memory --compilers`; 0 and empty in files
+    /// written before it was recorded).
+    #[serde(default)]
+    pub resident: usize,
+    #[serde(default)]
+    pub resident_from: String,
     pub status: Status,
     /// Tier 1, exact: requested bytes per ray.
     pub node_bytes: f64,
@@ -126,6 +133,8 @@ struct Record<'a> {
     #[serde(rename = "P")]
     packet: usize,
     wave: usize,
+    resident: usize,
+    resident_from: &'a str,
     #[serde(serialize_with = "display")]
     status: &'a Status,
     #[serde(serialize_with = "fixed::<1, _>")]
@@ -199,6 +208,8 @@ pub fn csv(rows: &[MemRow]) -> anyhow::Result<Vec<u8>> {
         branching: r.branching,
         packet: r.packet,
         wave: r.wave,
+        resident: r.resident,
+        resident_from: &r.resident_from,
         status: &r.status,
         node_bytes: r.node_bytes,
         vert_bytes: r.vert_bytes,
@@ -284,6 +295,14 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
             // A file written before the L2 bound was modelled.
             let no_l2 = rows.iter().any(|r| r.gpu == gpu && r.l2_bound_mrays.is_none());
             let binds = if no_l2 { format!("{binds} (no L2 bound in this file)") } else { binds };
+            // Resident waves from a compiler's occupancy (`memory --compilers`): name its release.
+            let from = rows
+                .iter()
+                .find(|r| r.gpu == gpu && !r.resident_from.is_empty() && !r.resident_from.starts_with("assumed"));
+            let binds = match from {
+                Some(r) => format!("{binds}; resident waves: {}'s occupancy", super::isa::release(&r.resident_from)),
+                None => binds,
+            };
             let n = *n as f64;
             out.push(format!(
                 "{gpu}, {kind} rays: **{l}**, roofline bound {:.2}× f32's, DRAM bytes {:.2}× f32's; {binds} (model)",
@@ -316,6 +335,7 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
            when evicted), each resident wave's stacks in a private region of its own: a model, not a \
            measurement.\n\n";
     md += gpus_table;
+    md += &resident_section(rows);
     let mut groups: Vec<(&str, &str, &str)> =
         rows.iter().map(|r| (r.gpu.as_str(), r.scene.as_str(), r.rays.as_str())).collect();
     groups.dedup();
@@ -325,12 +345,12 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
             "\n## {g}, {scene} ({} triangles), {kind} rays ({}, wave {})\n\n",
             rs[0].triangles, rs[0].ray_count, rs[0].wave
         );
-        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 |\n";
-        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
+        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 | resident waves |\n";
+        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
         for r in rs {
             let q = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.2}"));
             md += &format!(
-                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} |\n",
+                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.node_bytes,
                 r.vert_bytes,
@@ -353,11 +373,36 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
                 r.l2_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
                 r.issue_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
                 r.binds,
-                q(r.bound_vs_f32)
+                q(r.bound_vs_f32),
+                r.resident
             );
         }
     }
     md
+}
+
+/// Where the rows' resident waves come from a compiler's occupancy (`memory --compilers`):
+/// per GPU and kernel, the waves and the figure they were made from ("" where every row's are
+/// the model's assumed figure).
+fn resident_section(rows: &[MemRow]) -> String {
+    if rows.iter().all(|r| r.resident_from.is_empty() || r.resident_from == "assumed") {
+        return String::new();
+    }
+    let mut md = String::from(
+        "## Resident waves per unit, from the compilers' occupancy (`memory --compilers`)\n\n\
+         Each kernel's waves per unit in the cache model: the occupancy its GPU's compiler reported for it \
+         (waves per SIMD × SIMDs per CU on AMD), or the model's assumed figure where no compiler here \
+         reports one.\n\n| GPU | kernel | waves/unit | from |\n|---|---|---:|---|\n",
+    );
+    let mut seen: Vec<(&str, &str)> = Vec::new();
+    for r in rows {
+        if seen.contains(&(r.gpu.as_str(), r.kernel.as_str())) {
+            continue;
+        }
+        seen.push((&r.gpu, &r.kernel));
+        md += &format!("| {} | {} | {} | {} |\n", r.gpu, r.kernel, r.resident, r.resident_from);
+    }
+    md + "\n"
 }
 
 /// The rows of `dir/memory.json`, `None` where there is none.

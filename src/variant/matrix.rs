@@ -23,6 +23,9 @@ pub enum Matrix {
     /// Every layout, math, B and P; float controls on, and off where the layout has such a
     /// build.
     Full,
+    /// Every layout and math at every B, P = 1: the single-ray kernels `memory --compilers`
+    /// takes each kernel's occupancy from.
+    Singles,
 }
 
 impl Matrix {
@@ -33,11 +36,14 @@ impl Matrix {
             Matrix::Cover => "cover",
             Matrix::Default => "default",
             Matrix::Full => "full",
+            Matrix::Singles => "singles",
         }
     }
 
     pub fn parse(s: &str) -> Option<Matrix> {
-        [Matrix::Layouts, Matrix::Cover, Matrix::Default, Matrix::Full].into_iter().find(|m| m.name() == s)
+        [Matrix::Layouts, Matrix::Cover, Matrix::Default, Matrix::Full, Matrix::Singles]
+            .into_iter()
+            .find(|m| m.name() == s)
     }
 }
 
@@ -137,6 +143,15 @@ pub fn matrix(m: Matrix, imps: &dyn Fn(usize) -> Vec<Option<PacketImpl>>) -> Vec
         Matrix::Default => {
             for v in default_variants() {
                 add(v, FcChoice::Auto);
+            }
+        }
+        Matrix::Singles => {
+            for l in LayoutId::all() {
+                for &math in l.info().maths {
+                    for b in BRANCHINGS {
+                        add(Variant::new(l, b, 1).with_math(math), FcChoice::Auto);
+                    }
+                }
             }
         }
         Matrix::Full => {

@@ -478,6 +478,57 @@ fn isa_builds_on_the_newest_compilers() {
     let md = std::fs::read_to_string(est.join("estimate.md")).unwrap();
     assert!(md.contains(&format!("## navi31 (RDNA3), {newest}\n")), "{md}");
     assert!(md.contains(&format!("## navi31 (RDNA3), {newest}, teapot, primary rays")), "{md}");
+    // The memory model's resident waves from the compilers' occupancy (`memory --compilers`):
+    // each kernel's waves per unit are what its compiler reported for it on that release (navi31:
+    // waves per SIMD × 2 SIMDs per CU); a model no compiler here counts (g610) keeps its assumed
+    // figure, said. The estimate made on the same release joins.
+    let mem = tmp("newest-memory");
+    let memory = |compilers: &str, gpus: &str, out: &PathBuf| {
+        cli(&[
+            "memory",
+            "--compilers",
+            compilers,
+            "--gpu",
+            gpus,
+            "--layouts",
+            "f16h",
+            "--branchings",
+            "4",
+            "--rays",
+            "primary",
+            "--res",
+            "16",
+            "--estimate",
+            est.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let (ok, stdout, stderr) = memory("newest", "navi31,a740,g610", &mem);
+    assert!(ok, "memory on the newest compilers failed:\n{stdout}\n{stderr}");
+    let mrows = halftrace::report::memory::read(&mem).unwrap().expect("memory.json");
+    assert_eq!(mrows.len(), 3 * 4, "f32 and f16h in three maths on three GPU models");
+    for m in &mrows {
+        if m.gpu == "g610" {
+            let g = halftrace::memory::gpus::gpu("g610").unwrap();
+            assert_eq!(m.resident, g.resident, "g610 {}", m.kernel);
+            assert!(m.resident_from.starts_with("assumed (no compiler"), "g610 {}: {}", m.kernel, m.resident_from);
+            continue;
+        }
+        let isa = rows
+            .iter()
+            .find(|r| r.family == m.gpu && r.kernel == m.kernel && halftrace::report::isa::release(&r.driver) == newest)
+            .unwrap_or_else(|| panic!("{} {}: no isa row on {newest}", m.gpu, m.kernel));
+        let per_unit = if m.gpu == "navi31" { 2.0 } else { 1.0 };
+        assert_eq!(Some(m.resident as f64), isa.occupancy.map(|o| o * per_unit), "{} {}", m.gpu, m.kernel);
+        assert!(m.resident_from.contains(&release), "{} {}: {}", m.gpu, m.kernel, m.resident_from);
+    }
+    let md = std::fs::read_to_string(mem.join("memory.md")).unwrap();
+    assert!(md.contains("per kernel: a740's occupancy on ") && md.contains("| 16 (assumed) |"), "{md}");
+    // An estimate made on another release is refused: its issue bound and the cache model's
+    // waves would come from two compilers.
+    let (ok, _, stderr) = memory("pinned", "navi31", &tmp("pinned-memory"));
+    assert!(!ok && stderr.contains("Mesa 25.0.7") && stderr.contains(&newest), "{stderr}");
     let csv = std::fs::read_to_string(est.join("estimate-rays.csv")).unwrap();
     assert!(csv.starts_with("family,generation,driver,") && csv.contains(&format!("Mesa {release}")), "{csv}");
     let (ok, _, stderr) = cli(&[
