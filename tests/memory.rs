@@ -10,7 +10,7 @@ use halftrace::layout::LayoutId;
 use halftrace::memory::cache::{simulate, Cache};
 use halftrace::memory::gpus::{gpu, GPUS};
 use halftrace::memory::{
-    is_write, lines_of, private_offset, requested, wave_lines, waves, Buffers, Stack, WaveTrace, PRIVATE,
+    is_write, lines_of, private_offset, requested, wave_lines, waves, Buffers, Enter, Stack, WaveTrace, PRIVATE,
 };
 use halftrace::precision::FloatControls;
 
@@ -43,6 +43,78 @@ fn requested_bytes_are_the_counters_times_the_record_sizes() {
                         assert_eq!(q.nodes, nodes * enc.node_size() as u64, "{what}: node bytes");
                         assert_eq!(q.verts, 36 * tests, "{what}: vertex bytes");
                         assert!(q.ids <= 4 * tests, "{what}: id bytes");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Entering a child in the kernels that derive its entry then (f16h, f16h-poster:
+/// `stack_groups.glsl`'s `enter`) re-reads the parent's child word of that slot — the word of
+/// the node the pass visits — and, where the lane hit the child, the child's box: the ranges
+/// [`Enter`] names hold exactly those bytes of the uploaded nodes. Every pass but the root's
+/// enters a child; single rays enter only children they hit; the requested bytes are the
+/// ranges'; the other layouts' kernels re-read nothing.
+#[test]
+fn entering_a_child_rereads_its_parent_where_the_kernel_does() {
+    use halftrace::bvh::ChildRef;
+    use halftrace::layout::decode_child;
+    let (p, sets) = sets();
+    for layout in LayoutId::all() {
+        for b in [4, 8] {
+            let enc = encode(&p, layout, b);
+            let bytes = enc.nodes.to_bytes();
+            let ns = enc.node_size() as u64;
+            let word = |a: u64| u32::from_le_bytes(bytes[a as usize..a as usize + 4].try_into().unwrap());
+            let half = |a: u64| u16::from_le_bytes(bytes[a as usize..a as usize + 2].try_into().unwrap());
+            for &math in layout.info().maths {
+                let v = halftrace::variant::Variant::new(layout, b, 1).with_math(math);
+                let en = Enter::of(&v);
+                assert_eq!(en.is_some(), v.defers_entries(), "{layout} {}", math.name());
+                let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]).with_enter(en);
+                for pk in [1, 8] {
+                    for (kind, rays) in sets.iter().take(2) {
+                        let what = format!("{layout} {} B={b} P={pk} {kind}", math.name());
+                        let reads = layout.imp().mem_reads(&enc, rays, pk, math, FloatControls::On);
+                        let (mut entered, mut ranged) = (0u64, 0u64);
+                        for (k, packet) in reads.iter().enumerate() {
+                            let lanes = pk.min(rays.len() - k * pk);
+                            for (i, x) in packet.iter().enumerate() {
+                                let Some((pn, ps, hit)) = x.entered else {
+                                    assert!(i < lanes, "{what}: packet {k} pass {} entered nothing", i / lanes);
+                                    continue;
+                                };
+                                assert!(i >= lanes, "{what}: the root's pass entered a child");
+                                assert!(hit || pk > 1, "{what}: a single ray entered a child it missed");
+                                let Some(en) = en else { continue };
+                                let mut r = Vec::new();
+                                en.ranges(pn as u64 * ns, ps as u64, hit, &mut r);
+                                entered += en.bytes(hit);
+                                ranged += r.iter().map(|r| r.1 as u64).sum::<u64>();
+                                let w = word(r[0].0);
+                                assert_eq!(w, enc.nodes.child(pn as usize, ps as usize), "{what}: child word");
+                                if let Some(n) = x.node {
+                                    assert!(
+                                        matches!(decode_child(w), ChildRef::Inner(j) if j == n),
+                                        "{what}: entered {n}"
+                                    );
+                                }
+                                if hit {
+                                    let (lo, hi) = enc.nodes.child_box(pn as usize, ps as usize);
+                                    let want = lo.iter().chain(hi.iter()).map(|&x| half::f16::from_f32(x).to_bits());
+                                    for (&(a, n), want) in r[1..].iter().zip(want) {
+                                        // A pair's word holds the slot's half at its parity.
+                                        let got = if n == 4 { half(a + 2 * (ps as u64 & 1)) } else { half(a) };
+                                        assert_eq!(got, want, "{what}: node {pn} slot {ps} box half at {a}");
+                                    }
+                                    assert_eq!(r.len(), 7, "{what}: the child word and six box values");
+                                }
+                            }
+                        }
+                        let q = requested(&reads, &buf, &Stack { entry: 8, slots: 97, meta: None }, pk);
+                        assert_eq!((q.enter, entered), (ranged, ranged), "{what}: enter bytes");
+                        assert_eq!(q.enter > 0, en.is_some(), "{what}: enter bytes {}", q.enter);
                     }
                 }
             }
@@ -416,7 +488,7 @@ fn the_stacks_move_what_the_rays_push_and_pop() {
     // a leaf-less child (nothing), then popping the written one: 3 dwords a lane, the lanes'
     // dword k side by side — 384 contiguous bytes, 6 lines of 64 bytes, each way.
     let buf = scene.with_stack(entries);
-    let visit = |pushes: u32| Reads { node: Some(0), tris: vec![], pushes };
+    let visit = |pushes: u32| Reads { node: Some(0), tris: vec![], pushes, entered: None };
     let ws = waves(&vec![vec![visit(2), visit(0), visit(0)]; 32], 32, 1, 32, &buf);
     let stack_steps: Vec<&Vec<_>> = ws[0].steps.iter().filter(|s| s[0].0 >= PRIVATE).collect();
     assert_eq!(stack_steps.len(), 2, "one push step, one pop step");

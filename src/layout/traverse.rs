@@ -69,8 +69,8 @@ impl<L: Layout> Lane<L> {
 /// Buffers reused from packet to packet (one per worker thread).
 struct Scratch<L: Layout> {
     lanes: Vec<Lane<L>>,
-    /// Node index per stack level.
-    stack: Vec<u32>,
+    /// Per stack level: the node, its parent and its slot there (the root: [`ROOT_PARENT`]).
+    stack: Vec<(u32, u32, u32)>,
     /// P entries per stack level (`None`: the ray is inactive there).
     entries: Vec<Option<L::Entry>>,
     cur: Vec<Option<L::Entry>>,
@@ -78,7 +78,8 @@ struct Scratch<L: Layout> {
     /// B × P box test results of the current node.
     res: Vec<Option<(f32, L::ChildHit)>>,
     order: Vec<(f32, usize)>,
-    pend: Vec<u32>,
+    /// The visit's inner children to push, nearest first: node and slot.
+    pend: Vec<(u32, u32)>,
     pend_entries: Vec<Option<L::Entry>>,
     /// Each lane's `tri_tests` when the current visit began (only while recording steps).
     lane_tris: Vec<u32>,
@@ -149,7 +150,15 @@ pub struct Reads {
     pub node: Option<u32>,
     pub tris: Vec<(u32, bool)>,
     pub pushes: u32,
+    /// The child this pass entered — its parent node, its slot there, and whether this lane hit
+    /// it — for every pass but the root's (a kernel that derives entries when it enters a child,
+    /// `stack_groups.glsl`'s `enter`, re-reads the parent's child word, and the child's box
+    /// where the lane hit it).
+    pub entered: Option<(u32, u32, bool)>,
 }
+
+/// The parent the root's stack level names: it has none.
+const ROOT_PARENT: u32 = u32::MAX;
 
 /// How often a kernel's loops run for a set of single rays: the traversal loop's passes
 /// (`steps`), the passes in which a node is visited (`visits`; a visit runs the child-slot loop
@@ -300,20 +309,23 @@ fn packet<L: Layout, const B: usize>(
         });
     }
     if any_root {
-        stack.push(0);
+        stack.push((0, ROOT_PARENT, 0));
     } else {
         entries.clear();
     }
     let (mut packet_nodes, mut active_lanes) = (0u32, 0u32);
-    while let Some(ni) = stack.pop() {
+    while let Some((ni, parent, slot)) = stack.pop() {
         if let Some(st) = steps.as_mut() {
             st.push(Step::default());
         }
-        if let Some(rd) = reads.as_mut() {
-            rd.extend(std::iter::repeat_with(Reads::default).take(p));
-        }
         cur.clear();
         cur.extend(entries.drain(entries.len() - p..));
+        if let Some(rd) = reads.as_mut() {
+            rd.extend(cur.iter().map(|e| Reads {
+                entered: (parent != ROOT_PARENT).then_some((parent, slot, e.is_some())),
+                ..Reads::default()
+            }));
+        }
         visits.clear();
         let n = &nodes[ni as usize];
         let mut active = 0;
@@ -379,7 +391,7 @@ fn packet<L: Layout, const B: usize>(
                     }
                 }
                 ChildRef::Inner(j) => {
-                    pend.push(j);
+                    pend.push((j, slot as u32));
                     for l in 0..p {
                         let lane = &mut lanes[l];
                         let e = match (&tests[l], &cur[l], &visits[l]) {
@@ -424,7 +436,7 @@ fn packet<L: Layout, const B: usize>(
             }
         }
         for k in (0..pend.len()).rev() {
-            stack.push(pend[k]);
+            stack.push((pend[k].0, ni, pend[k].1));
             entries.extend_from_slice(&pend_entries[k * p..k * p + p]);
         }
     }

@@ -62,6 +62,61 @@ pub struct Buffers {
     pub tris: u64,
     /// The traversal stack in private memory ([`Stack`]); `None`: left out of the traces.
     pub stack: Option<Stack>,
+    /// What entering a child re-reads of its parent node, in kernels that derive entries then
+    /// ([`Enter`]); `None` elsewhere.
+    pub enter: Option<Enter>,
+}
+
+/// The parent-node reads of entering a child, in the kernels that derive a child's entry when
+/// they enter it (`stack_groups.glsl`'s `enter`: f16h, f16h-poster): the child word of the
+/// slot, and where the lane hit the child its box again (`retest_child`). Their node is
+/// `Node16` (`src/layout/node16.rs`: `lo` f16[3][B] at 0, `hi` at 6·B, `child` u32[B] at 12·B);
+/// the box is read half by half, or — where the math's box test takes two slots at once
+/// (`HALF_PAIRS`: fp16 and mixed math with float controls) — as the 32-bit word of the slot's
+/// pair, per axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Enter {
+    pub branching: u64,
+    pub pairs: bool,
+}
+
+impl Enter {
+    /// A variant's: `None` where its kernels derive entries at the push.
+    pub fn of(v: &crate::variant::Variant) -> Option<Enter> {
+        use crate::precision::{FloatControls, Math};
+        if !v.defers_entries() {
+            return None;
+        }
+        assert!(
+            matches!(v.layout.name(), "f16h" | "f16h-poster"),
+            "{}: its kernels enter children from the parent's node, whose fields memory::Enter places \
+             only for Node16",
+            v.layout.name()
+        );
+        Some(Enter { branching: v.branching as u64, pairs: v.math != Math::F32 && v.fc == FloatControls::On })
+    }
+
+    /// The ranges entering slot `s` of the node at `at` reads (`hit`: the lane hit the child).
+    pub fn ranges(&self, at: u64, s: u64, hit: bool, out: &mut Vec<Range>) {
+        let b = self.branching;
+        out.push((at + 12 * b + 4 * s, 4));
+        if hit {
+            for base in [0, 6 * b] {
+                for a in 0..3 {
+                    if self.pairs {
+                        out.push((at + base + 2 * (a * b + (s & !1)), 4));
+                    } else {
+                        out.push((at + base + 2 * (a * b + s), 2));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The bytes of [`Self::ranges`].
+    pub fn bytes(&self, hit: bool) -> u64 {
+        4 + if hit { 6 * if self.pairs { 4 } else { 2 } } else { 0 }
+    }
 }
 
 /// A lane's traversal stack in private (scratch) memory, in the kernel's discipline: `slots`
@@ -185,7 +240,12 @@ impl Buffers {
             nodes: nodes as u64,
             tris: tris as u64,
             stack: None,
+            enter: None,
         }
+    }
+    /// The same buffers, entering a child re-reading its parent as `enter` says ([`Enter`]).
+    pub fn with_enter(self, enter: Option<Enter>) -> Buffers {
+        Buffers { enter, ..self }
     }
     /// The same buffers, each node padded to a multiple of `align` bytes (a what-if: no layout
     /// places its nodes so; 0 or 1 leaves them packed).
@@ -286,6 +346,18 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
                 }
             }
             steps.extend([pops, back].into_iter().filter(|s| !s.is_empty()));
+            // Entering the pass's node: a kernel that derives entries then re-reads its parent.
+            if let Some(en) = b.enter {
+                let mut reads = Vec::new();
+                for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
+                    if let Some((pn, ps, hit)) = x.entered {
+                        en.ranges(b.node(pn).0, ps as u64, hit, &mut reads);
+                    }
+                }
+                if !reads.is_empty() {
+                    steps.push(reads);
+                }
+            }
             let mut node = Vec::new();
             let mut most = 0;
             for x in (0..packets.len()).filter_map(|k| pass(k, i)).flatten() {
@@ -322,10 +394,12 @@ pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffe
     out
 }
 
-/// Requested bytes, summed over rays: nodes, triangle vertices, triangle ids, stack.
+/// Requested bytes, summed over rays: nodes, triangle vertices, triangle ids, stack, and the
+/// parent-node re-reads of entering children ([`Enter`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Requested {
     pub nodes: u64,
+    pub enter: u64,
     pub verts: u64,
     pub ids: u64,
     pub stack: u64,
@@ -343,6 +417,9 @@ pub fn requested(reads: &[Vec<Reads>], b: &Buffers, stack: &Stack, p: usize) -> 
         q.visits += x.node.is_some() as u64;
         q.tests += x.tris.len() as u64;
         q.ids += 4 * x.tris.iter().filter(|t| t.1).count() as u64;
+        if let (Some(en), Some((_, _, hit))) = (b.enter, x.entered) {
+            q.enter += en.bytes(hit);
+        }
         if p > 1 {
             q.stack += 2 * stack.entry * x.pushes as u64;
         }
@@ -467,6 +544,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let stack = Stack::of(v);
                 let b = Buffers::new(sizes).with_node_align(cfg.node_align);
                 let b = if cfg.stack { b.with_stack(stack) } else { b };
+                let b = b.with_enter(Enter::of(v));
                 let q = requested(&reads, &b, &stack, v.packet);
                 let per = |x: u64| x as f64 / n.max(1) as f64;
                 let alone = waves(&reads, n, v.packet, v.packet, &b);
@@ -515,6 +593,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         node_bytes: per(q.nodes),
                         vert_bytes: per(q.verts),
                         id_bytes: per(q.ids),
+                        enter_bytes: per(q.enter),
                         stack_bytes: per(q.stack),
                         lines32_alone: alone_lines[0],
                         lines64_alone: alone_lines[1],

@@ -35,6 +35,10 @@ pub struct MemRow {
     pub node_bytes: f64,
     pub vert_bytes: f64,
     pub id_bytes: f64,
+    /// The parent-node bytes entering children re-reads (kernels that derive entries then:
+    /// `memory::Enter`; 0 elsewhere and in files written before it was modelled).
+    #[serde(default)]
+    pub enter_bytes: f64,
     /// The bytes the kernel's stack pushes and pops move (`memory::Stack::ops`; packets: two
     /// entries' bytes per child pushed).
     pub stack_bytes: f64,
@@ -144,6 +148,8 @@ struct Record<'a> {
     #[serde(serialize_with = "fixed::<1, _>")]
     id_bytes: f64,
     #[serde(serialize_with = "fixed::<1, _>")]
+    enter_bytes: f64,
+    #[serde(serialize_with = "fixed::<1, _>")]
     stack_bytes: f64,
     #[serde(serialize_with = "fixed::<2, _>")]
     lines32_alone: f64,
@@ -214,6 +220,7 @@ pub fn csv(rows: &[MemRow]) -> anyhow::Result<Vec<u8>> {
         node_bytes: r.node_bytes,
         vert_bytes: r.vert_bytes,
         id_bytes: r.id_bytes,
+        enter_bytes: r.enter_bytes,
         stack_bytes: r.stack_bytes,
         lines32_alone: r.lines32_alone,
         lines64_alone: r.lines64_alone,
@@ -325,7 +332,9 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
         md += &format!("- {v}\n");
     }
     md += "\n## What each tier is\n\n- requested bytes per ray (exact, from the CPU reference's walk): nodes, \
-           triangle vertices (36 B a test), ids (4 B a test the certified test does not reject), stack (what the \
+           triangle vertices (36 B a test), ids (4 B a test the certified test does not reject), enter (what a \
+           kernel that derives a child's entry when it enters it re-reads of the parent node: its child word, and \
+           the child's box where the ray hit it), stack (what the \
            kernel's pushes and pops move: an entry per inner child but the nearest, or a group per visit);\n- \
            distinct lines (exact): per ray alone and per wave with its lanes coalesced at each lockstep step — the \
            stacks' too, for single rays: in private memory, each wave's lanes interleaved dword by dword (unless \
@@ -345,16 +354,17 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
             "\n## {g}, {scene} ({} triangles), {kind} rays ({}, wave {})\n\n",
             rs[0].triangles, rs[0].ray_count, rs[0].wave
         );
-        md += "| kernel | node B | tri B | id B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 | resident waves |\n";
-        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
+        md += "| kernel | node B | tri B | id B | enter B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 | resident waves |\n";
+        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
         for r in rs {
             let q = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.2}"));
             md += &format!(
-                "| {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} | {} |\n",
+                "| {} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.node_bytes,
                 r.vert_bytes,
                 r.id_bytes,
+                r.enter_bytes,
                 r.lines64_alone,
                 r.lines64,
                 r.l1_bytes,
