@@ -3,7 +3,9 @@
 //!
 //! 1. **requested bytes per ray** (exact): nodes (the node record of every node a ray is
 //!    active in), triangle vertices (36 bytes per test), triangle ids (4 bytes per test the
-//!    certified test does not reject: `closest_test` reads it then), and the stack's bytes
+//!    certified test does not reject: `closest_test` reads it then), the parent-node bytes
+//!    entering a child re-reads in the kernels that derive entries then ([`Enter`]), and the
+//!    stack's bytes
 //!    as the kernel's discipline moves them ([`Stack::ops`]; every modelled GPU's compiler
 //!    keeps the single-ray kernels' stack arrays in private memory — scratch, local memory —
 //!    as `isa`'s private bytes show);
@@ -309,7 +311,7 @@ pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
 /// The waves of `reads` (each packet's passes × lanes, [`crate::layout::traverse::mem_reads`],
 /// of `rays` rays in packets of `p`: the last may hold fewer) in waves of `wave` lanes:
 /// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its pops,
-/// its node step, its pushes and its triangle steps (the kernels push a visit's children
+/// its entering reads ([`Enter`], where `b` has them), its node step, its pushes and its triangle steps (the kernels push a visit's children
 /// before testing its leaves). The stack's steps ([`Stack::ops`]) are
 /// there where `b` has it and for single rays (P = 1: a packet's stack is the packet's, in
 /// shared memory or registers).
