@@ -12,7 +12,7 @@ use halftrace::memory::gpus::{gpu, GPUS};
 use halftrace::memory::{
     is_write, lines_of, private_offset, requested, wave_lines, waves, Buffers, Enter, Stack, WaveTrace, PRIVATE,
 };
-use halftrace::precision::FloatControls;
+use halftrace::precision::{FloatControls, Math};
 
 fn sets() -> (Prepared, Vec<(String, Vec<Ray>)>) {
     let p = prepare(&scene_path("teapot.obj"));
@@ -72,6 +72,16 @@ fn entering_a_child_rereads_its_parent_where_the_kernel_does() {
                 let v = halftrace::variant::Variant::new(layout, b, 1).with_math(math);
                 let en = Enter::of(&v);
                 assert_eq!(en.is_some(), v.defers_entries(), "{layout} {}", math.name());
+                // The box is re-read as pair words where the math's box test takes two slots at
+                // once (`HALF_PAIRS`: glsl/half_f16.glsl and half_mixed.glsl, with float controls).
+                if let Some(en) = en {
+                    assert_eq!(en.pairs, math != Math::F32, "{layout} {}: pairs", math.name());
+                    assert_eq!(en.bytes(true), if en.pairs { 28 } else { 16 }, "{layout} {}", math.name());
+                    if layout.info().float_controls_off {
+                        let off = Enter::of(&v.with_fc(FloatControls::Off)).unwrap();
+                        assert!(!off.pairs, "{layout} {} without float controls: pairs", math.name());
+                    }
+                }
                 let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()]).with_enter(en);
                 for pk in [1, 8] {
                     for (kind, rays) in sets.iter().take(2) {
@@ -117,6 +127,47 @@ fn entering_a_child_rereads_its_parent_where_the_kernel_does() {
                         assert_eq!(q.enter > 0, en.is_some(), "{what}: enter bytes {}", q.enter);
                     }
                 }
+            }
+        }
+    }
+}
+
+/// The waves carry the entering reads: in a one-lane wave of a group kernel, every pass that
+/// entered a child has the parent's ranges ([`Enter::ranges`] at the parent's place, nodes
+/// padded or not) as the step just before its node step.
+#[test]
+fn the_waves_enter_before_they_visit() {
+    let (p, sets) = sets();
+    let layout = LayoutId::parse("f16h").unwrap();
+    for b in [4, 8] {
+        let enc = encode(&p, layout, b);
+        for math in [Math::F16, Math::F32] {
+            let v = halftrace::variant::Variant::new(layout, b, 1).with_math(math);
+            let en = Enter::of(&v).unwrap();
+            for align in [0, 128] {
+                let buf = Buffers::new([enc.node_size(), enc.nodes.len(), enc.tris.verts.len()])
+                    .with_node_align(align)
+                    .with_enter(Some(en));
+                let (kind, rays) = &sets[1];
+                let reads = layout.imp().mem_reads(&enc, rays, 1, math, FloatControls::On);
+                let ws = waves(&reads, rays.len(), 1, 1, &buf);
+                let mut entered = 0;
+                for (i, (lane, w)) in reads.iter().zip(&ws).enumerate() {
+                    let mut at = 0;
+                    for x in lane {
+                        let Some((pn, ps, hit)) = x.entered else { continue };
+                        let mut want = Vec::new();
+                        en.ranges(buf.node(pn).0, ps as u64, hit, &mut want);
+                        let j = (at..w.steps.len())
+                            .find(|&j| w.steps[j] == want)
+                            .unwrap_or_else(|| panic!("{kind} ray {i} B={b} align {align}: no entering step {want:?}"));
+                        let node: Vec<_> = x.node.map(|n| buf.node(n)).into_iter().collect();
+                        assert_eq!(w.steps.get(j + 1), Some(&node), "{kind} ray {i} B={b}: the node step follows");
+                        at = j + 2;
+                        entered += 1;
+                    }
+                }
+                assert!(entered > rays.len(), "{kind} B={b}: {entered} entering steps");
             }
         }
     }

@@ -18,7 +18,8 @@ pub struct EstimateArgs {
     /// installed RADV opens and every model (as `isa` takes them).
     #[arg(long, value_delimiter = ',', default_value = "navi31")]
     pub family: Vec<String>,
-    /// Kernels: layouts (every layout and math at B = 4), cover, default or full.
+    /// Kernels: layouts (every layout and math at B = 4), cover, default, full or singles (every
+    /// layout and math at every B, P = 1).
     #[arg(long, default_value = "default")]
     pub matrix: String,
     /// Only these layouts (and f32, the reference).

@@ -4,6 +4,7 @@
 use super::outln;
 use crate::memory::{self, gpus};
 use crate::outdir::{OutDir, OutMode, Outputs};
+use anyhow::Context as _;
 use std::time::Instant;
 
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -102,14 +103,22 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         Some(d) => crate::report::estimate::read(d)?
             .ok_or_else(|| anyhow::anyhow!("--estimate {}: no estimate-rays.json there", d.display()))?,
     };
-    let (isa_rows, release) = match &a.compilers {
-        None => (Vec::new(), None),
+    let isa_rows = match &a.compilers {
+        None => Vec::new(),
         Some(c) => {
+            // Every scene loads before the kernels are built (a minute on five models).
+            for scene in &a.scene {
+                crate::scene::load(scene).with_context(|| format!("--scene {}", scene.display()))?;
+            }
             let rows = occupancy(&gpus, &a.layouts, c)?;
             check_estimate_release(&rows, &estimates, a.estimate.as_deref())?;
-            let release = rows.first().map(|r| crate::report::isa::release(&r.driver));
-            (rows, release)
+            rows
         }
+    };
+    // Each GPU's release: its own compiler's (AMD's may be another build than the others').
+    let release = |g: &gpus::Gpu| {
+        let t = g.compiler?;
+        isa_rows.iter().find(|r| r.family == t).map(|r| crate::report::isa::release(&r.driver))
     };
     let cfg = memory::Config {
         scenes: a.scene.clone(),
@@ -120,10 +129,10 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         estimates,
         stack: !a.no_stack,
         node_align: a.node_align,
-        isa_rows,
+        isa_rows: isa_rows.clone(),
     };
     let rows = memory::run(&cfg, |_| {})?;
-    let mut gpus_table = gpus::table(&gpus, release.as_deref());
+    let mut gpus_table = gpus::table(&gpus, release);
     if a.node_align > 0 {
         gpus_table += &format!(
             "**What-if (`--node-align {}`)**: every layout's nodes padded to a multiple of {} bytes; no kernel \
@@ -155,7 +164,7 @@ fn occupancy(
     compilers: &str,
 ) -> anyhow::Result<Vec<crate::report::isa::IsaRow>> {
     use crate::isa;
-    let names: Vec<String> = gpus.iter().filter_map(|g| g.compiler.map(|c| c.0.to_string())).collect();
+    let names: Vec<String> = gpus.iter().filter_map(|g| g.compiler.map(str::to_string)).collect();
     anyhow::ensure!(
         !names.is_empty(),
         "--compilers {compilers}: none of the GPU models asked ({}) has a compiler here that reports its \

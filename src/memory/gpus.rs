@@ -17,12 +17,12 @@ pub struct Gpu {
     /// kernels' occupancy differs per kernel and compiler; `isa` reports it, and `memory
     /// --compilers` takes it from there where [`Gpu::compiler`] names a build).
     pub resident: usize,
-    /// The `isa` family or model whose compiler builds this GPU's kernels, and the waves per
-    /// unit one of its occupancy units makes (AMD: SIMDs per CU, the occupancy being waves per
-    /// SIMD; Adreno: waves per core; NVIDIA: warps per SM). `None` where no compiler here
-    /// reports a wave count: Mali's shaderdb gives a thread class (full or half), Intel's
-    /// driver no occupancy, and no Mesa shim builds for Hopper.
-    pub compiler: Option<(&'static str, u32)>,
+    /// The `isa` family or model whose compiler builds this GPU's kernels (`memory
+    /// --compilers`: its occupancy, in waves per unit — AMD's waves per SIMD × [`Gpu::simds`],
+    /// Adreno's waves per core, NVIDIA's warps per SM — sets each kernel's resident waves).
+    /// `None` where no compiler here reports a wave count: Mali's shaderdb gives a thread class
+    /// (full or half), Intel's driver no occupancy, and no Mesa shim builds for Hopper.
+    pub compiler: Option<&'static str>,
     pub l1_kib: u64,
     pub l1_line: u64,
     pub l1_ways: usize,
@@ -58,7 +58,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 2500,
         wave: 32,
         resident: 8,
-        compiler: Some(("navi31", 2)),
+        compiler: Some("navi31"),
         l1_kib: 32,
         l1_line: 128,
         l1_ways: 32,
@@ -83,7 +83,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 2250,
         wave: 32,
         resident: 8,
-        compiler: Some(("navi21", 2)),
+        compiler: Some("navi21"),
         l1_kib: 16,
         l1_line: 128,
         l1_ways: 32,
@@ -108,7 +108,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1546,
         wave: 64,
         resident: 8,
-        compiler: Some(("vega10", 4)),
+        compiler: Some("vega10"),
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
@@ -158,7 +158,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 680,
         wave: 64,
         resident: 8,
-        compiler: Some(("a740", 1)),
+        compiler: Some("a740"),
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,
@@ -208,7 +208,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1695,
         wave: 32,
         resident: 16,
-        compiler: Some(("ga102", 1)),
+        compiler: Some("ga102"),
         l1_kib: 128,
         l1_line: 128,
         l1_ways: 256,
@@ -282,9 +282,9 @@ pub fn gpu(id: &str) -> Option<&'static Gpu> {
     GPUS.iter().find(|g| g.id == id)
 }
 
-/// The table of the models' figures (Markdown), for the report. `compilers`: the release
-/// whose occupancy set the resident waves (`memory --compilers`), where one did.
-pub fn table(gpus: &[&Gpu], compilers: Option<&str>) -> String {
+/// The table of the models' figures (Markdown), for the report. `release(g)`: the compilers
+/// release whose occupancy set `g`'s resident waves (`memory --compilers`), where one did.
+pub fn table(gpus: &[&Gpu], release: impl Fn(&Gpu) -> Option<String>) -> String {
     let mut md = String::from(
         "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit | L1/unit KiB, line, ways, stores | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
     );
@@ -296,8 +296,8 @@ pub fn table(gpus: &[&Gpu], compilers: Option<&str>) -> String {
             g.units,
             g.unit,
             g.wave,
-            match (compilers, g.compiler) {
-                (Some(c), Some((t, _))) => format!("per kernel: {t}'s occupancy on {c}"),
+            match (release(g), g.compiler) {
+                (Some(c), Some(t)) => format!("per kernel: {t}'s occupancy on {c}"),
                 _ => format!("{} (assumed)", g.resident),
             },
             g.l1_kib,

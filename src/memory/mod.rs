@@ -476,21 +476,31 @@ pub struct Config {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Resident {
     pub waves: usize,
-    /// `assumed`, or the compiler's occupancy it was made from (`radv … Mesa 26.2.6-1: 24
-    /// waves/SIMD × 2 SIMDs`).
+    /// `assumed` (with why, where a compiler's was sought), or the compiler's occupancy it was
+    /// made from: `radv Mesa 26.2.6-1: 24 waves/SIMD × 2 SIMDs`.
     pub from: String,
 }
 
+impl Resident {
+    /// The compilers release `from` names ([`crate::report::isa::release`] of its driver), `None`
+    /// where the figure is assumed.
+    pub fn release(from: &str) -> Option<String> {
+        let driver = from.split(": ").next().filter(|_| !from.is_empty() && !from.starts_with("assumed"))?;
+        Some(crate::report::isa::release(driver))
+    }
+}
+
 /// The resident waves per unit of variant `v` on GPU `g`: the occupancy `g`'s compiler gave
-/// the kernel in `rows` (`isa`'s, [`Config::isa_rows`]) in waves per unit, where it built it
-/// and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]), saying why where
-/// `rows` were given.
+/// the kernel in `rows` (`isa`'s, [`Config::isa_rows`]) in waves per unit — AMD's waves per
+/// SIMD × the CU's SIMDs ([`gpus::Gpu::simds`]), Adreno's waves per core, NVIDIA's warps per SM
+/// — where it built it and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]),
+/// saying why where `rows` were given.
 pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::report::isa::IsaRow]) -> Resident {
     let assumed = |why: &str| Resident { waves: g.resident, from: format!("assumed{why}") };
     if rows.is_empty() {
         return assumed("");
     }
-    let Some((target, per_unit)) = g.compiler else {
+    let Some(target) = g.compiler else {
         return assumed(" (no compiler here reports its wave count)");
     };
     let row = rows.iter().find(|r| {
@@ -500,19 +510,27 @@ pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::repor
             && r.branching == v.branching
             && r.packet == v.packet
     });
-    match row {
-        None => assumed(&format!(" ({target}: not built)")),
-        Some(r) if !r.status.is_ok() => assumed(&format!(" ({target}: {})", r.status)),
-        Some(r) => match r.occupancy.filter(|&o| o >= 1.0) {
-            None => assumed(&format!(" ({target}: no occupancy reported)")),
-            Some(o) => Resident {
-                waves: (o.round() as usize) * per_unit as usize,
-                from: if per_unit > 1 {
-                    format!("{}: {o} {} × {per_unit}", r.driver, r.occupancy_unit)
-                } else {
-                    format!("{}: {o} {}", r.driver, r.occupancy_unit)
-                },
-            },
+    let Some(r) = row else { return assumed(&format!(" ({target}: not built)")) };
+    if !r.status.is_ok() {
+        return assumed(&format!(" ({target}: {})", r.status));
+    }
+    let Some(o) = r.occupancy.filter(|&o| o >= 1.0) else {
+        return assumed(&format!(" ({target}: no occupancy reported)"));
+    };
+    let per_unit = match r.occupancy_unit.as_str() {
+        "waves/SIMD" if g.simds > 0 => g.simds as usize,
+        "waves/core" | "warps/SM" => 1,
+        u => return assumed(&format!(" ({target}: occupancy in {u}, not waves per {})", g.unit)),
+    };
+    // A device without float controls builds the kernel without them (`_fcoff`): its
+    // occupancy stands for the variant's, said.
+    let build = if r.float_controls != v.fc.name() { format!(" ({})", r.kernel) } else { String::new() };
+    Resident {
+        waves: o.round() as usize * per_unit,
+        from: if per_unit > 1 {
+            format!("{}: {o} {} × {per_unit} SIMDs{build}", r.driver, r.occupancy_unit)
+        } else {
+            format!("{}: {o} {}{build}", r.driver, r.occupancy_unit)
         },
     }
 }
@@ -706,8 +724,7 @@ mod tests {
     #[test]
     fn resident_waves_come_from_the_compilers_occupancy() {
         use crate::report::isa::{test_row, IsaRow};
-        let (navi31, a740, g610) =
-            (gpus::gpu("navi31").unwrap(), gpus::gpu("a740").unwrap(), gpus::gpu("g610").unwrap());
+        let gpu = |id: &str| gpus::gpu(id).unwrap();
         let v = crate::variant::Variant::new(crate::layout::LayoutId::parse("f16h").unwrap(), 4, 1);
         let row = |family: &str, occupancy: Option<f64>, unit: &str| IsaRow {
             occupancy,
@@ -715,19 +732,42 @@ mod tests {
             ..test_row("f16h", ("dev", family, "gen", "drv Mesa 26.2.6-1"))
         };
         // No rows: the assumed figure, said plainly.
-        assert_eq!(resident(navi31, &v, &[]), Resident { waves: navi31.resident, from: "assumed".into() });
-        let rows = [row("navi31", Some(18.0), "waves/SIMD"), row("a740", Some(6.0), "waves/core")];
-        let r = resident(navi31, &v, &rows);
-        assert_eq!(r.waves, 36);
-        assert_eq!(r.from, "drv Mesa 26.2.6-1: 18 waves/SIMD × 2");
-        assert_eq!(resident(a740, &v, &rows).waves, 6);
+        assert_eq!(resident(gpu("navi31"), &v, &[]), Resident { waves: 8, from: "assumed".into() });
+        assert_eq!(Resident::release("assumed (a740: not built)"), None);
+        // Another math of the same layout and B, built with another occupancy: not this one's.
+        let m32 = crate::variant::Variant { math: crate::precision::Math::F32, ..v };
+        let other_math = IsaRow { math: "f32".into(), ..row("navi31", Some(24.0), "waves/SIMD") };
+        let rows = [
+            other_math,
+            row("navi31", Some(18.0), "waves/SIMD"),
+            row("vega10", Some(3.0), "waves/SIMD"),
+            row("a740", Some(6.0), "waves/core"),
+            row("ga102", Some(16.0), "warps/SM"),
+        ];
+        let r = resident(gpu("navi31"), &v, &rows);
+        assert_eq!(r, Resident { waves: 36, from: "drv Mesa 26.2.6-1: 18 waves/SIMD × 2 SIMDs".into() });
+        assert_eq!(Resident::release(&r.from).as_deref(), Some("Mesa 26.2.6"));
+        assert_eq!(resident(gpu("navi31"), &m32, &rows).waves, 48);
+        // GCN: four SIMD16 per CU; Adreno and NVIDIA count per core and per SM already.
+        assert_eq!(resident(gpu("vega10"), &v, &rows).waves, 12);
+        assert_eq!(resident(gpu("a740"), &v, &rows).waves, 6);
+        assert_eq!(resident(gpu("ga102"), &v, &rows).waves, 16);
         // Another kernel (B = 8) was not built; Mali has no compiler that counts its waves; a
-        // failed build or a missing occupancy falls back too.
+        // failed build, a missing occupancy or one in another unit falls back too.
         let b8 = crate::variant::Variant { branching: 8, ..v };
-        assert_eq!(resident(a740, &b8, &rows).from, "assumed (a740: not built)");
-        assert!(resident(g610, &v, &rows).from.starts_with("assumed (no compiler"));
-        let failed = IsaRow { status: crate::base::Status::Failed("no".into()), ..rows[1].clone() };
-        assert!(resident(a740, &v, &[failed]).from.starts_with("assumed (a740: "));
-        assert_eq!(resident(a740, &v, &[row("a740", None, "")]).from, "assumed (a740: no occupancy reported)");
+        assert_eq!(resident(gpu("a740"), &b8, &rows).from, "assumed (a740: not built)");
+        assert!(resident(gpu("g610"), &v, &rows).from.starts_with("assumed (no compiler"));
+        let failed = IsaRow { status: crate::base::Status::Failed("no".into()), ..rows[3].clone() };
+        assert!(resident(gpu("a740"), &v, &[failed]).from.starts_with("assumed (a740: "));
+        assert_eq!(resident(gpu("a740"), &v, &[row("a740", None, "")]).from, "assumed (a740: no occupancy reported)");
+        let threads = row("a740", Some(512.0), "threads");
+        assert_eq!(
+            resident(gpu("a740"), &v, &[threads]).from,
+            "assumed (a740: occupancy in threads, not waves per SP)"
+        );
+        // A build without float controls stands for the variant's, named.
+        let fcoff =
+            IsaRow { float_controls: "off".into(), kernel: "trav_f16h_m16_b4_p1_fcoff".into(), ..rows[3].clone() };
+        assert!(resident(gpu("a740"), &v, &[fcoff]).from.ends_with("6 waves/core (trav_f16h_m16_b4_p1_fcoff)"));
     }
 }

@@ -303,11 +303,10 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
             let no_l2 = rows.iter().any(|r| r.gpu == gpu && r.l2_bound_mrays.is_none());
             let binds = if no_l2 { format!("{binds} (no L2 bound in this file)") } else { binds };
             // Resident waves from a compiler's occupancy (`memory --compilers`): name its release.
-            let from = rows
-                .iter()
-                .find(|r| r.gpu == gpu && !r.resident_from.is_empty() && !r.resident_from.starts_with("assumed"));
+            let from =
+                rows.iter().filter(|r| r.gpu == gpu).find_map(|r| crate::memory::Resident::release(&r.resident_from));
             let binds = match from {
-                Some(r) => format!("{binds}; resident waves: {}'s occupancy", super::isa::release(&r.resident_from)),
+                Some(rel) => format!("{binds}; resident waves: {rel}'s occupancy"),
                 None => binds,
             };
             let n = *n as f64;
