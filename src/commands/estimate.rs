@@ -119,6 +119,7 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
             targets: models.iter().map(|m| isa::Target::Model(m.clone(), dir.clone())).collect(),
             matrix,
             layouts: a.layouts.clone(),
+            branchings: Vec::new(),
             builds: isa::plan(matrix, &a.layouts),
             disasm: None,
             validation: false,

@@ -169,6 +169,7 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         targets,
         matrix,
         layouts: a.layouts.clone(),
+        branchings: Vec::new(),
         builds: isa::plan(matrix, &a.layouts),
         disasm,
         validation: a.validation,
@@ -243,7 +244,8 @@ pub fn isa_model(a: &IsaModelArgs) -> anyhow::Result<()> {
     );
     let matrix = Matrix::parse(&a.matrix)
         .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default, full or singles", a.matrix))?;
-    let messages = isa::run_model_here(&a.model, &isa::plan(matrix, &a.layouts), a.validation, a.disasm.as_deref())?;
+    let builds = isa::plan_at(matrix, &a.layouts, &a.branchings);
+    let messages = isa::run_model_here(&a.model, &builds, a.validation, a.disasm.as_deref())?;
     anyhow::ensure!(
         messages.is_empty(),
         "{} validation-layer message(s), the first: {}",
@@ -265,6 +267,7 @@ mod tests {
             model: "a740".into(),
             matrix: "layouts".into(),
             layouts: vec!["f16h".parse().unwrap(), "q8".parse().unwrap()],
+            branchings: vec![4, 8],
             validation: true,
             disasm: Some("out dir/-x".into()),
         };

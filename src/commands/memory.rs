@@ -110,7 +110,7 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
             for scene in &a.scene {
                 crate::scene::load(scene).with_context(|| format!("--scene {}", scene.display()))?;
             }
-            let rows = occupancy(&gpus, &a.layouts, c)?;
+            let rows = occupancy(&gpus, &a.layouts, &a.branchings, c)?;
             check_estimate_release(&rows, &estimates, a.estimate.as_deref())?;
             rows
         }
@@ -156,11 +156,13 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `isa`'s rows of every single-ray kernel (of `layouts` and f32) on the compilers of the GPU
-/// models in `gpus` that have one ([`gpus::Gpu::compiler`]), on release `compilers`.
+/// `isa`'s rows of every single-ray kernel (of `layouts` and f32, at `branchings`) on the
+/// compilers of the GPU models in `gpus` that have one ([`gpus::Gpu::compiler`]), on release
+/// `compilers`.
 fn occupancy(
     gpus: &[&gpus::Gpu],
     layouts: &[crate::layout::LayoutId],
+    branchings: &[usize],
     compilers: &str,
 ) -> anyhow::Result<Vec<crate::report::isa::IsaRow>> {
     use crate::isa;
@@ -181,7 +183,8 @@ fn occupancy(
         targets,
         matrix,
         layouts: layouts.to_vec(),
-        builds: isa::plan(matrix, layouts),
+        branchings: branchings.to_vec(),
+        builds: isa::plan_at(matrix, layouts, branchings),
         disasm: None,
         validation: false,
         releases: 1,

@@ -35,6 +35,14 @@ pub fn plan(m: Matrix, layouts: &[LayoutId]) -> Vec<KernelSpec> {
     variant::matrix(m, &imps).into_iter().filter(|k| keep(k.variant.layout)).collect()
 }
 
+/// [`plan`]'s kernels at `branchings` only (empty: every B): what a model's child builds when
+/// the run asks for some B (`memory --compilers`: the B it models).
+pub fn plan_at(m: Matrix, layouts: &[LayoutId], branchings: &[usize]) -> Vec<KernelSpec> {
+    let mut p = plan(m, layouts);
+    p.retain(|k| branchings.is_empty() || branchings.contains(&k.variant.branching));
+    p
+}
+
 /// `halftrace isa-model`'s arguments (a hidden command: the child process that builds the
 /// matrix on one model): built here from the typed values, parsed back in a test.
 #[derive(clap::Args, Clone, Debug, PartialEq)]
@@ -47,6 +55,9 @@ pub struct ModelArgs {
     pub matrix: String,
     #[arg(long, value_delimiter = ',')]
     pub layouts: Vec<LayoutId>,
+    /// Only these branching factors of the matrix (empty: every one).
+    #[arg(long, value_delimiter = ',')]
+    pub branchings: Vec<usize>,
     #[arg(long)]
     pub validation: bool,
     /// Write the representations under this folder.
@@ -61,6 +72,7 @@ impl ModelArgs {
             .opt("model", Some(&self.model))
             .opt("matrix", Some(&self.matrix))
             .list("layouts", &self.layouts)
+            .list("branchings", &self.branchings)
             .flag("validation", self.validation)
             .opt("disasm", self.disasm.as_ref().map(|d| d.display()))
     }
@@ -70,9 +82,11 @@ impl ModelArgs {
 #[derive(Clone, Debug)]
 pub struct Config {
     pub targets: Vec<Target>,
-    /// The matrix and layouts the builds come from (a model's child process plans the same).
+    /// The matrix, layouts and branching factors (empty: every one) the builds come from
+    /// ([`plan_at`]; a model's child process plans the same).
     pub matrix: Matrix,
     pub layouts: Vec<LayoutId>,
+    pub branchings: Vec<usize>,
     pub builds: Vec<KernelSpec>,
     /// Write every kernel's internal representations (NIR, the compiler's IR, disassembly)
     /// under `disasm/<device>/` of the output folder.
@@ -184,6 +198,7 @@ fn run_model(cfg: &Config, exe: &Path, t: &Target) -> anyhow::Result<shim::Model
         model: m.name.into(),
         matrix: cfg.matrix.name().into(),
         layouts: cfg.layouts.clone(),
+        branchings: cfg.branchings.clone(),
         validation: cfg.validation,
         disasm: cfg.disasm.as_ref().map(|d| d.join(sub)),
     };
@@ -240,6 +255,7 @@ pub fn aco_programs(
         model: family.into(),
         matrix: matrix.name().into(),
         layouts: layouts.to_vec(),
+        branchings: Vec::new(),
         validation: false,
         disasm: None,
     };
