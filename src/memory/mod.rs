@@ -481,15 +481,6 @@ pub struct Resident {
     pub from: String,
 }
 
-impl Resident {
-    /// The compilers release `from` names ([`crate::report::isa::release`] of its driver), `None`
-    /// where the figure is assumed.
-    pub fn release(from: &str) -> Option<String> {
-        let driver = from.split(": ").next().filter(|_| !from.is_empty() && !from.starts_with("assumed"))?;
-        Some(crate::report::isa::release(driver))
-    }
-}
-
 /// The resident waves per unit of variant `v` on GPU `g`: the occupancy `g`'s compiler gave
 /// the kernel in `rows` (`isa`'s, [`Config::isa_rows`]) in waves per unit — AMD's waves per
 /// SIMD × the CU's SIMDs ([`gpus::Gpu::simds`]), Adreno's waves per core, NVIDIA's warps per SM
@@ -733,7 +724,8 @@ mod tests {
         };
         // No rows: the assumed figure, said plainly.
         assert_eq!(resident(gpu("navi31"), &v, &[]), Resident { waves: 8, from: "assumed".into() });
-        assert_eq!(Resident::release("assumed (a740: not built)"), None);
+        let release = crate::report::memory::resident_release;
+        assert_eq!(release("assumed (a740: not built)"), None);
         // Another math of the same layout and B, built with another occupancy: not this one's.
         let m32 = crate::variant::Variant { math: crate::precision::Math::F32, ..v };
         let other_math = IsaRow { math: "f32".into(), ..row("navi31", Some(24.0), "waves/SIMD") };
@@ -746,7 +738,7 @@ mod tests {
         ];
         let r = resident(gpu("navi31"), &v, &rows);
         assert_eq!(r, Resident { waves: 36, from: "drv Mesa 26.2.6-1: 18 waves/SIMD × 2 SIMDs".into() });
-        assert_eq!(Resident::release(&r.from).as_deref(), Some("Mesa 26.2.6"));
+        assert_eq!(release(&r.from).as_deref(), Some("Mesa 26.2.6"));
         assert_eq!(resident(gpu("navi31"), &m32, &rows).waves, 48);
         // GCN: four SIMD16 per CU; Adreno and NVIDIA count per core and per SM already.
         assert_eq!(resident(gpu("vega10"), &v, &rows).waves, 12);

@@ -303,8 +303,7 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
             let no_l2 = rows.iter().any(|r| r.gpu == gpu && r.l2_bound_mrays.is_none());
             let binds = if no_l2 { format!("{binds} (no L2 bound in this file)") } else { binds };
             // Resident waves from a compiler's occupancy (`memory --compilers`): name its release.
-            let from =
-                rows.iter().filter(|r| r.gpu == gpu).find_map(|r| crate::memory::Resident::release(&r.resident_from));
+            let from = rows.iter().filter(|r| r.gpu == gpu).find_map(|r| resident_release(&r.resident_from));
             let binds = match from {
                 Some(rel) => format!("{binds}; resident waves: {rel}'s occupancy"),
                 None => binds,
@@ -388,6 +387,13 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
         }
     }
     md
+}
+
+/// The compilers release a row's `resident_from` names (its driver's, [`super::isa::release`]),
+/// `None` where the figure is assumed (`memory::resident` writes it).
+pub fn resident_release(from: &str) -> Option<String> {
+    let driver = from.split(": ").next().filter(|_| !from.is_empty() && !from.starts_with("assumed"))?;
+    Some(super::isa::release(driver))
 }
 
 /// Where the rows' resident waves come from a compiler's occupancy (`memory --compilers`):
