@@ -72,11 +72,10 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
     // As `isa` takes them (`vendors` is every other vendor's model, `all` every AMD family and
     // every model), on one release: with one whose folder has the amdgpu shim (Mesa 26 on),
     // AMD's families are built under it.
-    let choice = a.compilers.as_deref().filter(|c| *c != "pinned");
     let mut families: Vec<String> = Vec::new();
     let (mut amd, mut compilers, mut models): (Option<PathBuf>, Option<PathBuf>, Vec<String>) =
         (None, None, Vec::new());
-    for t in isa::release_targets(&a.family, &exe, false, choice, false)? {
+    for t in isa::release_targets(&a.family, &exe, false, a.compilers.as_deref(), false)? {
         match t {
             isa::Target::Family(f, dir) => {
                 families.push(f);
@@ -120,7 +119,6 @@ pub fn estimate(a: &EstimateArgs) -> anyhow::Result<()> {
             matrix,
             layouts: a.layouts.clone(),
             branchings: Vec::new(),
-            builds: isa::plan(matrix, &a.layouts),
             disasm: None,
             validation: false,
             releases: 1,

@@ -170,7 +170,6 @@ pub fn isa(a: &IsaArgs) -> anyhow::Result<()> {
         matrix,
         layouts: a.layouts.clone(),
         branchings: Vec::new(),
-        builds: isa::plan(matrix, &a.layouts),
         disasm,
         validation: a.validation,
         releases,

@@ -115,11 +115,6 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
             rows
         }
     };
-    // Each GPU's release: its own compiler's (AMD's may be another build than the others').
-    let release = |g: &gpus::Gpu| {
-        let t = g.compiler?;
-        isa_rows.iter().find(|r| r.family == t).map(|r| crate::report::isa::release(&r.driver))
-    };
     let cfg = memory::Config {
         scenes: a.scene.clone(),
         kinds,
@@ -129,9 +124,14 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         estimates,
         stack: !a.no_stack,
         node_align: a.node_align,
-        isa_rows: isa_rows.clone(),
+        isa_rows,
     };
     let rows = memory::run(&cfg, |_| {})?;
+    // Each GPU's release: its own compiler's (AMD's may be another build than the others').
+    let release = |g: &gpus::Gpu| {
+        let t = g.compiler?;
+        cfg.isa_rows.iter().find(|r| r.family == t).map(|r| crate::report::isa::release(&r.driver))
+    };
     let mut gpus_table = gpus::table(&gpus, release);
     if a.node_align > 0 {
         gpus_table += &format!(
@@ -175,8 +175,7 @@ fn occupancy(
         gpus::GPUS.iter().filter(|g| g.compiler.is_some()).map(|g| g.id).collect::<Vec<_>>().join(", ")
     );
     let exe = std::env::current_exe()?;
-    let choice = Some(compilers).filter(|c| *c != "pinned");
-    let targets = isa::release_targets(&names, &exe, false, choice, false)
+    let targets = isa::release_targets(&names, &exe, false, Some(compilers), false)
         .map_err(|e| anyhow::anyhow!("--compilers {compilers}: {e:#}"))?;
     let matrix = isa::Matrix::Singles;
     let cfg = isa::Config {
@@ -184,7 +183,6 @@ fn occupancy(
         matrix,
         layouts: layouts.to_vec(),
         branchings: branchings.to_vec(),
-        builds: isa::plan_at(matrix, layouts, branchings),
         disasm: None,
         validation: false,
         releases: 1,

@@ -83,11 +83,10 @@ impl ModelArgs {
 pub struct Config {
     pub targets: Vec<Target>,
     /// The matrix, layouts and branching factors (empty: every one) the builds come from
-    /// ([`plan_at`]; a model's child process plans the same).
+    /// ([`Config::builds`]; a model's child process plans the same).
     pub matrix: Matrix,
     pub layouts: Vec<LayoutId>,
     pub branchings: Vec<usize>,
-    pub builds: Vec<KernelSpec>,
     /// Write every kernel's internal representations (NIR, the compiler's IR, disassembly)
     /// under `disasm/<device>/` of the output folder.
     pub disasm: Option<PathBuf>,
@@ -95,6 +94,13 @@ pub struct Config {
     /// Whether the targets come from more than one compilers release: each child's
     /// representations then go under `disasm/<name>-mesa-<release>/`.
     pub releases: usize,
+}
+
+impl Config {
+    /// The kernels built on each target ([`plan_at`]).
+    pub fn builds(&self) -> Vec<KernelSpec> {
+        plan_at(self.matrix, &self.layouts, &self.branchings)
+    }
 }
 
 /// What a run produced.
@@ -140,10 +146,11 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
     let mut rows = Vec::new();
     let mut messages = Vec::new();
     let mut notes = Vec::new();
+    let builds = cfg.builds();
     // Whatever opens under a drm-shim: a child process each, as many at once as there are cores.
     let children: Vec<&Target> = cfg.targets.iter().filter(|t| child_of(t).is_some()).collect();
     let mut runs: Vec<Option<shim::ModelRun>> =
-        children.par_iter().map(|t| run_model(cfg, exe, t).map(Some)).collect::<anyhow::Result<_>>()?;
+        children.par_iter().map(|t| run_model(cfg, exe, t, &builds).map(Some)).collect::<anyhow::Result<_>>()?;
     let mut next_run = runs.iter_mut();
     for t in &cfg.targets {
         if child_of(t).is_some() {
@@ -161,7 +168,7 @@ pub fn run(cfg: &Config, exe: &Path, mut each: impl FnMut(&IsaRow)) -> anyhow::R
             _ => slug(&g.info.name),
         };
         let who = Who { family: fam, model: None };
-        for b in &cfg.builds {
+        for b in &builds {
             let row = build_one(&g, &who, b, cfg.disasm.as_deref().map(|d| d.join(&label)).as_deref(), |_| {})?;
             each(&row);
             rows.push(row);
@@ -182,7 +189,7 @@ fn child_of(t: &Target) -> Option<(&str, &Path)> {
 }
 
 /// The rows of a model or a shimmed AMD family, built in its own process.
-fn run_model(cfg: &Config, exe: &Path, t: &Target) -> anyhow::Result<shim::ModelRun> {
+fn run_model(cfg: &Config, exe: &Path, t: &Target, builds: &[KernelSpec]) -> anyhow::Result<shim::ModelRun> {
     let (name, dir) = child_of(t).expect("a child's target");
     let (v, m) = match t {
         Target::Family(..) => (
@@ -202,7 +209,7 @@ fn run_model(cfg: &Config, exe: &Path, t: &Target) -> anyhow::Result<shim::Model
         validation: cfg.validation,
         disasm: cfg.disasm.as_ref().map(|d| d.join(sub)),
     };
-    shim::run_model(exe, (v, &m), dir, &args.argv(), &cfg.builds)
+    shim::run_model(exe, (v, &m), dir, &args.argv(), builds)
 }
 
 /// Builds `builds` in this process (`halftrace isa-model`) on model `name` — a device a

@@ -186,7 +186,8 @@ pub fn releases(asked: &[String]) -> anyhow::Result<Vec<Option<String>>> {
     Ok(out)
 }
 
-/// What `--family` names on one compilers release (`choice`: [`releases`]): the AMD families
+/// What `--family` names on one compilers release (`choice`: as `--compilers` names one —
+/// `pinned` or `None` the pinned release, else `newest` or a folder; [`releases`]): the AMD families
 /// — under the release's amdgpu shim where its folder has one, else RADV's null devices — and
 /// the other vendors' models under the release's shims. A release named for nothing it can
 /// build is refused. `one_of_several`: the release is one of several, so a model it lacks is
@@ -198,6 +199,7 @@ pub fn release_targets(
     choice: Option<&str>,
     one_of_several: bool,
 ) -> anyhow::Result<Vec<Target>> {
+    let choice = choice.filter(|c| *c != "pinned");
     let folder = choice.map(|c| shim::compilers_for(Some(c)).map_err(anyhow::Error::msg)).transpose()?;
     let amd = folder.filter(|d| shim::amd_shim(d).is_some());
     let (families, models, grouped) = families(asked, exe, default, amd.as_deref())?;

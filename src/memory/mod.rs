@@ -5,10 +5,9 @@
 //!    active in), triangle vertices (36 bytes per test), triangle ids (4 bytes per test the
 //!    certified test does not reject: `closest_test` reads it then), the parent-node bytes
 //!    entering a child re-reads in the kernels that derive entries then ([`Enter`]), and the
-//!    stack's bytes
-//!    as the kernel's discipline moves them ([`Stack::ops`]; every modelled GPU's compiler
-//!    keeps the single-ray kernels' stack arrays in private memory — scratch, local memory —
-//!    as `isa`'s private bytes show);
+//!    stack's bytes as the kernel's discipline moves them ([`Stack::ops`]; every modelled
+//!    GPU's compiler keeps the single-ray kernels' stack arrays in private memory — scratch,
+//!    local memory — as `isa`'s private bytes show);
 //! 2. **distinct cache lines** (exact) of 32, 64 and 128 bytes, per ray alone and per wave in
 //!    lockstep (at each step the union over the wave's lanes: what coalescing leaves), the
 //!    stacks' pops and pushes among them (single rays, in private memory: [`Stack`]);
@@ -311,10 +310,10 @@ pub fn lines_of(ranges: &[Range], line: u64, out: &mut Vec<u64>) {
 /// The waves of `reads` (each packet's passes × lanes, [`crate::layout::traverse::mem_reads`],
 /// of `rays` rays in packets of `p`: the last may hold fewer) in waves of `wave` lanes:
 /// ⌊wave ÷ p⌋ packets in lockstep per wave (at least one), pass by pass, each pass its pops,
-/// its entering reads ([`Enter`], where `b` has them), its node step, its pushes and its triangle steps (the kernels push a visit's children
-/// before testing its leaves). The stack's steps ([`Stack::ops`]) are
-/// there where `b` has it and for single rays (P = 1: a packet's stack is the packet's, in
-/// shared memory or registers).
+/// its entering reads ([`Enter`], where `b` has them), its node step, its pushes and its
+/// triangle steps (the kernels push a visit's children before testing its leaves). The stack's
+/// steps ([`Stack::ops`]) are there where `b` has it and for single rays (P = 1: a packet's
+/// stack is the packet's, in shared memory or registers).
 pub fn waves(reads: &[Vec<Reads>], rays: usize, p: usize, wave: usize, b: &Buffers) -> Vec<WaveTrace> {
     let p = p.max(1);
     let per_wave = (wave / p).max(1);
@@ -516,13 +515,10 @@ pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::repor
     // A device without float controls builds the kernel without them (`_fcoff`): its
     // occupancy stands for the variant's, said.
     let build = if r.float_controls != v.fc.name() { format!(" ({})", r.kernel) } else { String::new() };
+    let simds = if per_unit > 1 { format!(" × {per_unit} SIMDs") } else { String::new() };
     Resident {
         waves: o.round() as usize * per_unit,
-        from: if per_unit > 1 {
-            format!("{}: {o} {} × {per_unit} SIMDs{build}", r.driver, r.occupancy_unit)
-        } else {
-            format!("{}: {o} {}{build}", r.driver, r.occupancy_unit)
-        },
+        from: format!("{}: {o} {}{simds}{build}", r.driver, r.occupancy_unit),
     }
 }
 
