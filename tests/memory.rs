@@ -265,7 +265,11 @@ impl Naive {
 /// wave's private offsets go to its place's region: place `s` at `private + s × region`; a
 /// write goes to a write-back L1, else to the L2 (passing a write-through L1); dirty lines go
 /// down when pushed out.
-fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: u64, region: u64) -> [u64; 8] {
+/// The counts of [`naive_hierarchy`], then its reading steps and their summed latency (each
+/// step as long as its deepest level's latency).
+type NaiveCounts = ([u64; 8], u64, f64);
+
+fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: u64, region: u64) -> NaiveCounts {
     struct Levels {
         l2: Naive,
         llc: Option<Naive>,
@@ -294,25 +298,34 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
                 }
             }
         }
-        /// The L2 reads (or takes a write of) the line at byte `b`.
-        fn l2(&mut self, b: u64, write: bool) {
+        /// The L2 reads (or takes a write of) the line at byte `b`; where a read's bytes came
+        /// from: 1 the L2, 2 the LLC, 3 DRAM.
+        fn l2(&mut self, b: u64, write: bool) -> usize {
             let (hit, out) = self.l2.touch(b / self.l2_line, write);
             if let Some(o) = out {
                 self.l2_out(o * self.l2_line);
             }
             if hit || write {
-                return;
+                return 1;
             }
             match self.llc.as_mut() {
-                None => self.dram += self.l2_line,
+                None => {
+                    self.dram += self.l2_line;
+                    3
+                }
                 Some(c) => {
+                    let mut from = 2;
                     let mut x = b / self.llc_line * self.llc_line;
                     while x < b + self.l2_line {
                         let (h, o) = c.touch(x / self.llc_line, false);
                         self.dram += self.llc_line * (!h as u64 + o.is_some() as u64);
                         self.written += self.llc_line * o.is_some() as u64;
+                        if !h {
+                            from = 3;
+                        }
                         x += self.llc_line;
                     }
+                    from
                 }
             }
         }
@@ -339,6 +352,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
     let slots = units * g.resident;
     let mut slot: Vec<Option<(usize, usize)>> = (0..slots).map(|s| queue.get(s).map(|_| (s, 0))).collect();
     let mut next = slots.min(queue.len());
+    let (mut read_steps, mut wait) = (0u64, 0f64);
     loop {
         let mut any = false;
         for s in 0..slots {
@@ -358,6 +372,9 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
             }
             lines.sort();
             let u = &mut l1[s % units];
+            let mut deepest = 0;
+            // A step whose lanes read nothing waits for nothing.
+            let reads = !write && !lines.is_empty();
             for l in lines {
                 if write && !g.l1_write_back {
                     u.pass(l * line / g.l1_line);
@@ -374,9 +391,13 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
                 let (a, end) = (l * g.l1_line, (l + 1) * g.l1_line);
                 let mut b = a / g.l2_line * g.l2_line;
                 while b < end {
-                    lv.l2(b, false);
+                    deepest = deepest.max(lv.l2(b, false));
                     b += g.l2_line;
                 }
+            }
+            if reads {
+                read_steps += 1;
+                wait += g.latency_ns[deepest];
             }
             slot[s] = if i + 1 < queue[w].steps.len() {
                 Some((w, i + 1))
@@ -393,7 +414,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
     }
     let (la, lh) = (l1.iter().map(|c| c.accesses).sum(), l1.iter().map(|c| c.hits).sum());
     let (ca, ch) = lv.llc.as_ref().map_or((0, 0), |c| (c.accesses, c.hits));
-    [la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram, lv.written]
+    ([la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram, lv.written], read_steps, wait)
 }
 
 /// Equal hit and miss counts at every level, and equal DRAM bytes, on a real trace, for every
@@ -415,12 +436,14 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
         scene.with_stack(Stack { entry: 20, slots: 31, meta: Some(4) }),
     ] {
         for g in GPUS {
-            // A small GPU of the same caches, so that waves queue and caches fill.
+            // A small GPU of the same caches, so that waves queue and caches fill; a latency
+            // per level that names the level in the sum.
             let small = halftrace::memory::gpus::Gpu {
                 units: 2,
                 resident: 2,
                 l2_kib: 64,
                 llc_kib: g.llc_kib.min(128),
+                latency_ns: [1.0, 1e3, 1e6, 1e9],
                 ..g.clone()
             };
             // Both ways an L1 can take the stacks' stores.
@@ -440,9 +463,10 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
                 ];
                 let region = buf.private_region(g.wave);
                 let stack = buf.stack.is_some();
+                let (counts, read_steps, wait) = naive_hierarchy(&small, &ws, buf.private_base(), region);
                 assert_eq!(
-                    got,
-                    naive_hierarchy(&small, &ws, buf.private_base(), region),
+                    (got, h.read_steps, h.wait_ns),
+                    (counts, read_steps, wait),
                     "{} on {kind} rays, L1 write-back {wb}",
                     g.id
                 );
@@ -616,14 +640,24 @@ fn the_command_writes_its_files_and_refuses_bad_flags() {
         assert_eq!(&row[ratio], "1", "f32's own ratio");
     }
     // The roofline: the L2 bound is the GPU's L2 bandwidth over the bytes per ray requested from
-    // the L2, and the bound is the lowest of the bounds, named by `binds`.
+    // the L2, a step's mean latency lies between the L1's and DRAM's, and the bound is the
+    // lowest of the bounds, named by `binds`.
     let rows = halftrace::report::memory::read(&dir).unwrap().expect("memory.json");
     assert_eq!(rows.len(), 2 * 3 * kernels);
     for r in &rows {
         let g = gpu(&r.gpu).unwrap();
         let l2 = r.l2_bound_mrays.expect("an L2 bound");
         assert!(r.l2_bytes > 0.0 && (l2 * r.l2_bytes / (g.l2_gbs * 1e3) - 1.0).abs() < 1e-9, "{} {}", r.gpu, r.kernel);
-        let bounds = [(r.issue_bound_mrays, "issue"), (Some(l2), "L2"), (Some(r.dram_bound_mrays), "DRAM")];
+        let lat = r.latency_bound_mrays.expect("a latency bound");
+        assert!(lat > 0.0 && lat.is_finite(), "{} {}: latency bound {lat}", r.gpu, r.kernel);
+        let (l1, dram) = (g.latency_ns[0], g.latency_ns[3]);
+        assert!(r.step_ns >= l1 && r.step_ns <= dram, "{} {}: step {} ns", r.gpu, r.kernel, r.step_ns);
+        let bounds = [
+            (r.issue_bound_mrays, "issue"),
+            (Some(lat), "latency"),
+            (Some(l2), "L2"),
+            (Some(r.dram_bound_mrays), "DRAM"),
+        ];
         let lowest = bounds.iter().filter_map(|b| b.0).fold(f64::INFINITY, f64::min);
         assert_eq!(r.bound_mrays, lowest, "{} {}", r.gpu, r.kernel);
         assert!(

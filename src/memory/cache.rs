@@ -132,6 +132,10 @@ pub struct Hierarchy {
     pub dram_stack_bytes: u64,
     /// Of `dram_bytes`, those written back (dirty lines evicted from the last level).
     pub dram_write_bytes: u64,
+    /// [`simulate`]: the wave steps that read, and the sum of their latencies (ns): each step
+    /// waits for the deepest level any of its lines came from ([`Gpu::latency_ns`]).
+    pub read_steps: u64,
+    pub wait_ns: f64,
     /// Bytes below this address are the node buffer's.
     nodes_end: u64,
     /// Bytes from this address on are the waves' private memory.
@@ -150,6 +154,8 @@ impl Hierarchy {
             dram_node_bytes: 0,
             dram_stack_bytes: 0,
             dram_write_bytes: 0,
+            read_steps: 0,
+            wait_ns: 0.0,
             nodes_end,
             private_base,
             l1_write_back: g.l1_write_back,
@@ -165,8 +171,9 @@ impl Hierarchy {
         }
     }
 
-    /// Unit `unit` reads the L1 line holding byte `addr`.
-    pub fn read(&mut self, unit: usize, addr: u64) {
+    /// Unit `unit` reads the L1 line holding byte `addr`; returns the deepest level its bytes
+    /// came from ([`Level`]).
+    pub fn read(&mut self, unit: usize, addr: u64) -> Level {
         let l1 = &mut self.l1[unit];
         let span = l1.line;
         let a = addr / span * span;
@@ -175,9 +182,10 @@ impl Hierarchy {
             self.l1_write_back(v * span);
         }
         if hit {
-            return;
+            return Level::L1;
         }
         // The L1 line's bytes in L2 lines (one when the L2's line is the longer).
+        let mut deepest = Level::L2;
         let mut b = a / self.l2.line * self.l2.line;
         while b < a + span {
             let (hit, evicted) = self.l2.read(b / self.l2.line);
@@ -185,10 +193,11 @@ impl Hierarchy {
                 self.write_back(v * self.l2.line);
             }
             if !hit {
-                self.below_l2(b);
+                deepest = deepest.max(self.below_l2(b));
             }
             b += self.l2.line;
         }
+        deepest
     }
 
     /// Unit `unit` writes into the line holding byte `addr` ([`Hierarchy::write_line`]): kept
@@ -256,11 +265,13 @@ impl Hierarchy {
         }
     }
 
-    /// An L2 miss at `b`: its bytes from the last-level cache, else from DRAM.
-    fn below_l2(&mut self, b: u64) {
+    /// An L2 miss at `b`: its bytes from the last-level cache, else from DRAM; returns where
+    /// they came from (DRAM where any part of them did).
+    fn below_l2(&mut self, b: u64) -> Level {
         let span = self.l2.line;
         let Some(llc) = self.llc.as_mut() else {
-            return self.dram(b, span);
+            self.dram(b, span);
+            return Level::Dram;
         };
         let (mut missed, mut out) = (Vec::new(), Vec::new());
         let mut c = b / llc.line * llc.line;
@@ -277,10 +288,21 @@ impl Hierarchy {
             self.dram_write_bytes += line;
             self.dram(v, line);
         }
+        let level = if missed.is_empty() { Level::Llc } else { Level::Dram };
         for c in missed {
             self.dram(c, line);
         }
+        level
     }
+}
+
+/// Where a read's bytes came from, nearest first (an index into [`Gpu::latency_ns`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Level {
+    L1,
+    L2,
+    Llc,
+    Dram,
 }
 
 /// Runs `waves` (of the buffers `b`) on `g` as it would run them at once: wave i starts on unit
@@ -288,7 +310,9 @@ impl Hierarchy {
 /// one lockstep step (units in turn); a finished wave's place goes to the next wave not yet
 /// started. A wave's private memory (its [`super::PRIVATE`] ranges) is its place's: place `s`
 /// has the `s`-th region after [`Buffers::private_base`], as a driver gives each resident wave
-/// its scratch.
+/// its scratch. Each step that reads waits for the slowest of its lines: the latency of the
+/// deepest level any of them came from, summed in [`Hierarchy::wait_ns`] (no latency is hidden
+/// within a wave: a step's loads depend on the step before).
 pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> Hierarchy {
     let units = g.units as usize;
     let mut h = Hierarchy::new(g, units, b.nodes_end(), b.private_base());
@@ -322,9 +346,12 @@ pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> H
                     h.write(s % units, l * line);
                 }
             } else {
+                // The wave waits for the slowest of its lines (a store does not wait).
                 super::lines_of(&ranges, g.l1_line, &mut lines);
-                for &l in &lines {
-                    h.read(s % units, l * g.l1_line);
+                let deepest = lines.iter().map(|&l| h.read(s % units, l * g.l1_line)).max();
+                if let Some(d) = deepest {
+                    h.read_steps += 1;
+                    h.wait_ns += g.latency_ns[d as usize];
                 }
             }
             *r = if step + 1 < waves[w].steps.len() {
@@ -385,5 +412,33 @@ mod tests {
             }
         }
         assert_eq!(c.misses(), 4);
+    }
+
+    /// Each reading step waits for the deepest level its lines came from: DRAM, L1, L2 and
+    /// the last-level cache in turn on a one-unit GPU with direct-mapped caches, one step
+    /// reading two lines (one in L1, one from DRAM) waiting for DRAM.
+    #[test]
+    fn a_step_waits_for_its_slowest_line() {
+        let mut g = crate::memory::gpus::gpu("navi31").expect("navi31").clone();
+        (g.units, g.l1_kib, g.l1_line, g.l1_ways) = (1, 1, 64, 1); // 16 sets
+        (g.l2_kib, g.l2_line, g.l2_ways) = (2, 64, 1); // 32 sets
+        (g.llc_kib, g.llc_line, g.llc_ways) = (64, 64, 16);
+        g.latency_ns = [1.0, 10.0, 100.0, 1000.0];
+        let line = |l: u64| (l * 64, 4);
+        // 0 from DRAM, 0 in L1, 16 from DRAM (0 leaves the L1, stays in the L2), 0 from the L2,
+        // 32 from DRAM (0 leaves the L1 and the L2, stays in the LLC), 0 from the LLC, then
+        // 0 (L1) with 48 (DRAM) in one step.
+        let steps = [0, 0, 16, 0, 32, 0].iter().map(|&l| vec![line(l)]).chain([vec![line(0), line(48)]]).collect();
+        let waves = [WaveTrace { steps, rays: 32 }];
+        let b = Buffers::new([56, 1000, 10]);
+        let h = simulate(&g, &waves, 1, &b);
+        assert_eq!(h.read_steps, 7);
+        assert_eq!(h.wait_ns, 1000.0 + 1.0 + 1000.0 + 10.0 + 1000.0 + 100.0 + 1000.0);
+        // One place (one unit, one wave): 32 rays in 4111 ns; more resident waves than waves
+        // running add no place.
+        let (step, bound) = crate::memory::latency(&g, 1, &waves, &h, 32);
+        assert_eq!(step, 4111.0 / 7.0);
+        assert!((bound - 32.0 / 4111.0 * 1e3).abs() < 1e-9, "{bound}");
+        assert_eq!(crate::memory::latency(&g, 8, &waves, &h, 32).1, bound);
     }
 }

@@ -43,6 +43,10 @@ pub struct Gpu {
     pub l2_gbs: f64,
     /// DRAM access energy, pJ per bit, for the memory type.
     pub pj_per_bit: f64,
+    /// Load-to-use latency (ns) of a read served by the L1, the L2, the last-level cache (0
+    /// where none) and DRAM: pointer-chasing measurements where published, else assumed
+    /// (`docs/gpu-memory.md`, "Latency"); the roofline's latency bound.
+    pub latency_ns: [f64; 4],
     /// SIMDs per unit that `estimate`'s rays per 1000 clocks per SIMD scale by (AMD: 2 SIMD32
     /// per RDNA CU, 4 SIMD16 per GCN CU); 0 where no cycle model exists.
     pub simds: u32,
@@ -73,6 +77,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 960.0,
         l2_gbs: 7680.0,
         pj_per_bit: 7.5,
+        latency_ns: [28.5, 87.0, 150.3, 234.55],
         simds: 2,
     },
     Gpu {
@@ -98,6 +103,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 512.0,
         l2_gbs: 4608.0,
         pj_per_bit: 7.5,
+        latency_ns: [28.5, 87.0, 165.0, 283.89],
         simds: 2,
     },
     Gpu {
@@ -123,6 +129,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 483.8,
         l2_gbs: 1583.0,
         pj_per_bit: 3.9,
+        latency_ns: [90.6, 187.6, 0.0, 404.3],
         simds: 4,
     },
     Gpu {
@@ -148,6 +155,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 33.8,
         l2_gbs: 256.0,
         pj_per_bit: 4.5,
+        latency_ns: [62.3, 150.0, 0.0, 350.0],
         simds: 0,
     },
     Gpu {
@@ -173,6 +181,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 67.2,
         l2_gbs: 261.0,
         pj_per_bit: 4.0,
+        latency_ns: [62.3, 150.0, 243.0, 350.0],
         simds: 0,
     },
     Gpu {
@@ -198,6 +207,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 136.5,
         l2_gbs: 1050.0,
         pj_per_bit: 4.0,
+        latency_ns: [40.0, 120.0, 200.0, 350.0],
         simds: 0,
     },
     Gpu {
@@ -223,6 +233,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 936.0,
         l2_gbs: 2604.0,
         pj_per_bit: 7.25,
+        latency_ns: [19.0, 140.0, 0.0, 314.0],
         simds: 0,
     },
     Gpu {
@@ -248,6 +259,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 3350.0,
         l2_gbs: 9800.0,
         pj_per_bit: 3.5,
+        latency_ns: [16.2, 141.6, 0.0, 347.0],
         simds: 0,
     },
     Gpu {
@@ -273,6 +285,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 4800.0,
         l2_gbs: 9800.0,
         pj_per_bit: 3.5,
+        latency_ns: [16.2, 141.6, 0.0, 347.0],
         simds: 0,
     },
 ];
@@ -286,11 +299,11 @@ pub fn gpu(id: &str) -> Option<&'static Gpu> {
 /// release whose occupancy set `g`'s resident waves (`memory --compilers`), where one did.
 pub fn table(gpus: &[&Gpu], release: impl Fn(&Gpu) -> Option<String>) -> String {
     let mut md = String::from(
-        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit | L1/unit KiB, line, ways, stores | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|\n",
+        "## The GPU models (sources and assumptions: `docs/gpu-memory.md`)\n\n| GPU | units | wave | resident waves/unit | L1/unit KiB, line, ways, stores | L2 KiB, line, ways | LLC KiB, line, ways | L2 GB/s | DRAM | GB/s | pJ/bit | latency ns L1, L2, LLC, DRAM |\n|---|---:|---:|---:|---|---|---|---:|---|---:|---:|---|\n",
     );
     for g in gpus {
         md += &format!(
-            "| {} ({}) | {} {} | {} | {} | {}, {} B, {}, {} | {}, {} B, {} | {} | {:.0} | {} | {:.0} | {} |\n",
+            "| {} ({}) | {} {} | {} | {} | {}, {} B, {}, {} | {}, {} B, {} | {} | {:.0} | {} | {:.0} | {} | {} |\n",
             g.id,
             g.name,
             g.units,
@@ -311,7 +324,8 @@ pub fn table(gpus: &[&Gpu], release: impl Fn(&Gpu) -> Option<String>) -> String 
             g.l2_gbs,
             g.dram,
             g.dram_gbs,
-            g.pj_per_bit
+            g.pj_per_bit,
+            g.latency_ns.iter().filter(|&&l| l > 0.0).map(|l| format!("{l}")).collect::<Vec<_>>().join(", ")
         );
     }
     md + "\n"

@@ -582,6 +582,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                     // Millions of rays per second `gbs` GB/s allows at `bytes` per ray.
                     let bound =
                         |gbs: f64, bytes: f64| if bytes > 0.0 { gbs * 1e9 / bytes / 1e6 } else { f64::INFINITY };
+                    let (step_ns, latency_bound) = latency(g, res.waves, ws, &h, n);
                     MemRow {
                         gpu: g.id.into(),
                         scene: scene.clone(),
@@ -620,6 +621,8 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                         dram_nj: dram * 8.0 * g.pj_per_bit / 1000.0,
                         dram_bound_mrays: bound(g.dram_gbs, dram),
                         l2_bound_mrays: Some(bound(g.l2_gbs, l2_bytes)),
+                        step_ns,
+                        latency_bound_mrays: Some(latency_bound),
                         issue_bound_mrays: cfg
                             .estimates
                             .iter()
@@ -644,6 +647,20 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
     rows.sort_by_key(|r| cfg.gpus.iter().position(|g| g.id == r.gpu));
     crate::report::memory::set_ratios(&mut rows);
     Ok(rows)
+}
+
+/// The latency side of the roofline, from a run of the cache model (`h`, [`cache::simulate`]) of
+/// `waves` on `g` with `resident` waves per unit: the mean latency of a reading step (ns), and
+/// the millions of rays per second (of `rays` in all) the latency allows — every place on the
+/// GPU (units × resident waves, at most one per wave) runs its waves one after another, a wave
+/// as long as the sum of its steps' latencies, so the waves need at least their summed
+/// latencies ÷ the places (Little's law: what is in flight ÷ how long each takes).
+pub fn latency(g: &gpus::Gpu, resident: usize, waves: &[WaveTrace], h: &cache::Hierarchy, rays: usize) -> (f64, f64) {
+    let step = if h.read_steps > 0 { h.wait_ns / h.read_steps as f64 } else { 0.0 };
+    let running = waves.iter().filter(|w| !w.steps.is_empty()).count();
+    let places = (g.units as usize * resident.max(1)).min(running);
+    let bound = if h.wait_ns > 0.0 { rays as f64 * places as f64 / h.wait_ns * 1e3 } else { f64::INFINITY };
+    (step, bound)
 }
 
 /// The default variants: every layout in every math at each of `branchings`, single rays.

@@ -78,8 +78,18 @@ pub struct MemRow {
     /// ray requested from the L2 (`None` in files written before it was modelled).
     #[serde(default)]
     pub l2_bound_mrays: Option<f64>,
-    /// The roofline: the lowest of the issue, L2 and DRAM bounds, which one binds ("issue",
-    /// "L2", "DRAM"), ÷ f32's bound.
+    /// Mean latency of a wave's reading step, ns: the deepest level its lines came from
+    /// (`cache::simulate`; 0 in files written before latency was modelled).
+    #[serde(default)]
+    pub step_ns: f64,
+    /// Rays per second the latency allows with the waves resident (millions): the rays ÷ the
+    /// time the waves need when every place on the GPU (units × resident waves) runs its waves
+    /// one after another, each wave as long as the sum of its steps' latencies (Little's law;
+    /// `None` in files written before latency was modelled).
+    #[serde(default)]
+    pub latency_bound_mrays: Option<f64>,
+    /// The roofline: the lowest of the issue, latency, L2 and DRAM bounds, which one binds
+    /// ("issue", "latency", "L2", "DRAM"), ÷ f32's bound.
     #[serde(default)]
     pub bound_mrays: f64,
     #[serde(default)]
@@ -92,12 +102,14 @@ pub struct MemRow {
 
 super::key::keyed_row!(MemRow, |r| place: [&r.gpu, "", &r.scene, &r.rays], float_controls: "", packet_impl: None);
 
-/// Sets each row's roofline (the lowest of its issue, L2 and DRAM bounds; on a tie DRAM, then
-/// L2) and its ratios to its f32 peer's: DRAM bytes, the nodes' DRAM bytes, the bound.
+/// Sets each row's roofline (the lowest of its issue, latency, L2 and DRAM bounds; on a tie
+/// DRAM, then L2, then latency) and its ratios to its f32 peer's: DRAM bytes, the nodes' DRAM
+/// bytes, the bound.
 pub fn set_ratios(rows: &mut [MemRow]) {
     for r in rows.iter_mut() {
         let mut bound = (r.dram_bound_mrays, "DRAM");
-        for (b, name) in [(r.l2_bound_mrays, "L2"), (r.issue_bound_mrays, "issue")] {
+        for (b, name) in [(r.l2_bound_mrays, "L2"), (r.latency_bound_mrays, "latency"), (r.issue_bound_mrays, "issue")]
+        {
             if let Some(b) = b.filter(|&b| b < bound.0) {
                 bound = (b, name);
             }
@@ -191,6 +203,10 @@ struct Record<'a> {
     dram_node_vs_f32: Option<f64>,
     #[serde(serialize_with = "opt_fixed::<1, _>")]
     l2_bound_mrays: Option<f64>,
+    #[serde(serialize_with = "fixed::<1, _>")]
+    step_ns: f64,
+    #[serde(serialize_with = "opt_fixed::<1, _>")]
+    latency_bound_mrays: Option<f64>,
     #[serde(serialize_with = "opt_fixed::<1, _>")]
     issue_bound_mrays: Option<f64>,
     #[serde(serialize_with = "fixed::<1, _>")]
@@ -242,6 +258,8 @@ pub fn csv(rows: &[MemRow]) -> anyhow::Result<Vec<u8>> {
         dram_vs_f32: r.dram_vs_f32.map(|v| (v * 1e4).round() / 1e4),
         dram_node_vs_f32: r.dram_node_vs_f32.map(|v| (v * 1e4).round() / 1e4),
         l2_bound_mrays: r.l2_bound_mrays,
+        step_ns: r.step_ns,
+        latency_bound_mrays: r.latency_bound_mrays,
         issue_bound_mrays: r.issue_bound_mrays,
         bound_mrays: r.bound_mrays,
         binds: &r.binds,
@@ -250,7 +268,7 @@ pub fn csv(rows: &[MemRow]) -> anyhow::Result<Vec<u8>> {
 }
 
 /// What can bind a roofline, as `binds` names it.
-const BINDS: [&str; 3] = ["issue", "L2", "DRAM"];
+const BINDS: [&str; 4] = ["issue", "latency", "L2", "DRAM"];
 
 /// Coherent (primary) or incoherent (every other ray kind) rays.
 fn coherence(rays: &str) -> &'static str {
@@ -267,16 +285,16 @@ fn coherence(rays: &str) -> &'static str {
 /// `estimate` gave them, else DRAM alone).
 pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
     use std::collections::BTreeMap;
-    // (gpu, coherence) → kernel label → (sum of bound ratios, of DRAM ratios, [issue, L2, DRAM]
-    // bound counts, n)
-    type Acc = BTreeMap<String, (f64, f64, [usize; 3], usize)>;
+    // (gpu, coherence) → kernel label → (sum of bound ratios, of DRAM ratios, [issue, latency,
+    // L2, DRAM] bound counts, n)
+    type Acc = BTreeMap<String, (f64, f64, [usize; 4], usize)>;
     let mut acc: BTreeMap<(String, &str), Acc> = BTreeMap::new();
     let conservative = |r: &MemRow| r.what.builtin().is_some_and(|k| k.variant.layout.info().conservative);
     for r in rows.iter().filter(|r| r.ok() && conservative(r)) {
         let (Some(q), Some(d)) = (r.bound_vs_f32, r.dram_vs_f32) else { continue };
         let label = format!("{} {} B={} P={}", r.layout, r.math, r.branching, r.packet);
         let e =
-            acc.entry((r.gpu.clone(), coherence(&r.rays))).or_default().entry(label).or_insert((0.0, 0.0, [0; 3], 0));
+            acc.entry((r.gpu.clone(), coherence(&r.rays))).or_default().entry(label).or_insert((0.0, 0.0, [0; 4], 0));
         e.0 += q;
         e.1 += d;
         if let Some(i) = BINDS.iter().position(|b| *b == r.binds) {
@@ -299,9 +317,11 @@ pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
             };
             let binds =
                 if modelled { binds } else { format!("{binds} (memory alone: no cycle model joined for this GPU)") };
-            // A file written before the L2 bound was modelled.
+            // A file written before the L2 or the latency bound was modelled.
             let no_l2 = rows.iter().any(|r| r.gpu == gpu && r.l2_bound_mrays.is_none());
             let binds = if no_l2 { format!("{binds} (no L2 bound in this file)") } else { binds };
+            let no_lat = rows.iter().any(|r| r.gpu == gpu && r.latency_bound_mrays.is_none());
+            let binds = if no_lat { format!("{binds} (no latency bound in this file)") } else { binds };
             // Resident waves from a compiler's occupancy (`memory --compilers`): name its release.
             let from = rows.iter().filter(|r| r.gpu == gpu).find_map(|r| resident_release(&r.resident_from));
             let binds = match from {
@@ -324,7 +344,7 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
     let mut md = String::from("# The memory side of a ray\n\n## Verdict per GPU (the model's)\n\n");
     md += "Among the conservative layouts' kernels, the highest roofline bound as a ratio to f32's at the same \
            B and P (mean over scenes and ray sets): the lowest of the rays/s DRAM bandwidth allows, the rays/s the \
-           L2's bandwidth allows and, where `memory --estimate` joined AMD's cycle estimate, the rays/s issue \
+           L2's bandwidth allows, the rays/s the latency allows with the waves resident and, where `memory --estimate` joined AMD's cycle estimate, the rays/s issue \
            allows.\n\n";
     for v in verdicts(rows) {
         md += &format!("- {v}\n");
@@ -352,12 +372,12 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
             "\n## {g}, {scene} ({} triangles), {kind} rays ({}, wave {})\n\n",
             rs[0].triangles, rs[0].ray_count, rs[0].wave
         );
-        md += "| kernel | node B | tri B | id B | enter B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | issue-bound | binds | bound ÷ f32 | resident waves |\n";
-        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
+        md += "| kernel | node B | tri B | id B | enter B | lines/ray 64 B alone | wave | L1 B | L1 hit | L2 B | L2 hit | LLC B | LLC hit | DRAM B | DRAM node B | DRAM stack B | ÷ f32 | nodes ÷ f32 | DRAM nJ | Mrays/s DRAM-bound | L2-bound | step ns | latency-bound | issue-bound | binds | bound ÷ f32 | resident waves |\n";
+        md += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
         for r in rs {
             let q = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.2}"));
             md += &format!(
-                "| {} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {} | {} | {} | {} |\n",
+                "| {} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.3} | {:.0} | {:.0} | {:.0} | {} | {} | {:.2} | {:.0} | {} | {:.0} | {} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.node_bytes,
                 r.vert_bytes,
@@ -379,6 +399,8 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
                 r.dram_nj,
                 r.dram_bound_mrays,
                 r.l2_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
+                r.step_ns,
+                r.latency_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
                 r.issue_bound_mrays.map_or("–".to_string(), |v| format!("{v:.0}")),
                 r.binds,
                 q(r.bound_vs_f32),
