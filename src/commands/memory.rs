@@ -35,7 +35,8 @@ pub struct MemoryArgs {
     /// The compilers release whose occupancy sets each kernel's resident waves per unit in the
     /// cache model: `pinned`, `newest` or a compilers folder (as `isa --compilers`). Every
     /// single-ray kernel is built first on the compilers of navi31, navi21, vega10 (RADV), a740
-    /// (turnip) and ga102 (NVK), those asked; the other models keep their assumed figure.
+    /// (turnip), g610 (panfrost: its thread class) and ga102 (NVK), those asked and that
+    /// release has; the other models keep their assumed figure.
     /// Default: every model's assumed figure.
     #[arg(long)]
     pub compilers: Option<String>,
@@ -175,8 +176,17 @@ fn occupancy(
         gpus::GPUS.iter().filter(|g| g.compiler.is_some()).map(|g| g.id).collect::<Vec<_>>().join(", ")
     );
     let exe = std::env::current_exe()?;
-    let targets = isa::release_targets(&names, &exe, false, Some(compilers), false)
+    // A model the release has no compiler for is left out (said): its GPU keeps the assumed
+    // figure (Debian's newest Mesa builds no panvk for Mali).
+    let targets = isa::release_targets(&names, &exe, false, Some(compilers), true)
         .map_err(|e| anyhow::anyhow!("--compilers {compilers}: {e:#}"))?;
+    let names: Vec<String> = targets
+        .iter()
+        .filter_map(|t| match t {
+            isa::Target::Family(n, _) | isa::Target::Model(n, _) => Some(n.clone()),
+            isa::Target::Device(_) => None,
+        })
+        .collect();
     let matrix = isa::Matrix::Singles;
     let cfg = isa::Config {
         targets,

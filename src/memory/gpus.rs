@@ -20,8 +20,9 @@ pub struct Gpu {
     /// The `isa` family or model whose compiler builds this GPU's kernels (`memory
     /// --compilers`: its occupancy, in waves per unit — AMD's waves per SIMD × [`Gpu::simds`],
     /// Adreno's waves per core, NVIDIA's warps per SM — sets each kernel's resident waves).
-    /// `None` where no compiler here reports a wave count: Mali's shaderdb gives a thread class
-    /// (full or half), Intel's driver no occupancy, and no Mesa shim builds for Hopper.
+    /// Mali's thread class (full or half of [`VALHALL_WARPS_PER_CORE`]). `None` where no
+    /// compiler here reports one: Intel's driver gives no occupancy, no Mesa shim builds for
+    /// Hopper.
     pub compiler: Option<&'static str>,
     pub l1_kib: u64,
     pub l1_line: u64,
@@ -51,6 +52,11 @@ pub struct Gpu {
     /// per RDNA CU, 4 SIMD16 per GCN CU); 0 where no cycle model exists.
     pub simds: u32,
 }
+
+/// Warps resident per Mali Valhall shader core at full occupancy (at most 32 registers a
+/// thread; more than 32 halve it: Mesa's shaderdb `threads` 2 or 1). The Arm driver's
+/// `shaderWarpsPerCore` on Mali-G610 and G710 (`docs/gpu-memory.md`, "What the model adds").
+pub const VALHALL_WARPS_PER_CORE: usize = 64;
 
 /// Every modelled GPU.
 pub static GPUS: &[Gpu] = &[
@@ -139,8 +145,8 @@ pub static GPUS: &[Gpu] = &[
         unit: "shader core",
         clock_mhz: 1000,
         wave: 16,
-        resident: 16,
-        compiler: None,
+        resident: 32,
+        compiler: Some("g610"),
         l1_kib: 16,
         l1_line: 64,
         l1_ways: 4,

@@ -482,8 +482,9 @@ pub struct Resident {
 
 /// The resident waves per unit of variant `v` on GPU `g`: the occupancy `g`'s compiler gave
 /// the kernel in `rows` (`isa`'s, [`Config::isa_rows`]) in waves per unit — AMD's waves per
-/// SIMD × the CU's SIMDs ([`gpus::Gpu::simds`]), Adreno's waves per core, NVIDIA's warps per SM
-/// — where it built it and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]),
+/// SIMD × the CU's SIMDs ([`gpus::Gpu::simds`]), Adreno's waves per core, NVIDIA's warps per SM,
+/// Mali's thread class (2: the core's [`gpus::VALHALL_WARPS_PER_CORE`], 1: half of them) — where
+/// it built it and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]),
 /// saying why where `rows` were given.
 pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::report::isa::IsaRow]) -> Resident {
     let assumed = |why: &str| Resident { waves: g.resident, from: format!("assumed{why}") };
@@ -507,19 +508,20 @@ pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::repor
     let Some(o) = r.occupancy.filter(|&o| o >= 1.0) else {
         return assumed(&format!(" ({target}: no occupancy reported)"));
     };
-    let per_unit = match r.occupancy_unit.as_str() {
-        "waves/SIMD" if g.simds > 0 => g.simds as usize,
-        "waves/core" | "warps/SM" => 1,
+    let n = o.round() as usize;
+    let (waves, how) = match r.occupancy_unit.as_str() {
+        "waves/SIMD" if g.simds > 0 => (n * g.simds as usize, format!(" × {} SIMDs", g.simds)),
+        "waves/core" | "warps/SM" => (n, String::new()),
+        // Mali's shaderdb thread class (2: at most 32 registers, full occupancy; 1: half).
+        "threads" if g.id == "g610" && n <= 2 => {
+            (n * gpus::VALHALL_WARPS_PER_CORE / 2, format!(" (of 2: {} warps/core at 2)", gpus::VALHALL_WARPS_PER_CORE))
+        }
         u => return assumed(&format!(" ({target}: occupancy in {u}, not waves per {})", g.unit)),
     };
     // A device without float controls builds the kernel without them (`_fcoff`): its
     // occupancy stands for the variant's, said.
     let build = if r.float_controls != v.fc.name() { format!(" ({})", r.kernel) } else { String::new() };
-    let simds = if per_unit > 1 { format!(" × {per_unit} SIMDs") } else { String::new() };
-    Resident {
-        waves: o.round() as usize * per_unit,
-        from: format!("{}: {o} {}{simds}{build}", r.driver, r.occupancy_unit),
-    }
+    Resident { waves, from: format!("{}: {o} {}{how}{build}", r.driver, r.occupancy_unit) }
 }
 
 /// Every variant of `cfg` on every scene and ray set, each on every GPU model: its rows, with
@@ -757,11 +759,17 @@ mod tests {
         assert_eq!(resident(gpu("vega10"), &v, &rows).waves, 12);
         assert_eq!(resident(gpu("a740"), &v, &rows).waves, 6);
         assert_eq!(resident(gpu("ga102"), &v, &rows).waves, 16);
-        // Another kernel (B = 8) was not built; Mali has no compiler that counts its waves; a
-        // failed build, a missing occupancy or one in another unit falls back too.
+        // Mali: the thread class, 1 (more than 32 registers) half the core's 64 warps, 2 all.
+        let mali = |c: f64| resident(gpu("g610"), &v, &[row("g610", Some(c), "threads")]);
+        assert_eq!((mali(1.0).waves, mali(2.0).waves), (32, 64));
+        assert_eq!(mali(1.0).from, "drv Mesa 26.2.6-1: 1 threads (of 2: 64 warps/core at 2)");
+        assert!(mali(3.0).from.starts_with("assumed (g610: occupancy in threads"));
+        // Another kernel (B = 8) was not built; Hopper has no compiler here; a failed build, a
+        // missing occupancy or one in another unit falls back too.
         let b8 = crate::variant::Variant { branching: 8, ..v };
         assert_eq!(resident(gpu("a740"), &b8, &rows).from, "assumed (a740: not built)");
-        assert!(resident(gpu("g610"), &v, &rows).from.starts_with("assumed (no compiler"));
+        assert_eq!(resident(gpu("g610"), &v, &rows).from, "assumed (g610: not built)");
+        assert!(resident(gpu("h100"), &v, &rows).from.starts_with("assumed (no compiler"));
         let failed = IsaRow { status: crate::base::Status::Failed("no".into()), ..rows[3].clone() };
         assert!(resident(gpu("a740"), &v, &[failed]).from.starts_with("assumed (a740: "));
         assert_eq!(resident(gpu("a740"), &v, &[row("a740", None, "")]).from, "assumed (a740: no occupancy reported)");
