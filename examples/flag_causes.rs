@@ -47,7 +47,11 @@ fn main() -> anyhow::Result<()> {
                 for (p, v) in verts.iter().enumerate() {
                     best.test(&r, v, p as i32);
                 }
-                anyhow::ensure!(best.flagged(), "{}: a ray the traversal flags and the brute force does not", scene.name);
+                anyhow::ensure!(
+                    best.flagged(),
+                    "{}: a ray the traversal flags and the brute force does not",
+                    scene.name
+                );
                 let v = &verts[best.undecided.1 as usize];
                 let c = tri::certify(&r, v);
                 let (lo, hi) = c.bounds();
