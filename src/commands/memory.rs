@@ -35,8 +35,9 @@ pub struct MemoryArgs {
     /// The compilers release whose occupancy sets each kernel's resident waves per unit in the
     /// cache model: `pinned`, `newest` or a compilers folder (as `isa --compilers`). Every
     /// single-ray kernel is built first on the compilers of navi31, navi21, vega10 (RADV), a740
-    /// (turnip), g610 (panfrost: its thread class) and ga102 (NVK), those asked and that
-    /// release has; the other models keep their assumed figure.
+    /// (turnip), g610 (panfrost: its thread class) and ga102 (NVK; h100 and h200 take its
+    /// registers with Hopper's warp limit), those asked and that release has; lnl keeps its
+    /// assumed figure.
     /// Default: every model's assumed figure.
     #[arg(long)]
     pub compilers: Option<String>,
@@ -167,7 +168,10 @@ fn occupancy(
     compilers: &str,
 ) -> anyhow::Result<Vec<crate::report::isa::IsaRow>> {
     use crate::isa;
-    let names: Vec<String> = gpus.iter().filter_map(|g| g.compiler.map(str::to_string)).collect();
+    // Each compiler once (Hopper borrows GA102's).
+    let mut names: Vec<String> = gpus.iter().filter_map(|g| g.compiler.map(str::to_string)).collect();
+    names.sort();
+    names.dedup();
     anyhow::ensure!(
         !names.is_empty(),
         "--compilers {compilers}: none of the GPU models asked ({}) has a compiler here that reports its \

@@ -20,9 +20,10 @@ pub struct Gpu {
     /// The `isa` family or model whose compiler builds this GPU's kernels (`memory
     /// --compilers`: its occupancy, in waves per unit — AMD's waves per SIMD × [`Gpu::simds`],
     /// Adreno's waves per core, NVIDIA's warps per SM — sets each kernel's resident waves).
-    /// Mali's thread class (full or half of [`VALHALL_WARPS_PER_CORE`]). `None` where no
-    /// compiler here reports one: Intel's driver gives no occupancy, no Mesa shim builds for
-    /// Hopper.
+    /// Mali's thread class (full or half of [`VALHALL_WARPS_PER_CORE`]). Hopper borrows GA102's
+    /// build (no Mesa shim builds for Hopper): its registers per thread give the warps per SM by
+    /// CUDA's rule with Hopper's 64-warp limit, the register file (64 K per SM) being GA102's.
+    /// `None` where no compiler here reports one: Intel's driver gives no occupancy.
     pub compiler: Option<&'static str>,
     pub l1_kib: u64,
     pub l1_line: u64,
@@ -250,7 +251,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1980,
         wave: 32,
         resident: 16,
-        compiler: None,
+        compiler: Some("ga102"),
         l1_kib: 256,
         l1_line: 128,
         l1_ways: 512,
@@ -276,7 +277,7 @@ pub static GPUS: &[Gpu] = &[
         clock_mhz: 1980,
         wave: 32,
         resident: 16,
-        compiler: None,
+        compiler: Some("ga102"),
         l1_kib: 256,
         l1_line: 128,
         l1_ways: 512,
@@ -316,7 +317,8 @@ pub fn table(gpus: &[&Gpu], release: impl Fn(&Gpu) -> Option<String>) -> String 
             g.unit,
             g.wave,
             match (release(g), g.compiler) {
-                (Some(c), Some(t)) => format!("per kernel: {t}'s occupancy on {c}"),
+                (Some(c), Some(t)) if t == g.id => format!("per kernel: {t}'s occupancy on {c}"),
+                (Some(c), Some(t)) => format!("per kernel: from {t}'s registers on {c}"),
                 _ => format!("{} (assumed)", g.resident),
             },
             g.l1_kib,

@@ -483,8 +483,9 @@ pub struct Resident {
 /// The resident waves per unit of variant `v` on GPU `g`: the occupancy `g`'s compiler gave
 /// the kernel in `rows` (`isa`'s, [`Config::isa_rows`]) in waves per unit — AMD's waves per
 /// SIMD × the CU's SIMDs ([`gpus::Gpu::simds`]), Adreno's waves per core, NVIDIA's warps per SM,
-/// Mali's thread class (2: the core's [`gpus::VALHALL_WARPS_PER_CORE`], 1: half of them) — where
-/// it built it and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]),
+/// Mali's thread class (2: the core's [`gpus::VALHALL_WARPS_PER_CORE`], 1: half of them), and
+/// for Hopper the warps GA102's build's registers allow with Hopper's limits — where it built it
+/// and gave one; else the model's assumed figure ([`gpus::Gpu::resident`]),
 /// saying why where `rows` were given.
 pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::report::isa::IsaRow]) -> Resident {
     let assumed = |why: &str| Resident { waves: g.resident, from: format!("assumed{why}") };
@@ -511,7 +512,15 @@ pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::repor
     let n = o.round() as usize;
     let (waves, how) = match r.occupancy_unit.as_str() {
         "waves/SIMD" if g.simds > 0 => (n * g.simds as usize, format!(" × {} SIMDs", g.simds)),
-        "waves/core" | "warps/SM" => (n, String::new()),
+        "waves/core" | "warps/SM" if target == g.id => (n, String::new()),
+        // Hopper on GA102's build: the same 64 K registers per SM, up to 64 warps (GA102: 48).
+        "warps/SM" => match r.registers {
+            Some(gprs) => {
+                let w = crate::vendor::nvidia::warps(gprs, 64.0) as usize;
+                (w, format!(" on {target}; {gprs} registers: {w} warps/SM with {}'s 64-warp limit", g.id))
+            }
+            None => return assumed(&format!(" ({target}'s build gave no registers)")),
+        },
         // Mali's shaderdb thread class (2: at most 32 registers, full occupancy; 1: half).
         "threads" if g.id == "g610" && n <= 2 => {
             (n * gpus::VALHALL_WARPS_PER_CORE / 2, format!(" (of 2: {} warps/core at 2)", gpus::VALHALL_WARPS_PER_CORE))
@@ -764,12 +773,21 @@ mod tests {
         assert_eq!((mali(1.0).waves, mali(2.0).waves), (32, 64));
         assert_eq!(mali(1.0).from, "drv Mesa 26.2.6-1: 1 threads (of 2: 64 warps/core at 2)");
         assert!(mali(3.0).from.starts_with("assumed (g610: occupancy in threads"));
-        // Another kernel (B = 8) was not built; Hopper has no compiler here; a failed build, a
-        // missing occupancy or one in another unit falls back too.
+        // Hopper on GA102's build: its registers by CUDA's rule, up to 64 warps (GA102's 48).
+        let nv = |gprs: f64| IsaRow { registers: Some(gprs), ..row("ga102", Some(16.0), "warps/SM") };
+        assert_eq!(resident(gpu("h100"), &v, &[nv(128.0)]).waves, 16);
+        assert_eq!(resident(gpu("h200"), &v, &[nv(40.0)]).waves, 51);
+        assert_eq!(
+            resident(gpu("h100"), &v, &[nv(107.0)]).from,
+            "drv Mesa 26.2.6-1: 16 warps/SM on ga102; 107 registers: 18 warps/SM with h100's 64-warp limit"
+        );
+        assert!(resident(gpu("h100"), &v, &rows).from.starts_with("assumed (ga102's build gave no registers"));
+        // Another kernel (B = 8) was not built; Intel has no compiler here that counts; a failed
+        // build, a missing occupancy or one in another unit falls back too.
         let b8 = crate::variant::Variant { branching: 8, ..v };
         assert_eq!(resident(gpu("a740"), &b8, &rows).from, "assumed (a740: not built)");
         assert_eq!(resident(gpu("g610"), &v, &rows).from, "assumed (g610: not built)");
-        assert!(resident(gpu("h100"), &v, &rows).from.starts_with("assumed (no compiler"));
+        assert!(resident(gpu("lnl"), &v, &rows).from.starts_with("assumed (no compiler"));
         let failed = IsaRow { status: crate::base::Status::Failed("no".into()), ..rows[3].clone() };
         assert!(resident(gpu("a740"), &v, &[failed]).from.starts_with("assumed (a740: "));
         assert_eq!(resident(gpu("a740"), &v, &[row("a740", None, "")]).from, "assumed (a740: no occupancy reported)");

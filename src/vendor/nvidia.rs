@@ -46,8 +46,9 @@ fn neutral(s: &Input) -> Neutral {
 
 /// Warps an NVIDIA SM holds at `gprs` registers per thread: 64 K registers per SM, allocated
 /// per warp in units of 256 (8 per thread), at most `max_warps` (32 on Turing, 48 on Ampere's
-/// GA10x and Ada). CUDA's occupancy rule, so an estimate: the driver reports only GPRs.
-fn warps(gprs: f64, max_warps: f64) -> f64 {
+/// GA10x and Ada, 64 on Hopper). CUDA's occupancy rule, so an estimate: the driver reports
+/// only GPRs.
+pub fn warps(gprs: f64, max_warps: f64) -> f64 {
     let per_thread = (gprs / 8.0).ceil().max(1.0) * 8.0;
     (65536.0 / (per_thread * 32.0)).floor().min(max_warps)
 }
