@@ -265,9 +265,9 @@ impl Naive {
 /// wave's private offsets go to its place's region: place `s` at `private + s × region`; a
 /// write goes to a write-back L1, else to the L2 (passing a write-through L1); dirty lines go
 /// down when pushed out.
-/// The counts of [`naive_hierarchy`], then its reading steps and their summed latency (each
-/// step as long as its deepest level's latency).
-type NaiveCounts = ([u64; 8], u64, f64);
+/// The counts of [`naive_hierarchy`], then its reading steps, their summed latency (each step as
+/// long as its deepest level's latency) and the longest wave's.
+type NaiveCounts = ([u64; 8], u64, f64, f64);
 
 fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: u64, region: u64) -> NaiveCounts {
     struct Levels {
@@ -353,6 +353,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
     let mut slot: Vec<Option<(usize, usize)>> = (0..slots).map(|s| queue.get(s).map(|_| (s, 0))).collect();
     let mut next = slots.min(queue.len());
     let (mut read_steps, mut wait) = (0u64, 0f64);
+    let mut wave_wait = vec![0f64; queue.len()];
     loop {
         let mut any = false;
         for s in 0..slots {
@@ -398,6 +399,7 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
             if reads {
                 read_steps += 1;
                 wait += g.latency_ns[deepest];
+                wave_wait[w] += g.latency_ns[deepest];
             }
             slot[s] = if i + 1 < queue[w].steps.len() {
                 Some((w, i + 1))
@@ -414,7 +416,8 @@ fn naive_hierarchy(g: &halftrace::memory::gpus::Gpu, ws: &[WaveTrace], private: 
     }
     let (la, lh) = (l1.iter().map(|c| c.accesses).sum(), l1.iter().map(|c| c.hits).sum());
     let (ca, ch) = lv.llc.as_ref().map_or((0, 0), |c| (c.accesses, c.hits));
-    ([la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram, lv.written], read_steps, wait)
+    let longest = wave_wait.into_iter().fold(0.0, f64::max);
+    ([la, lh, lv.l2.accesses, lv.l2.hits, ca, ch, lv.dram, lv.written], read_steps, wait, longest)
 }
 
 /// Equal hit and miss counts at every level, and equal DRAM bytes, on a real trace, for every
@@ -446,9 +449,12 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
                 latency_ns: [1.0, 1e3, 1e6, 1e9],
                 ..g.clone()
             };
-            // Both ways an L1 can take the stacks' stores.
-            for wb in [false, true] {
-                let small = halftrace::memory::gpus::Gpu { l1_write_back: wb, ..small.clone() };
+            // Both ways an L1 can take the stacks' stores; with the GPU's lines, and (write-through)
+            // with L2 lines half and twice the L1's, so that an L1 miss spans several L2 lines and
+            // an L2 line several L1 lines.
+            let (l1, l2) = (g.l1_line, g.l2_line);
+            for (wb, l1_line, l2_line) in [(false, l1, l2), (true, l1, l2), (false, l1, l1 / 2), (false, l1 / 2, l1)] {
+                let small = halftrace::memory::gpus::Gpu { l1_write_back: wb, l1_line, l2_line, ..small.clone() };
                 let ws = waves(&reads, rays.len(), 1, g.wave, &buf);
                 let h = simulate(&small, &ws, small.resident, &buf);
                 let got = [
@@ -463,11 +469,11 @@ fn the_cache_model_agrees_with_an_independent_implementation() {
                 ];
                 let region = buf.private_region(g.wave);
                 let stack = buf.stack.is_some();
-                let (counts, read_steps, wait) = naive_hierarchy(&small, &ws, buf.private_base(), region);
+                let naive = naive_hierarchy(&small, &ws, buf.private_base(), region);
                 assert_eq!(
-                    (got, h.read_steps, h.wait_ns),
-                    (counts, read_steps, wait),
-                    "{} on {kind} rays, L1 write-back {wb}",
+                    (got, h.read_steps, h.wait_ns, h.longest_wave_ns),
+                    naive,
+                    "{} on {kind} rays, L1 write-back {wb}, lines {l1_line}/{l2_line}",
                     g.id
                 );
                 assert!(got[1] < got[0] && got[6] > 0, "{}: a trace that both hits and misses", g.id);

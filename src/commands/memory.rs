@@ -168,10 +168,13 @@ fn occupancy(
     compilers: &str,
 ) -> anyhow::Result<Vec<crate::report::isa::IsaRow>> {
     use crate::isa;
-    // Each compiler once (Hopper borrows GA102's).
-    let mut names: Vec<String> = gpus.iter().filter_map(|g| g.compiler.map(str::to_string)).collect();
-    names.sort();
-    names.dedup();
+    // Each compiler once (Hopper borrows GA102's), in the order the GPUs were asked.
+    let mut names: Vec<String> = Vec::new();
+    for n in gpus.iter().filter_map(|g| g.compiler) {
+        if !names.iter().any(|m| m == n) {
+            names.push(n.to_string());
+        }
+    }
     anyhow::ensure!(
         !names.is_empty(),
         "--compilers {compilers}: none of the GPU models asked ({}) has a compiler here that reports its \
@@ -179,18 +182,28 @@ fn occupancy(
         gpus.iter().map(|g| g.id).collect::<Vec<_>>().join(", "),
         gpus::GPUS.iter().filter(|g| g.compiler.is_some()).map(|g| g.id).collect::<Vec<_>>().join(", ")
     );
+    // A model the release has no compiler for (Debian's newest Mesa has no panvk) is left out,
+    // said: its GPU keeps the assumed figure. Compilers not installed at all are refused.
+    if names.iter().any(|n| crate::vendor::find_model(n).is_some()) {
+        let choice = Some(compilers).filter(|c| *c != "pinned");
+        let dir = isa::shim::compilers_for(choice).map_err(|e| anyhow::anyhow!("--compilers {compilers}: {e}"))?;
+        let (kept, lacking): (Vec<String>, Vec<String>) = names.into_iter().partition(|n| {
+            crate::vendor::find_model(n).is_none() || isa::shim::check_models(&dir, std::slice::from_ref(n)).is_ok()
+        });
+        if !lacking.is_empty() {
+            eprintln!(
+                "note: --compilers {compilers} has no compiler for {}: their GPUs keep the assumed resident waves",
+                lacking.join(", ")
+            );
+        }
+        names = kept;
+    }
+    if names.is_empty() {
+        return Ok(Vec::new());
+    }
     let exe = std::env::current_exe()?;
-    // A model the release has no compiler for is left out (said): its GPU keeps the assumed
-    // figure (Debian's newest Mesa builds no panvk for Mali).
-    let targets = isa::release_targets(&names, &exe, false, Some(compilers), true)
+    let targets = isa::release_targets(&names, &exe, false, Some(compilers), false)
         .map_err(|e| anyhow::anyhow!("--compilers {compilers}: {e:#}"))?;
-    let names: Vec<String> = targets
-        .iter()
-        .filter_map(|t| match t {
-            isa::Target::Family(n, _) | isa::Target::Model(n, _) => Some(n.clone()),
-            isa::Target::Device(_) => None,
-        })
-        .collect();
     let matrix = isa::Matrix::Singles;
     let cfg = isa::Config {
         targets,

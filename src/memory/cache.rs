@@ -132,10 +132,13 @@ pub struct Hierarchy {
     pub dram_stack_bytes: u64,
     /// Of `dram_bytes`, those written back (dirty lines evicted from the last level).
     pub dram_write_bytes: u64,
-    /// [`simulate`]: the wave steps that read, and the sum of their latencies (ns): each step
-    /// waits for the deepest level any of its lines came from ([`Gpu::latency_ns`]).
+    /// [`simulate`]: the wave steps that read (each waits for the deepest level any of its
+    /// lines came from, [`Gpu::latency_ns`]).
     pub read_steps: u64,
+    /// [`simulate`]: the sum of those steps' latencies over every wave, ns.
     pub wait_ns: f64,
+    /// [`simulate`]: the longest wave's sum of its steps' latencies, ns.
+    pub longest_wave_ns: f64,
     /// Bytes below this address are the node buffer's.
     nodes_end: u64,
     /// Bytes from this address on are the waves' private memory.
@@ -156,6 +159,7 @@ impl Hierarchy {
             dram_write_bytes: 0,
             read_steps: 0,
             wait_ns: 0.0,
+            longest_wave_ns: 0.0,
             nodes_end,
             private_base,
             l1_write_back: g.l1_write_back,
@@ -325,6 +329,7 @@ pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> H
     let mut running: Vec<Option<(usize, usize)>> = (0..slots).map(|s| (s < waves.len()).then_some((s, 0))).collect();
     let mut next = slots.min(waves.len());
     let mut lines = Vec::new();
+    let mut wave_ns = vec![0f64; waves.len()];
     while running.iter().any(Option::is_some) {
         for (s, r) in running.iter_mut().enumerate() {
             let Some((w, step)) = *r else { continue };
@@ -352,6 +357,7 @@ pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> H
                 if let Some(d) = deepest {
                     h.read_steps += 1;
                     h.wait_ns += g.latency_ns[d as usize];
+                    wave_ns[w] += g.latency_ns[d as usize];
                 }
             }
             *r = if step + 1 < waves[w].steps.len() {
@@ -364,6 +370,7 @@ pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> H
             };
         }
     }
+    h.longest_wave_ns = wave_ns.into_iter().fold(0.0, f64::max);
     h
 }
 
@@ -415,7 +422,7 @@ mod tests {
     }
 
     /// Each reading step waits for the deepest level its lines came from: DRAM, L1, L2 and
-    /// the last-level cache in turn on a one-unit GPU with direct-mapped caches, one step
+    /// the last-level cache in turn on a one-unit GPU with direct-mapped L1 and L2, one step
     /// reading two lines (one in L1, one from DRAM) waiting for DRAM.
     #[test]
     fn a_step_waits_for_its_slowest_line() {
@@ -436,9 +443,19 @@ mod tests {
         assert_eq!(h.wait_ns, 1000.0 + 1.0 + 1000.0 + 10.0 + 1000.0 + 100.0 + 1000.0);
         // One place (one unit, one wave): 32 rays in 4111 ns; more resident waves than waves
         // running add no place.
+        assert_eq!(h.longest_wave_ns, h.wait_ns);
         let (step, bound) = crate::memory::latency(&g, 1, &waves, &h, 32);
         assert_eq!(step, 4111.0 / 7.0);
         assert!((bound - 32.0 / 4111.0 * 1e3).abs() < 1e-9, "{bound}");
         assert_eq!(crate::memory::latency(&g, 8, &waves, &h, 32).1, bound);
+        // Two waves on two places: no faster than the longer one, whatever the mean.
+        let short = WaveTrace { steps: vec![vec![line(0)]], rays: 32 };
+        let two = [waves[0].clone(), short];
+        g.units = 2;
+        let h = simulate(&g, &two, 1, &b);
+        // (The short wave's line comes from the L2: the first wave brought it there.)
+        assert_eq!((h.wait_ns, h.longest_wave_ns), (4111.0 + 10.0, 4111.0));
+        let (_, bound) = crate::memory::latency(&g, 1, &two, &h, 64);
+        assert!((bound - 64.0 / 4111.0 * 1e3).abs() < 1e-9, "{bound}");
     }
 }

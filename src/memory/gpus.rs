@@ -240,7 +240,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 936.0,
         l2_gbs: 2604.0,
         pj_per_bit: 7.25,
-        latency_ns: [19.0, 140.0, 0.0, 314.0],
+        latency_ns: [19.0, 140.0, 0.0, 314.2],
         simds: 0,
     },
     Gpu {
@@ -266,7 +266,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 3350.0,
         l2_gbs: 9800.0,
         pj_per_bit: 3.5,
-        latency_ns: [16.2, 141.6, 0.0, 347.0],
+        latency_ns: [16.2, 141.6, 0.0, 347.5],
         simds: 0,
     },
     Gpu {
@@ -292,7 +292,7 @@ pub static GPUS: &[Gpu] = &[
         dram_gbs: 4800.0,
         l2_gbs: 9800.0,
         pj_per_bit: 3.5,
-        latency_ns: [16.2, 141.6, 0.0, 347.0],
+        latency_ns: [16.2, 141.6, 0.0, 347.5],
         simds: 0,
     },
 ];
@@ -333,7 +333,11 @@ pub fn table(gpus: &[&Gpu], release: impl Fn(&Gpu) -> Option<String>) -> String 
             g.dram,
             g.dram_gbs,
             g.pj_per_bit,
-            g.latency_ns.iter().filter(|&&l| l > 0.0).map(|l| format!("{l}")).collect::<Vec<_>>().join(", ")
+            g.latency_ns
+                .iter()
+                .map(|&l| if l > 0.0 { format!("{l}") } else { "–".into() })
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     md + "\n"

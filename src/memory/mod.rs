@@ -516,8 +516,9 @@ pub fn resident(g: &gpus::Gpu, v: &crate::variant::Variant, rows: &[crate::repor
         // Hopper on GA102's build: the same 64 K registers per SM, up to 64 warps (GA102: 48).
         "warps/SM" => match r.registers {
             Some(gprs) => {
-                let w = crate::vendor::nvidia::warps(gprs, 64.0) as usize;
-                (w, format!(" on {target}; {gprs} registers: {w} warps/SM with {}'s 64-warp limit", g.id))
+                let cap = crate::vendor::nvidia::HOPPER_MAX_WARPS;
+                let w = crate::vendor::nvidia::warps(gprs, cap) as usize;
+                (w, format!(" on {target}; {gprs} registers: {w} warps/SM with {}'s {cap}-warp limit", g.id))
             }
             None => return assumed(&format!(" ({target}'s build gave no registers)")),
         },
@@ -665,12 +666,14 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
 /// the millions of rays per second (of `rays` in all) the latency allows — every place on the
 /// GPU (units × resident waves, at most one per wave) runs its waves one after another, a wave
 /// as long as the sum of its steps' latencies, so the waves need at least their summed
-/// latencies ÷ the places (Little's law: what is in flight ÷ how long each takes).
+/// latencies ÷ the places (Little's law: what is in flight ÷ how long each takes), and at least
+/// the longest wave's.
 pub fn latency(g: &gpus::Gpu, resident: usize, waves: &[WaveTrace], h: &cache::Hierarchy, rays: usize) -> (f64, f64) {
     let step = if h.read_steps > 0 { h.wait_ns / h.read_steps as f64 } else { 0.0 };
     let running = waves.iter().filter(|w| !w.steps.is_empty()).count();
     let places = (g.units as usize * resident.max(1)).min(running);
-    let bound = if h.wait_ns > 0.0 { rays as f64 * places as f64 / h.wait_ns * 1e3 } else { f64::INFINITY };
+    let ns = if places > 0 { (h.wait_ns / places as f64).max(h.longest_wave_ns) } else { 0.0 };
+    let bound = if ns > 0.0 { rays as f64 / ns * 1e3 } else { f64::INFINITY };
     (step, bound)
 }
 
@@ -773,13 +776,15 @@ mod tests {
         assert_eq!((mali(1.0).waves, mali(2.0).waves), (32, 64));
         assert_eq!(mali(1.0).from, "drv Mesa 26.2.6-1: 1 threads (of 2: 64 warps/core at 2)");
         assert!(mali(3.0).from.starts_with("assumed (g610: occupancy in threads"));
-        // Hopper on GA102's build: its registers by CUDA's rule, up to 64 warps (GA102's 48).
-        let nv = |gprs: f64| IsaRow { registers: Some(gprs), ..row("ga102", Some(16.0), "warps/SM") };
+        // Hopper on GA102's build: its registers by CUDA's rule, up to 64 warps (GA102's 48); GA102
+        // itself takes its own row's occupancy.
+        let nv = |gprs: f64| IsaRow { registers: Some(gprs), ..row("ga102", Some(20.0), "warps/SM") };
+        assert_eq!(resident(gpu("ga102"), &v, &[nv(128.0)]).waves, 20);
         assert_eq!(resident(gpu("h100"), &v, &[nv(128.0)]).waves, 16);
         assert_eq!(resident(gpu("h200"), &v, &[nv(40.0)]).waves, 51);
         assert_eq!(
             resident(gpu("h100"), &v, &[nv(107.0)]).from,
-            "drv Mesa 26.2.6-1: 16 warps/SM on ga102; 107 registers: 18 warps/SM with h100's 64-warp limit"
+            "drv Mesa 26.2.6-1: 20 warps/SM on ga102; 107 registers: 18 warps/SM with h100's 64-warp limit"
         );
         assert!(resident(gpu("h100"), &v, &rows).from.starts_with("assumed (ga102's build gave no registers"));
         // Another kernel (B = 8) was not built; Intel has no compiler here that counts; a failed

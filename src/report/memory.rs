@@ -83,9 +83,10 @@ pub struct MemRow {
     #[serde(default)]
     pub step_ns: f64,
     /// Rays per second the latency allows with the waves resident (millions): the rays ÷ the
-    /// time the waves need when every place on the GPU (units × resident waves) runs its waves
-    /// one after another, each wave as long as the sum of its steps' latencies (Little's law;
-    /// `None` in files written before latency was modelled).
+    /// time the waves need when every place on the GPU (units × resident waves, at most one per
+    /// wave that reads) runs its waves one after another, each wave as long as the sum of its
+    /// steps' latencies — their sum ÷ the places, or the longest wave where that is longer
+    /// (Little's law; `None` in files written before latency was modelled).
     #[serde(default)]
     pub latency_bound_mrays: Option<f64>,
     /// The roofline: the lowest of the issue, latency, L2 and DRAM bounds, which one binds
@@ -281,8 +282,8 @@ fn coherence(rays: &str) -> &'static str {
 
 /// One verdict per GPU and coherence: among the built-in kernels of the conservative layouts
 /// (those that return f32's hits), the one whose roofline bound is highest as a ratio to f32's
-/// (mean over scenes and ray sets), by how much, and what binds it (its issue cycles where
-/// `estimate` gave them, else DRAM alone).
+/// (mean over scenes and ray sets), by how much, and what binds it in how many ray sets (issue,
+/// where `estimate` gave cycles; latency; the L2; DRAM).
 pub fn verdicts(rows: &[MemRow]) -> Vec<String> {
     use std::collections::BTreeMap;
     // (gpu, coherence) → kernel label → (sum of bound ratios, of DRAM ratios, [issue, latency,
@@ -344,8 +345,8 @@ pub fn markdown(rows: &[MemRow], gpus_table: &str) -> String {
     let mut md = String::from("# The memory side of a ray\n\n## Verdict per GPU (the model's)\n\n");
     md += "Among the conservative layouts' kernels, the highest roofline bound as a ratio to f32's at the same \
            B and P (mean over scenes and ray sets): the lowest of the rays/s DRAM bandwidth allows, the rays/s the \
-           L2's bandwidth allows, the rays/s the latency allows with the waves resident and, where `memory --estimate` joined AMD's cycle estimate, the rays/s issue \
-           allows.\n\n";
+           L2's bandwidth allows, the rays/s the latency allows with the waves resident and, where \
+           `memory --estimate` joined AMD's cycle estimate, the rays/s issue allows.\n\n";
     for v in verdicts(rows) {
         md += &format!("- {v}\n");
     }

@@ -44,6 +44,9 @@ fn neutral(s: &Input) -> Neutral {
     }
 }
 
+/// Hopper's most warps per SM (GA10x and Ada: 48, Turing: 32).
+pub const HOPPER_MAX_WARPS: f64 = 64.0;
+
 /// Warps an NVIDIA SM holds at `gprs` registers per thread: 64 K registers per SM, allocated
 /// per warp in units of 256 (8 per thread), at most `max_warps` (32 on Turing, 48 on Ampere's
 /// GA10x and Ada, 64 on Hopper). CUDA's occupancy rule, so an estimate: the driver reports
