@@ -139,6 +139,9 @@ pub struct Hierarchy {
     pub wait_ns: f64,
     /// [`simulate`]: the longest wave's sum of its steps' latencies, ns.
     pub longest_wave_ns: f64,
+    /// [`simulate`]: the places that ran waves at once (units × resident waves, at most one
+    /// per wave that takes a step).
+    pub places: usize,
     /// Bytes below this address are the node buffer's.
     nodes_end: u64,
     /// Bytes from this address on are the waves' private memory.
@@ -160,6 +163,7 @@ impl Hierarchy {
             read_steps: 0,
             wait_ns: 0.0,
             longest_wave_ns: 0.0,
+            places: 0,
             nodes_end,
             private_base,
             l1_write_back: g.l1_write_back,
@@ -328,6 +332,7 @@ pub fn simulate(g: &Gpu, waves: &[WaveTrace], resident: usize, b: &Buffers) -> H
     // (wave, next step) per slot; slot s belongs to unit s % units.
     let mut running: Vec<Option<(usize, usize)>> = (0..slots).map(|s| (s < waves.len()).then_some((s, 0))).collect();
     let mut next = slots.min(waves.len());
+    h.places = next;
     let mut lines = Vec::new();
     let mut wave_ns = vec![0f64; waves.len()];
     while running.iter().any(Option::is_some) {
@@ -443,11 +448,12 @@ mod tests {
         assert_eq!(h.wait_ns, 1000.0 + 1.0 + 1000.0 + 10.0 + 1000.0 + 100.0 + 1000.0);
         // One place (one unit, one wave): 32 rays in 4111 ns; more resident waves than waves
         // running add no place.
-        assert_eq!(h.longest_wave_ns, h.wait_ns);
-        let (step, bound) = crate::memory::latency(&g, 1, &waves, &h, 32);
+        assert_eq!((h.longest_wave_ns, h.places), (h.wait_ns, 1));
+        let (step, bound) = crate::memory::latency(&h, 32);
         assert_eq!(step, 4111.0 / 7.0);
         assert!((bound - 32.0 / 4111.0 * 1e3).abs() < 1e-9, "{bound}");
-        assert_eq!(crate::memory::latency(&g, 8, &waves, &h, 32).1, bound);
+        let h8 = simulate(&g, &waves, 8, &b);
+        assert_eq!((h8.places, crate::memory::latency(&h8, 32).1), (1, bound));
         // Two waves on two places: no faster than the longer one, whatever the mean.
         let short = WaveTrace { steps: vec![vec![line(0)]], rays: 32 };
         let two = [waves[0].clone(), short];
@@ -455,7 +461,7 @@ mod tests {
         let h = simulate(&g, &two, 1, &b);
         // (The short wave's line comes from the L2: the first wave brought it there.)
         assert_eq!((h.wait_ns, h.longest_wave_ns), (4111.0 + 10.0, 4111.0));
-        let (_, bound) = crate::memory::latency(&g, 1, &two, &h, 64);
+        let (_, bound) = crate::memory::latency(&h, 64);
         assert!((bound - 64.0 / 4111.0 * 1e3).abs() < 1e-9, "{bound}");
     }
 }

@@ -594,7 +594,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                     // Millions of rays per second `gbs` GB/s allows at `bytes` per ray.
                     let bound =
                         |gbs: f64, bytes: f64| if bytes > 0.0 { gbs * 1e9 / bytes / 1e6 } else { f64::INFINITY };
-                    let (step_ns, latency_bound) = latency(g, res.waves, ws, &h, n);
+                    let (step_ns, latency_bound) = latency(&h, n);
                     MemRow {
                         gpu: g.id.into(),
                         scene: scene.clone(),
@@ -661,18 +661,15 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
     Ok(rows)
 }
 
-/// The latency side of the roofline, from a run of the cache model (`h`, [`cache::simulate`]) of
-/// `waves` on `g` with `resident` waves per unit: the mean latency of a reading step (ns), and
-/// the millions of rays per second (of `rays` in all) the latency allows — every place on the
-/// GPU (units × resident waves, at most one per wave) runs its waves one after another, a wave
-/// as long as the sum of its steps' latencies, so the waves need at least their summed
-/// latencies ÷ the places (Little's law: what is in flight ÷ how long each takes), and at least
-/// the longest wave's.
-pub fn latency(g: &gpus::Gpu, resident: usize, waves: &[WaveTrace], h: &cache::Hierarchy, rays: usize) -> (f64, f64) {
+/// The latency side of the roofline, from a run of the cache model (`h`, [`cache::simulate`]):
+/// the mean latency of a reading step (ns), and the millions of rays per second (of `rays` in
+/// all) the latency allows — every place on the GPU (units × resident waves, at most one per
+/// wave: [`cache::Hierarchy::places`]) runs its waves one after another, a wave as long as the
+/// sum of its steps' latencies, so the waves need at least their summed latencies ÷ the places
+/// (Little's law: what is in flight ÷ how long each takes), and at least the longest wave's.
+pub fn latency(h: &cache::Hierarchy, rays: usize) -> (f64, f64) {
     let step = if h.read_steps > 0 { h.wait_ns / h.read_steps as f64 } else { 0.0 };
-    let running = waves.iter().filter(|w| !w.steps.is_empty()).count();
-    let places = (g.units as usize * resident.max(1)).min(running);
-    let ns = if places > 0 { (h.wait_ns / places as f64).max(h.longest_wave_ns) } else { 0.0 };
+    let ns = if h.places > 0 { (h.wait_ns / h.places as f64).max(h.longest_wave_ns) } else { 0.0 };
     let bound = if ns > 0.0 { rays as f64 / ns * 1e3 } else { f64::INFINITY };
     (step, bound)
 }
