@@ -483,26 +483,18 @@ fn isa_builds_on_the_newest_compilers() {
     // waves per SIMD × 2 SIMDs per CU); a model the release has no compiler for (g610: Debian
     // builds no panvk) keeps its assumed figure, said. The estimate made on the same release joins.
     let mem = tmp("newest-memory");
+    // `memory` at B = 4 on 16² primary rays, with `more` flags.
+    let memory_with = |compilers: &str, gpus: &str, more: &[&str], out: &PathBuf| {
+        let out = out.to_str().unwrap();
+        let mut args =
+            vec!["memory", "--compilers", compilers, "--gpu", gpus, "--branchings", "4", "--rays", "primary"];
+        args.extend(["--res", "16", "--out", out]);
+        args.extend_from_slice(more);
+        cli(&args)
+    };
+    let est_dir = est.to_str().unwrap();
     let memory = |compilers: &str, gpus: &str, out: &PathBuf| {
-        cli(&[
-            "memory",
-            "--compilers",
-            compilers,
-            "--gpu",
-            gpus,
-            "--layouts",
-            "f16h",
-            "--branchings",
-            "4",
-            "--rays",
-            "primary",
-            "--res",
-            "16",
-            "--estimate",
-            est.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
+        memory_with(compilers, gpus, &["--layouts", "f16h", "--estimate", est_dir], out)
     };
     let (ok, stdout, stderr) = memory("newest", "navi31,a740,g610", &mem);
     assert!(ok, "memory on the newest compilers failed:\n{stdout}\n{stderr}");
@@ -528,43 +520,13 @@ fn isa_builds_on_the_newest_compilers() {
     let md = std::fs::read_to_string(mem.join("memory.md")).unwrap();
     assert!(md.contains("per kernel: a740's occupancy on ") && md.contains("| 32 (assumed) |"), "{md}");
     // Only models the release lacks: the run goes on with the assumed figure, said.
-    let (ok, _, stderr) = cli(&[
-        "memory",
-        "--compilers",
-        "newest",
-        "--gpu",
-        "g610",
-        "--branchings",
-        "4",
-        "--rays",
-        "primary",
-        "--res",
-        "16",
-        "--out",
-        tmp("newest-mali").to_str().unwrap(),
-    ]);
+    let (ok, _, stderr) = memory_with("newest", "g610", &[], &tmp("newest-mali"));
     assert!(ok && stderr.contains("has no compiler for g610"), "{stderr}");
     // Mali on the pinned release (panfrost's shim): each kernel's thread class, 2 (at most 32
     // registers) all of a Valhall core's 64 warps, 1 half; its fp16-math kernels, which panvk
     // 25.0.7 cannot build, keep the assumed figure, said.
     let mali = tmp("pinned-mali");
-    let (ok, stdout, stderr) = cli(&[
-        "memory",
-        "--compilers",
-        "pinned",
-        "--gpu",
-        "g610",
-        "--layouts",
-        "q8",
-        "--branchings",
-        "4",
-        "--rays",
-        "primary",
-        "--res",
-        "16",
-        "--out",
-        mali.to_str().unwrap(),
-    ]);
+    let (ok, stdout, stderr) = memory_with("pinned", "g610", &["--layouts", "q8"], &mali);
     assert!(ok && stdout.contains("built on g610 "), "memory on the pinned Mali compiler:\n{stdout}\n{stderr}");
     let mrows = halftrace::report::memory::read(&mali).unwrap().expect("memory.json");
     assert_eq!(mrows.len(), 3, "f32 and q8 in two maths");
