@@ -6,6 +6,7 @@ mod common;
 use common::*;
 use halftrace::base::Hit;
 use halftrace::bvh::BRANCHINGS;
+use halftrace::layout::traverse::branch_work;
 use halftrace::layout::LayoutId;
 use rayon::prelude::*;
 
@@ -412,6 +413,29 @@ fn loop_work_follows_the_counters_and_lockstep_costs_more() {
                     plock.steps <= plane.steps && plock.tri_passes <= plane.tri_passes,
                     "{what} P8: {plock:?} {plane:?}"
                 );
+                // The named branches' counts (estimate's branch weights) pass through the same
+                // triangle passes, single rays and packets, in lockstep and alone.
+                for (p, l, a) in [(1, lock, lanes), (8, plock, plane)] {
+                    let reads = enc.layout.imp().mem_reads(&enc, rays, p, math, FloatControls::On);
+                    let (bl, ba) = branch_work(&reads, rays, &enc.tris, p, 64);
+                    assert_eq!((bl.tri_passes, ba.tri_passes), (l.tri_passes, a.tri_passes), "{what} P{p}");
+                    let [huge, edges, cross, flat, divide, candidate, best, note] = ba.taken;
+                    let [_, ledges, lcross, ..] = bl.taken;
+                    // Alone, each test takes one of flat and divide past the edge functions; every
+                    // side lies past the one before it; a wave takes a side in a pass when any lane
+                    // does: no more often than its passes, no less than its lanes' ÷ 64.
+                    assert_eq!(huge, 0, "{what} P{p}: nothing here is beyond 2^40");
+                    assert!(ba.tri_passes >= edges && edges >= cross && cross >= candidate, "{what} P{p}: {ba:?}");
+                    assert!(candidate >= best + note && best > 0 && edges > cross, "{what} P{p}: {ba:?}");
+                    if p == 1 {
+                        assert_eq!(cross, flat + divide, "{what}: {ba:?}");
+                    }
+                    assert!(ledges <= bl.tri_passes && lcross <= ledges, "{what} P{p}: {bl:?}");
+                    assert!(64 * ledges >= edges && 64 * lcross >= cross, "{what} P{p}: {bl:?} against {ba:?}");
+                    if kind == "ao" || kind == "diffuse" {
+                        assert!(ledges as f64 > edges as f64 / 64.0, "{what} P{p}: lockstep takes sides more often");
+                    }
+                }
             }
         }
     }

@@ -293,15 +293,21 @@ impl ClosestTrue {
     /// fp32's decision on triangle `verts` against the best so far: kept only where its
     /// certified interval lies wholly before the best's (`hi < lo_best`), so that the kept
     /// hit is the nearest exact crossing, not only the smallest upper bound.
+    /// The sides of the kernel's test it takes go to `path` ([`tri::Branch`] bits).
     #[inline]
-    fn decide(&self, r: &RayPre, verts: &[f32; 9], prim: i32) -> Decision {
-        let c = tri::certify(r, verts);
+    fn decide(&self, r: &RayPre, verts: &[f32; 9], prim: i32, path: &mut u8) -> Decision {
+        let c = tri::certify_traced(r, verts, path);
+        if c == tri::Cert::Miss {
+            return Decision::No;
+        }
         let (lo, hi) = c.bounds();
         if hi < r.tmin || !closer(lo, prim, (self.t, self.prim)) {
             return Decision::No;
         }
+        *path |= tri::Branch::Candidate.bit();
         if let tri::Cert::Hit { u, v, .. } = c {
             if lo >= r.tmin && hi <= r.tmax && hi < self.lo {
+                *path |= tri::Branch::Best.bit();
                 return Decision::Kept { lo, hi, u, v };
             }
         }
@@ -311,7 +317,15 @@ impl ClosestTrue {
     /// Tests triangle `verts` with public id `prim` and keeps it if nearer.
     #[inline]
     pub fn test(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) {
-        match self.decide(r, verts, prim) {
+        self.test_traced(r, verts, prim);
+    }
+
+    /// [`Self::test`], returning the sides of the kernel's `tri_certify` and `closest_test`
+    /// it took ([`tri::Branch`] bits; fast mode is what the kernels run).
+    #[inline]
+    pub fn test_traced(&mut self, r: &RayPre, verts: &[f32; 9], prim: i32) -> u8 {
+        let mut path = 0;
+        match self.decide(r, verts, prim, &mut path) {
             Decision::No => {}
             Decision::Kept { lo, hi, u, v } => self.keep(verts, prim, lo, hi, u, v),
             Decision::Undecided(lo) => {
@@ -319,12 +333,14 @@ impl ClosestTrue {
                 if self.fast {
                     if closer(lo, prim, self.undecided) {
                         self.undecided = (lo, prim);
+                        path |= tri::Branch::Note.bit();
                     }
                 } else {
                     self.decide_exactly(r, verts, prim);
                 }
             }
         }
+        path
     }
 
     fn keep(&mut self, verts: &[f32; 9], prim: i32, lo: f32, hi: f32, u: f32, v: f32) {

@@ -81,7 +81,94 @@ const U: f32 = 1.0 / 16_777_216.0; // the unit roundoff 2⁻²⁴
 /// [`super::exact`] on adversarial cases). What it cannot decide it says ([`Cert::Unsure`]).
 #[inline]
 pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
+    certify_traced(r, v, &mut 0)
+}
+
+/// The sides of the kernel's triangle test that [`certify`] takes, as [`Branch`] bits: which
+/// parts of `tri_certify` (glsl/tri.glsl) a test runs, for the estimate's branch weights
+/// (`estimate`; the kernel's markers name the same sides). [`super::hit::ClosestTrue`] adds
+/// `closest_test`'s.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Branch {
+    /// Coordinates beyond 2^40 from the ray origin, scaled first.
+    Huge,
+    /// Past the certain-miss test of the projected triangle: the edge functions.
+    Edges,
+    /// Past the edge functions' certain miss: the determinant and depths.
+    Cross,
+    /// No usable determinant: t from the vertices' depths.
+    Flat,
+    /// A usable determinant: t by the correctly rounded division and its bound.
+    Divide,
+    /// `closest_test`: a test not rejected by tmin or the best so far.
+    Candidate,
+    /// `closest_test`: a certified hit kept as the best.
+    Best,
+    /// `closest_test`: an undecided test noted as the least so far.
+    Note,
+}
+
+impl Branch {
+    pub const ALL: [Branch; 8] = [
+        Branch::Huge,
+        Branch::Edges,
+        Branch::Cross,
+        Branch::Flat,
+        Branch::Divide,
+        Branch::Candidate,
+        Branch::Best,
+        Branch::Note,
+    ];
+
+    pub fn bit(self) -> u8 {
+        1 << self as u8
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Branch::Huge => "huge",
+            Branch::Edges => "edges",
+            Branch::Cross => "cross",
+            Branch::Flat => "flat",
+            Branch::Divide => "divide",
+            Branch::Candidate => "candidate",
+            Branch::Best => "best",
+            Branch::Note => "note",
+        }
+    }
+
+    /// The atomic operation of the side's marker in the kernel's marked build (`BRANCH_MARKS`,
+    /// glsl/ray.glsl's `MARK`): how its instruction is named after `atomic_` in a compiler's
+    /// listing (`buffer_atomic_smin`, `global_atomic_cmpswap`). `Note` has none: the seven
+    /// integer atomics that stay themselves are taken (ACO 26 turns an exchange whose result
+    /// is unused into something else), and its two moves are made selects by every compiler
+    /// met, where a marker would keep an if that the real build does not have.
+    pub fn marker(self) -> Option<&'static str> {
+        match self {
+            Branch::Huge => Some("smin"),
+            Branch::Edges => Some("add"),
+            Branch::Cross => Some("or"),
+            Branch::Flat => Some("xor"),
+            Branch::Divide => Some("and"),
+            Branch::Candidate => Some("smax"),
+            Branch::Best => Some("cmpswap"),
+            Branch::Note => None,
+        }
+    }
+
+    /// The side a marker instruction's operation (`smin`, `add`, … as [`Self::marker`]) names.
+    pub fn of_marker(op: &str) -> Option<Branch> {
+        Branch::ALL.into_iter().find(|b| b.marker() == Some(op))
+    }
+}
+
+/// [`certify`], noting in `path` the [`Branch`] bits of the sides it takes.
+#[inline]
+pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
     let ([a, b, c], back) = translated(r, v);
+    if back != 1.0 {
+        *path |= Branch::Huge.bit();
+    }
     let (kx, ky, kz) = (r.kx, r.ky, r.kz);
     // Sheared coordinates, and per axis the bound of their error: |x − x*| ≤ 5.0001u·(|A_x| +
     // |sx·A_z|) (the translation, the shear's quotient, its product and difference).
@@ -100,6 +187,7 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
     if x0 > ex || x1 < -ex || y0 > ey || y1 < -ey {
         return Cert::Miss;
     }
+    *path |= Branch::Edges.bit();
     let xm = ax.abs().max(bx.abs()).max(cx.abs());
     let ym = ay.abs().max(by.abs()).max(cy.abs());
     // One bound for the three edge functions: 2γ₂·X·Y for the rounding of the 2×2
@@ -113,6 +201,7 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
     if pos && neg {
         return Cert::Miss;
     }
+    *path |= Branch::Cross.bit();
     let sure = uu.abs() > e && vv.abs() > e && ww.abs() > e;
     let det = uu + vv + ww;
     let s = uu.abs() + vv.abs() + ww.abs();
@@ -123,6 +212,7 @@ pub fn certify(r: &RayPre, v: &[f32; 9]) -> Cert {
     let zm = az.abs().max(bz.abs()).max(cz.abs());
     let ez = (3.5 * U) * zm;
     let usable = det.abs() > 2.0 * ed; // false for NaN too
+    *path |= if usable { Branch::Divide.bit() } else { Branch::Flat.bit() };
     let (t, err) = if !usable {
         // No usable t: a crossing, if any, is a convex combination of the vertices, so its s
         // lies within the vertices' depths (each within ez of its computed value).

@@ -24,6 +24,7 @@
 //! entries here are theirs (docs/architecture.md, "Deferred entries").
 
 use super::{decode_child, Encoded, Layout, Node, TriBuffer};
+use crate::base::tri::Branch;
 use crate::base::Ray;
 use crate::base::{slab32, ClosestTrue, Counters, Hit, RayPre};
 use crate::bvh::ChildRef;
@@ -236,6 +237,97 @@ pub fn loop_work<L: Layout, const B: usize>(
                 })
                 .collect();
             (LoopWork::lockstep(&lanes), LoopWork::lanes(&lanes))
+        })
+        .reduce(Default::default, |mut a, b| {
+            a.0 += b.0;
+            a.1 += b.1;
+            a
+        })
+}
+
+/// How often a kernel's named branches run for a set of rays: the triangle loop's passes and,
+/// per side of the triangle test ([`Branch`], `Branch as usize`), the passes in which it runs
+/// — in lockstep, a wave runs a side in a pass when any of its lanes takes it there.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BranchWork {
+    pub tri_passes: u64,
+    pub taken: [u64; Branch::ALL.len()],
+}
+
+impl std::ops::AddAssign for BranchWork {
+    fn add_assign(&mut self, o: BranchWork) {
+        self.tri_passes += o.tri_passes;
+        for (a, b) in self.taken.iter_mut().zip(o.taken) {
+            *a += b;
+        }
+    }
+}
+
+impl BranchWork {
+    /// One wave running `lanes` (each lane's passes, each pass the sides its triangle tests
+    /// took, in the kernel's order) in lockstep: a pass of the visit's triangle loop while any
+    /// lane has a triangle left, a side run in it when any lane takes it.
+    pub fn lockstep(lanes: &[Vec<Vec<u8>>]) -> BranchWork {
+        let mut w = BranchWork::default();
+        let passes = lanes.iter().map(Vec::len).max().unwrap_or(0);
+        for i in 0..passes {
+            let at = || lanes.iter().filter_map(move |l| l.get(i));
+            let tris = at().map(Vec::len).max().unwrap_or(0);
+            w.tri_passes += tris as u64;
+            for j in 0..tris {
+                let any = at().filter_map(|t| t.get(j)).fold(0u8, |a, &b| a | b);
+                for b in Branch::ALL {
+                    w.taken[b as usize] += (any & b.bit() != 0) as u64;
+                }
+            }
+        }
+        w
+    }
+}
+
+/// [`BranchWork`] of `rays` from their packets' reads (`reads`, [`mem_reads`] of the same rays
+/// in packets of `p`): each lane's triangle tests replayed in the kernel's order with the
+/// closest-hit state the kernel keeps (`closest_test` of glsl/tri.glsl), in waves of `wave`
+/// consecutive rays, the wave's lanes in lockstep — summed over the waves, and over the
+/// packets each on its own.
+pub fn branch_work(
+    reads: &[Vec<Reads>],
+    rays: &[Ray],
+    tris: &TriBuffer,
+    p: usize,
+    wave: usize,
+) -> (BranchWork, BranchWork) {
+    let p = p.max(1);
+    let per_wave = (wave.max(p) / p).max(1);
+    reads
+        .par_chunks(per_wave)
+        .zip(rays.par_chunks(per_wave * p))
+        .map(|(packets, rays)| {
+            let mut lanes: Vec<Vec<Vec<u8>>> = Vec::new();
+            let mut alone = BranchWork::default();
+            for (packet, rays) in packets.iter().zip(rays.chunks(p)) {
+                let n = rays.len();
+                // Lane l's passes are reads l, l + n, … of its packet.
+                let mine: Vec<Vec<Vec<u8>>> = rays
+                    .iter()
+                    .enumerate()
+                    .map(|(l, ray)| {
+                        let (r, mut best) = (RayPre::new(ray), ClosestTrue::fast(ray.tmax));
+                        let test = |i: u32, best: &mut ClosestTrue| {
+                            best.test_traced(&r, &tris.verts[i as usize], tris.ids[i as usize] as i32)
+                        };
+                        packet
+                            .iter()
+                            .skip(l)
+                            .step_by(n)
+                            .map(|pass| pass.tris.iter().map(|&(i, _)| test(i, &mut best)).collect())
+                            .collect()
+                    })
+                    .collect();
+                alone += BranchWork::lockstep(&mine);
+                lanes.extend(mine);
+            }
+            (BranchWork::lockstep(&lanes), alone)
         })
         .reduce(Default::default, |mut a, b| {
             a.0 += b.0;

@@ -9,7 +9,7 @@ use crate::base::{Counters, Hit};
 use crate::baseline::{BaselineId, BaselineScene};
 use crate::bvh::{self, BinaryBvh};
 use crate::gpu::GpuBvh;
-use crate::layout::traverse::{LoopWork, Reads};
+use crate::layout::traverse::{BranchWork, LoopWork, Reads};
 use crate::layout::{Encoded, LayoutId};
 use crate::precision::{FloatControls, Math};
 use crate::rays::RayKind;
@@ -257,6 +257,17 @@ impl<'g> Runner<'g> {
         let s = self.scene.as_ref().expect("current");
         let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
         Ok(v.layout.imp().loop_work(enc, &s.sets[i].rays, v.packet, wave, v.math, v.fc))
+    }
+
+    /// How often `v`'s named branches run on ray set `set`, in waves of `wave` lanes and each
+    /// packet on its own ([`crate::layout::traverse::branch_work`]: the estimate's branch
+    /// weights).
+    pub fn branch_work(&mut self, v: &Variant, set: RaySetId, wave: usize) -> anyhow::Result<(BranchWork, BranchWork)> {
+        let (reads, _) = self.mem_reads(v, set)?;
+        let i = self.index(set);
+        let s = self.scene.as_ref().expect("current");
+        let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
+        Ok(crate::layout::traverse::branch_work(&reads, &s.sets[i].rays, &enc.tris, v.packet, wave))
     }
 
     /// Every packet's reads of the scene's buffers for `v` on ray set `set`, pass by pass
