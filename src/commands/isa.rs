@@ -243,7 +243,12 @@ pub fn isa_model(a: &IsaModelArgs) -> anyhow::Result<()> {
     );
     let matrix = Matrix::parse(&a.matrix)
         .ok_or_else(|| anyhow::anyhow!("--matrix {}: layouts, cover, default, full or singles", a.matrix))?;
-    let builds = isa::plan_at(matrix, &a.layouts, &a.branchings);
+    let mut builds = isa::plan_at(matrix, &a.layouts, &a.branchings);
+    if a.marked {
+        for b in &mut builds {
+            b.source = crate::variant::Source::Marked;
+        }
+    }
     let messages = isa::run_model_here(&a.model, &builds, a.validation, a.disasm.as_deref())?;
     anyhow::ensure!(
         messages.is_empty(),
@@ -269,6 +274,7 @@ mod tests {
             branchings: vec![4, 8],
             validation: true,
             disasm: Some("out dir/-x".into()),
+            marked: true,
         };
         let argv = std::iter::once("halftrace".to_string()).chain(a.argv().0);
         let got = crate::commands::Cli::try_parse_from(argv).unwrap();

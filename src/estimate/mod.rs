@@ -20,9 +20,13 @@
 //! would.
 //! Every other loop (an exact division's corrections, a per-axis loop the compiler kept)
 //! keeps ACO's assumed trips relative to the nearest of those three around it, or runs as
-//! ACO assumes when outside them; branches inside a loop keep ACO's weights (0.5 for a
-//! uniform if, 0.75 for a divergent one). It is the compiler's model, one wave, issue plus
-//! stall cycles, no latency hidden: an estimate, not a measurement.
+//! ACO assumes when outside them. Inside the triangle loop the named sides of the triangle
+//! test ([`crate::base::tri::Branch`]), found in ACO's program by a build with a marker at the
+//! start of each ([`aco::branch_sides`]), run in as many passes as a wave's lanes take them
+//! ([`crate::layout::traverse::branch_work`]); every other branch keeps ACO's weights (0.5 for
+//! a uniform if, 0.75 for a divergent one), and the row keeps ACO's figure beside
+//! (`aco_branches`). It is the compiler's model, one wave, issue plus stall cycles, no latency
+//! hidden: an estimate, not a measurement.
 
 mod rays;
 
@@ -150,14 +154,44 @@ pub fn run(
     amd: Option<&Path>,
 ) -> anyhow::Result<(Vec<Row>, Vec<RayRow>)> {
     use rayon::prelude::*;
-    let built: Vec<Vec<_>> =
-        families.par_iter().map(|f| isa::aco_programs(exe, f, matrix, layouts, amd)).collect::<anyhow::Result<_>>()?;
+    // Each family's kernels, and the same kernels with their named branches marked (a second
+    // child process each).
+    let jobs: Vec<(&String, bool)> = families.iter().flat_map(|f| [(f, false), (f, true)]).collect();
+    let mut both: Vec<Vec<_>> = jobs
+        .par_iter()
+        .map(|&(f, marked)| isa::aco_programs(exe, f, matrix, layouts, amd, marked))
+        .collect::<anyhow::Result<_>>()?;
+    let mut built: Vec<Vec<_>> = Vec::new();
+    while !both.is_empty() {
+        let marked = both.remove(1);
+        let real = both.remove(0);
+        anyhow::ensure!(
+            real.len() == marked.len(),
+            "the marked build made {} kernels, the real one {}",
+            marked.len(),
+            real.len()
+        );
+        built.push(
+            real.into_iter()
+                .zip(marked)
+                .map(|((r, p), (mr, mp))| {
+                    let sides = match (&p, mp) {
+                        (Ok(p), Ok(mp)) if mr.kernel == r.kernel => aco::branch_sides(&mp, p),
+                        (Ok(_), Ok(_)) => Err(format!("the marked build is {}, not {}", mr.kernel, r.kernel)),
+                        (_, Err(e)) => Err(format!("the marked build: {e}")),
+                        (Err(e), _) => Err(e.clone()),
+                    };
+                    (r, p, sides)
+                })
+                .collect(),
+        );
+    }
     let by_family: Vec<(String, &Built)> = families.iter().cloned().zip(built.iter().map(Vec::as_slice)).collect();
     let ray_out = ray_rows(&by_family, rays)?;
     let mut rows = Vec::new();
     for (f, b) in families.iter().zip(built) {
         let generation = null::family(f).map_or("", |x| x.generation);
-        rows.extend(b.into_iter().map(|(r, p)| row(f, generation, &r, p)));
+        rows.extend(b.into_iter().map(|(r, p, _)| row(f, generation, &r, p)));
     }
     Ok((rows, ray_out))
 }

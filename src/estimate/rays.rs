@@ -2,17 +2,18 @@
 //! model's cycles with those trips ([`ray_cycles`]), and each kernel's row per ray set
 //! ([`ray_rows`]).
 
+use crate::base::tri::Branch;
 use crate::base::Status;
 use crate::gpu::null;
 use crate::isa::aco;
-use crate::layout::traverse::LoopWork;
+use crate::layout::traverse::{BranchWork, LoopWork};
 use crate::rays::RayKind;
 pub use crate::report::estimate::{RayRow, Split};
 use crate::runner::rays::RaySpec;
 use crate::runner::Runner;
 use crate::variant::{Buffers, Variant};
 use anyhow::Context as _;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
 /// The loops of a kernel that the rays give trips to.
@@ -111,6 +112,72 @@ pub fn ray_cycles(p: &impl LoopCosts, roles: &Roles, w: &LoopWork, b: usize) -> 
     Split { setup: parts[0], step: parts[1], slots: parts[2], triangles: parts[3] }
 }
 
+/// [`ray_cycles`] with the triangle loop's named branches weighed by the rays too: each block
+/// of the triangle loop (and of loops inside it) in a named side runs in as many passes as
+/// the side does (`bw`: waves that take it, any lane), times ACO's weights of the ifs inside
+/// that side and of the loops inside it; the other blocks keep ACO's weights. `sides`: the
+/// named sides of `p` ([`aco::branch_sides`]); with none it is [`ray_cycles`].
+pub fn ray_cycles_branches(
+    p: &aco::Program,
+    roles: &Roles,
+    w: &LoopWork,
+    bw: &BranchWork,
+    b: usize,
+    sides: &aco::BranchSides,
+) -> Result<Split, String> {
+    if bw.tri_passes != w.tri_passes {
+        return Err(format!(
+            "the branch counts saw {} triangle passes, the loop counts {}",
+            bw.tri_passes, w.tri_passes
+        ));
+    }
+    let tri = roles.triangles;
+    let inside = |x: usize| (tri.header..tri.exit).contains(&x);
+    // Named sides by first block; a side inside a loop within the triangle loop would run
+    // more than once per pass, which the counts do not say.
+    let named: BTreeMap<usize, Branch> = sides.sides.iter().map(|(&k, &s)| (s, k)).collect();
+    for (&s, k) in &named {
+        if !inside(s) {
+            return Err(format!("the {} side (BB{s}) is outside the triangle loop (BB{})", k.name(), tri.header));
+        }
+        if p.loops.iter().any(|l| l.header > tri.header && l.contains(s)) {
+            return Err(format!("the {} side (BB{s}) is in a loop inside the triangle loop", k.name()));
+        }
+    }
+    let mut split = ray_cycles(p, roles, w, b);
+    let mut triangles = 0.0;
+    for blk in p.blocks.iter().filter(|x| inside(x.index)) {
+        let loops: f64 = p
+            .loops
+            .iter()
+            .filter(|l| l.header > tri.header && l.contains(blk.index))
+            .map(aco::Loop::aco_trips)
+            .product();
+        let sides: Vec<&aco::Side> = blk.sides.iter().filter(|s| inside(s.first)).collect();
+        let at = sides.iter().rposition(|s| named.contains_key(&s.first));
+        let (passes, rest) = match at {
+            Some(i) => (bw.taken[named[&sides[i].first] as usize] as f64, &sides[i + 1..]),
+            None => (w.tri_passes as f64, &sides[..]),
+        };
+        let weight: f64 = rest.iter().map(|s| s.weight).product::<f64>() * if blk.skip_side { 0.25 } else { 1.0 };
+        triangles += blk.clk as f64 * loops * passes * weight;
+    }
+    split.triangles = triangles;
+    Ok(split)
+}
+
+/// The named sides a row was weighed with, in words: those weighed by the rays with the share
+/// of the wave's triangle passes that run them (`bw`), then those left to ACO's weights and why.
+fn branches_said(s: &aco::BranchSides, bw: &BranchWork) -> String {
+    let share = |k: Branch| 100.0 * bw.taken[k as usize] as f64 / bw.tri_passes.max(1) as f64;
+    let named: Vec<String> = s.sides.keys().map(|&k| format!("{} {:.1}%", k.name(), share(k))).collect();
+    let mut out = format!("rays: {}", named.join(", "));
+    for (k, why) in &s.left {
+        out += &format!("; {}: {why}", k.name());
+    }
+    out
+}
+
 /// The rays the kernels are weighed with: each scene's ray kinds, primary rays at `res`².
 pub struct Rays {
     pub scenes: Vec<PathBuf>,
@@ -125,8 +192,9 @@ impl Rays {
     }
 }
 
-/// One family's kernels: its isa rows beside ACO's programs ([`crate::isa::aco_programs`]).
-pub type Built = [(crate::report::isa::IsaRow, Result<aco::Program, String>)];
+/// One family's kernels: its isa rows beside ACO's programs ([`crate::isa::aco_programs`])
+/// and their named branches, from the marked builds ([`aco::branch_sides`]).
+pub type Built = [(crate::report::isa::IsaRow, Result<aco::Program, String>, Result<aco::BranchSides, String>)];
 
 /// Each kernel of each family in `built` on each ray set of `rays`: its estimated cycles per
 /// ray, with f32's ratio; rows by family, then ray set. Scenes, ray sets and encodings come
@@ -137,7 +205,7 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
     // The loops the rays weigh depend on the program only.
     let named: Vec<Vec<Result<Roles, String>>> = built
         .iter()
-        .map(|(_, b)| b.iter().map(|(_, p)| p.as_ref().map_err(String::clone).and_then(roles)).collect())
+        .map(|(_, b)| b.iter().map(|(_, p, _)| p.as_ref().map_err(String::clone).and_then(roles)).collect())
         .collect();
     let mut per_family: Vec<Vec<RayRow>> = vec![Vec::new(); built.len()];
     let mut runner = Runner::new(None, &[], Default::default())?;
@@ -153,9 +221,10 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                 eprintln!("estimate: {scene} {kind}: the ray set has no rays; its rows are skipped");
             }
             let mut work: HashMap<(Variant, usize), (LoopWork, LoopWork)> = HashMap::new();
+            let mut branch_work: HashMap<(Variant, usize), (BranchWork, BranchWork)> = HashMap::new();
             for (((family, b), named), out) in built.iter().zip(&named).zip(per_family.iter_mut()) {
                 let generation = null::family(family).map_or("", |x| x.generation);
-                for ((r, p), roles) in b.iter().zip(named) {
+                for ((r, p, sides), roles) in b.iter().zip(named) {
                     let mut row = RayRow {
                         family: family.clone(),
                         generation: generation.into(),
@@ -187,13 +256,40 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                             }
                         };
                         let rays = ray_count.max(1) as f64;
-                        let split = ray_cycles(p, roles, &lock, r.branching);
+                        let aco_split = ray_cycles(p, roles, &lock, r.branching);
+                        row.aco_branches = aco_split.total() / rays;
+                        row.aco_triangles = aco_split.triangles / rays;
+                        // The named branches weighed by the rays where the marked build found them.
+                        let mut weighed = |sides: &aco::BranchSides| -> Result<(Split, Split, String), String> {
+                            let (bl, ba) = match branch_work.get(&(v, wave)) {
+                                Some(w) => *w,
+                                None => {
+                                    let w = runner.branch_work(&v, set, wave).map_err(|e| format!("{e:#}"))?;
+                                    *branch_work.entry((v, wave)).or_insert(w)
+                                }
+                            };
+                            let said = branches_said(sides, &bl);
+                            Ok((
+                                ray_cycles_branches(p, roles, &lock, &bl, r.branching, sides)?,
+                                ray_cycles_branches(p, roles, &lanes, &ba, r.branching, sides)?,
+                                said,
+                            ))
+                        };
+                        let (split, lane_split) = match sides.as_ref().map_err(String::clone).and_then(&mut weighed) {
+                            Ok((lock, lanes, said)) => {
+                                row.branches = said;
+                                (lock, lanes)
+                            }
+                            Err(why) => {
+                                row.branches = format!("ACO's weights: {why}");
+                                (aco_split, ray_cycles(p, roles, &lanes, r.branching))
+                            }
+                        };
                         row.cycles_per_ray = split.total() / rays;
                         row.split = split.scaled(1.0 / rays);
                         // Packets (or single rays) per wave: a lane average is one packet's cost ÷ them.
                         let packets_per_wave = lanes.waves as f64 / lock.waves.max(1) as f64;
-                        row.lane_average =
-                            ray_cycles(p, roles, &lanes, r.branching).total() / (rays * packets_per_wave);
+                        row.lane_average = lane_split.total() / (rays * packets_per_wave);
                         row.waves = p.printed.get("num_waves").copied().unwrap_or(0.0);
                         let cycles_per_wave = split.total() / lock.waves.max(1) as f64;
                         let w64 = p.printed.get("wave64_per_cycle").copied().unwrap_or(0.0);
@@ -221,13 +317,13 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
 #[cfg(test)]
 mod tests {
     use super::*;
-    use aco::{Depth, Loop, Program, Weighed};
+    use aco::{Depth, Loop, Program, Side, Weighed};
 
     /// A traversal loop (BB1) around a triangle loop (BB2, in a divergent if) around a helper
     /// loop (BB3), with set-up before them.
     fn program() -> Program {
         let d = |loops, divergent_ifs| Depth { loops, divergent_ifs, uniform_ifs: 0 };
-        let b = |index, clk, depth| Weighed { index, clk, depth, skip_side: false };
+        let b = |index, clk, depth| Weighed { index, clk, depth, skip_side: false, sides: vec![], markers: vec![] };
         Program {
             blocks: vec![b(0, 10, d(0, 0)), b(1, 100, d(1, 0)), b(2, 50, d(2, 1)), b(3, 4, d(3, 1)), b(5, 7, d(0, 0))],
             loops: vec![
@@ -237,7 +333,70 @@ mod tests {
             ],
             printed_latency: 0.0,
             printed: Default::default(),
+            events: vec![],
         }
+    }
+
+    /// A traversal loop (BB1) around a triangle loop (BB2..7) holding a divergent if whose then
+    /// side (BB3) holds another (BB4, skipped by BB5).
+    fn branchy() -> Program {
+        let d = |loops, divergent_ifs| Depth { loops, divergent_ifs, uniform_ifs: 0 };
+        let (a, b) = (Side { first: 3, weight: 0.75 }, Side { first: 4, weight: 0.75 });
+        let w = |index, clk, depth, sides: Vec<Side>, skip_side| Weighed {
+            index,
+            clk,
+            depth,
+            skip_side,
+            sides,
+            markers: vec![],
+        };
+        Program {
+            blocks: vec![
+                w(0, 10, d(0, 0), vec![], false),
+                w(1, 100, d(1, 0), vec![], false),
+                w(2, 20, d(2, 0), vec![], false),
+                w(3, 40, d(2, 1), vec![a], false),
+                w(4, 8, d(2, 2), vec![a, b], false),
+                w(5, 4, d(2, 1), vec![a], true),
+                w(6, 2, d(2, 0), vec![], false),
+                w(7, 5, d(1, 0), vec![], false),
+                w(8, 7, d(0, 0), vec![], false),
+            ],
+            loops: vec![
+                Loop { header: 1, exit: 8, depth: 1, at: d(0, 0) },
+                Loop { header: 2, exit: 7, depth: 2, at: d(1, 0) },
+            ],
+            printed_latency: 0.0,
+            printed: Default::default(),
+            events: vec![],
+        }
+    }
+
+    #[test]
+    fn a_named_side_runs_as_often_as_the_rays_take_it() {
+        let p = branchy();
+        let r = roles(&p).unwrap();
+        assert_eq!((r.traversal.header, r.triangles.header), (1, 2));
+        let w = LoopWork { waves: 2, rays: 128, steps: 10, visits: 6, tri_passes: 20 };
+        let mut bw = BranchWork { tri_passes: 20, ..Default::default() };
+        bw.taken[Branch::Edges as usize] = 5;
+        // No named side: ACO's weights, as ray_cycles gives them: 20·(20 + 0.75·40 + 0.75²·8 +
+        // 0.75·0.25·4 + 2).
+        let none = aco::BranchSides::default();
+        let aco_split = ray_cycles(&p, &r, &w, 4);
+        assert_eq!(aco_split.triangles, 1145.0);
+        assert_eq!(ray_cycles_branches(&p, &r, &w, &bw, 4, &none).unwrap(), aco_split);
+        // BB3 named: its side runs in 5 passes, the if inside it keeps ACO's 0.75 (0.25 for the
+        // skip), the blocks outside it run in every pass: 20·20 + 5·40 + 5·0.75·8 + 5·0.25·4 + 20·2.
+        let named = aco::BranchSides { sides: [(Branch::Edges, 3)].into(), left: vec![] };
+        let s = ray_cycles_branches(&p, &r, &w, &bw, 4, &named).unwrap();
+        assert_eq!(s.triangles, 400.0 + 200.0 + 30.0 + 5.0 + 40.0);
+        assert_eq!((s.setup, s.step, s.slots), (aco_split.setup, aco_split.step, aco_split.slots));
+        // Counts of other rays, a side outside the triangle loop: refused.
+        let other = BranchWork { tri_passes: 21, ..bw };
+        assert!(ray_cycles_branches(&p, &r, &w, &other, 4, &named).unwrap_err().contains("21 triangle passes"));
+        let outside = aco::BranchSides { sides: [(Branch::Edges, 1)].into(), left: vec![] };
+        assert!(ray_cycles_branches(&p, &r, &w, &bw, 4, &outside).unwrap_err().contains("outside the triangle loop"));
     }
 
     #[test]

@@ -33,6 +33,7 @@ impl<'g> Kernel<'g> {
     pub fn label(&self) -> String {
         match &self.source {
             Source::Builtin => self.name(),
+            Source::Marked => format!("{} (branches marked)", self.name()),
             Source::Glsl(p) | Source::Spirv(p) => format!("{} (user kernel {})", self.name(), p.display()),
         }
     }
@@ -45,6 +46,7 @@ impl<'g> Kernel<'g> {
         let (k, pin, dev) = (&d.id, d.pin, d.build);
         let code = match source {
             Source::Builtin => shader::compile(k, dev)?,
+            Source::Marked => shader::compile_marked(k, dev)?,
             Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, k, dev)?, k, gpu)?,
             Source::Spirv(p) => {
                 // The interface first (its messages say what a kernel must look like), then the
@@ -127,7 +129,9 @@ impl<'g> Kernel<'g> {
         let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
         if let Some(bad) = hits.iter().position(|h| h.prim == PRIM_OVERFLOW) {
             return Err(GpuError::Other(match &self.source {
-                Source::Builtin => format!("{}: ray {bad} overflowed the traversal stack", self.name()),
+                Source::Builtin | Source::Marked => {
+                    format!("{}: ray {bad} overflowed the traversal stack", self.name())
+                }
                 Source::Glsl(p) | Source::Spirv(p) => format!(
                     "the user's kernel {} (in place of {}): ray {bad} overflowed its traversal stack — was it built for another branching factor or layout than B = {}?",
                     p.display(),

@@ -22,6 +22,7 @@
 //! [`Program::latency`] equals the printed `latency` (the identity the tests check); with
 //! other trips, per loop, it is the same model run on them.
 
+use crate::base::tri::Branch;
 use std::collections::BTreeMap;
 
 /// One block of a printout.
@@ -137,6 +138,34 @@ struct Replay<'a> {
     blocks: &'a BTreeMap<usize, Block>,
     depth: Vec<Depth>,
     loops: Vec<Loop>,
+    /// The sides open at the block being created, outermost first.
+    stack: Vec<Side>,
+    /// Per block, the sides around it (parallel to `depth`).
+    sides: Vec<Vec<Side>>,
+    events: Vec<Event>,
+}
+
+/// A side of an if (its then or else blocks): the first block of it, and the weight ACO gives
+/// it (0.75 in a divergent if, 0.5 in a uniform one, 1 in an exec skip, which ACO does not
+/// weigh).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Side {
+    pub first: usize,
+    pub weight: f64,
+}
+
+/// The program's control flow in the order instruction selection makes it (its shape, for
+/// comparing two builds of one kernel: [`branch_sides`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// An if whose sides weigh this much.
+    If(f64),
+    /// A side of the innermost if, by its first block.
+    Side(usize),
+    EndSide,
+    EndIf,
+    Loop,
+    EndLoop,
 }
 
 impl Replay<'_> {
@@ -153,7 +182,21 @@ impl Replay<'_> {
             }
         }
         self.depth.push(d);
+        self.sides.push(self.stack.clone());
         Ok(i)
+    }
+
+    /// Creates the first block of a side of weight `weight` and opens it.
+    fn open_side(&mut self, inner: Depth, weight: f64) -> Result<usize, String> {
+        let first = self.depth.len();
+        self.events.push(Event::Side(first));
+        self.stack.push(Side { first, weight });
+        self.create(inner, None)
+    }
+
+    fn close_side(&mut self) {
+        self.stack.pop();
+        self.events.push(Event::EndSide);
     }
 
     /// One list of control flow whose current block is `cur`: returns the block that ends it.
@@ -185,12 +228,14 @@ impl Replay<'_> {
 
     fn nest(&mut self, d: Depth) -> Result<usize, String> {
         let inner = Depth { loops: d.loops + 1, ..d };
+        self.events.push(Event::Loop);
         let header = self.create(inner, Some("loop-header"))?;
         let last = self.region(header, inner)?;
         if self.block(last)?.is("continue_or_break") {
             self.create(inner, None)?;
             self.create(inner, None)?;
         }
+        self.events.push(Event::EndLoop);
         let exit = self.create(d, Some("loop-exit"))?;
         self.loops.push(Loop { header, exit, depth: inner.loops, at: d });
         Ok(exit)
@@ -198,26 +243,36 @@ impl Replay<'_> {
 
     fn divergent_if(&mut self, d: Depth) -> Result<usize, String> {
         let inner = Depth { divergent_ifs: d.divergent_ifs + 1, ..d };
-        let then = self.create(inner, None)?;
+        self.events.push(Event::If(0.75));
+        let then = self.open_side(inner, 0.75)?;
         self.region(then, inner)?;
+        self.close_side();
         self.create(d, None)?;
         // ACO 26 leaves out an empty else side (no invert block, no else blocks): the merge
         // follows the then side's linear block.
         if self.block(self.depth.len())?.is("merge") {
+            self.events.push(Event::EndIf);
             return self.create(d, Some("merge"));
         }
         self.create(d, Some("invert"))?;
-        let els = self.create(inner, None)?;
+        let els = self.open_side(inner, 0.75)?;
         self.region(els, inner)?;
+        self.close_side();
         self.create(d, None)?;
+        self.events.push(Event::EndIf);
         self.create(d, Some("merge"))
     }
 
     fn uniform_if(&mut self, d: Depth, inner: Depth) -> Result<usize, String> {
-        let then = self.create(inner, None)?;
+        let weight = if inner.uniform_ifs > d.uniform_ifs { 0.5 } else { 1.0 };
+        self.events.push(Event::If(weight));
+        let then = self.open_side(inner, weight)?;
         self.region(then, inner)?;
-        let els = self.create(inner, None)?;
+        self.close_side();
+        let els = self.open_side(inner, weight)?;
         self.region(els, inner)?;
+        self.close_side();
+        self.events.push(Event::EndIf);
         self.create(d, None)
     }
 }
@@ -231,6 +286,10 @@ pub struct Weighed {
     pub depth: Depth,
     /// The linear-only block a wave runs when it skips a side of a divergent if (×0.25).
     pub skip_side: bool,
+    /// The sides of ifs around it, outermost first (their weights make `depth`'s factor).
+    pub sides: Vec<Side>,
+    /// The named branches whose markers it holds (a marked build's: [`branch_sides`]).
+    pub markers: Vec<Branch>,
 }
 
 impl Depth {
@@ -262,6 +321,8 @@ pub struct Program {
     pub printed_latency: f64,
     /// The other figures printed beside it (`num_waves`, `valu_usage`, …).
     pub printed: BTreeMap<String, f64>,
+    /// Its control flow's shape, as instruction selection made it.
+    pub events: Vec<Event>,
 }
 
 impl Program {
@@ -307,7 +368,14 @@ impl Program {
         printed_latency: f64,
         printed: BTreeMap<String, f64>,
     ) -> Result<Program, String> {
-        let mut r = Replay { blocks: isel, depth: Vec::new(), loops: Vec::new() };
+        let mut r = Replay {
+            blocks: isel,
+            depth: Vec::new(),
+            loops: Vec::new(),
+            stack: Vec::new(),
+            sides: Vec::new(),
+            events: Vec::new(),
+        };
         let first = r.create(Depth::default(), None)?;
         r.region(first, Depth::default())?;
         if r.depth.len() != isel.len() {
@@ -328,12 +396,13 @@ impl Program {
                     && b.linear_preds.len() == 1
                     && succs.get(&b.index) == Some(&1)
                     && fin.get(&b.linear_preds[0]).is_some_and(|p| p.is("branch") || p.is("invert"));
-                Weighed { index: b.index, clk: b.clk, depth, skip_side }
+                let sides = r.sides.get(b.index).cloned().unwrap_or_default();
+                Weighed { index: b.index, clk: b.clk, depth, skip_side, sides, markers: markers(b) }
             })
             .collect();
         let mut loops = r.loops;
         loops.sort_by_key(|l| l.header);
-        Ok(Program { blocks, loops, printed_latency, printed })
+        Ok(Program { blocks, loops, printed_latency, printed, events: r.events })
     }
 
     /// The loops holding block `i`, outermost first.
@@ -380,6 +449,143 @@ impl Program {
     pub fn cycles(&self, passes: impl Fn(&Loop) -> f64) -> f64 {
         self.per_pass(None) + self.loops.iter().map(|l| self.per_pass(Some(l)) * passes(l)).sum::<f64>()
     }
+}
+
+/// The named branches whose markers (atomic operations, [`Branch::marker`]) block `b` holds.
+fn markers(b: &Block) -> Vec<Branch> {
+    b.instrs
+        .iter()
+        .filter_map(|i| {
+            let op = i.split_whitespace().find_map(|w| w.split_once("atomic_").map(|(_, op)| op))?;
+            Branch::of_marker(op.split('_').next().unwrap_or(op))
+        })
+        .collect()
+}
+
+/// What a marked build says of the real build's branches: for each named branch whose
+/// marker the marked build holds, the side of the real program that runs it (its first
+/// block), or why none does.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BranchSides {
+    pub sides: BTreeMap<Branch, usize>,
+    /// Branches not found as a side of the real program, with why: flattened there (its if was
+    /// made selects, so ACO weighs no block of it), or not in a side of its own.
+    pub left: Vec<(Branch, String)>,
+}
+
+/// Finds the named branches of `real` from `marked`, the same kernel built with a marker at
+/// the start of each named side (`BRANCH_MARKS`). The two programs' control flow must be the
+/// same but for ifs the markers kept that the real build flattened (an if with no if or loop
+/// inside, holding a marker): those branches are left out, said. Where two alignments of the
+/// shapes fit, the branches in the ifs they disagree on are left out too. Any other difference
+/// is an error: the marked build changed the program's shape.
+pub fn branch_sides(marked: &Program, real: &Program) -> Result<BranchSides, String> {
+    let (a, b) = (&marked.events, &real.events);
+    let (n, m) = (a.len(), b.len());
+    // The side each marker is in (the innermost side of its block).
+    let mut side_of: BTreeMap<Branch, Option<usize>> = BTreeMap::new();
+    for blk in &marked.blocks {
+        for &k in &blk.markers {
+            if side_of.insert(k, blk.sides.last().map(|s| s.first)).is_some() {
+                return Err(format!("the {} marker appears twice in the marked build", k.name()));
+            }
+        }
+    }
+    let marked_sides: Vec<usize> = side_of.values().flatten().copied().collect();
+    // Where an if starting at event i ends (the event after its EndIf), when it holds no if or
+    // loop and one of its sides holds a marker: the marked build may have kept it alone.
+    let skip: Vec<Option<usize>> = (0..n)
+        .map(|i| {
+            if !matches!(a[i], Event::If(_)) {
+                return None;
+            }
+            let mut marker = false;
+            for (j, e) in a.iter().enumerate().skip(i + 1) {
+                match e {
+                    Event::Side(f) => marker |= marked_sides.contains(f),
+                    Event::EndSide => {}
+                    Event::EndIf => return marker.then_some(j + 1),
+                    _ => return None,
+                }
+            }
+            None
+        })
+        .collect();
+    let same = |x: &Event, y: &Event| match (x, y) {
+        (Event::Side(_), Event::Side(_)) => true,
+        _ => x == y,
+    };
+    // ok[i][j]: a[i..] aligns with b[j..].
+    let mut ok = vec![vec![false; m + 1]; n + 1];
+    ok[n][m] = true;
+    for i in (0..n).rev() {
+        for j in (0..=m).rev() {
+            let matched = j < m && same(&a[i], &b[j]) && ok[i + 1][j + 1];
+            let skipped = skip[i].is_some_and(|e| ok[e][j]);
+            ok[i][j] = matched || skipped;
+        }
+    }
+    if !ok[0][0] {
+        return Err(format!(
+            "the marked build's control flow ({} ifs, {} loops) is not the real build's ({} ifs, {} loops) with marked ifs added",
+            a.iter().filter(|e| matches!(e, Event::If(_))).count(),
+            a.iter().filter(|e| **e == Event::Loop).count(),
+            b.iter().filter(|e| matches!(e, Event::If(_))).count(),
+            b.iter().filter(|e| **e == Event::Loop).count()
+        ));
+    }
+    let (mut i, mut j) = (0, 0);
+    let mut map: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut dropped: Vec<(usize, &str)> = Vec::new();
+    while i < n {
+        let matched = j < m && same(&a[i], &b[j]) && ok[i + 1][j + 1];
+        let skipped = skip[i].filter(|&e| ok[e][j]);
+        match (matched, skipped) {
+            (true, skip) => {
+                if let (Event::Side(x), Event::Side(y)) = (a[i], b[j]) {
+                    map.insert(x, y);
+                }
+                if let Some(e) = skip {
+                    for ev in &a[i..e] {
+                        if let Event::Side(x) = ev {
+                            dropped.push((
+                                *x,
+                                "its if matches the real build's in one alignment and is missing in another",
+                            ));
+                        }
+                    }
+                }
+                (i, j) = (i + 1, j + 1);
+            }
+            (false, Some(e)) => {
+                for ev in &a[i..e] {
+                    if let Event::Side(x) = ev {
+                        dropped.push((*x, "flattened in the real build (its if became selects: no block to weigh)"));
+                    }
+                }
+                i = e;
+            }
+            (false, None) => unreachable!("ok[i][j] holds on the path taken"),
+        }
+    }
+    let mut out = BranchSides::default();
+    for k in Branch::ALL.into_iter().filter(|k| k.marker().is_some() && !side_of.contains_key(k)) {
+        out.left.push((k, "no marker in the marked build (its compiler removed or changed it)".into()));
+    }
+    for (k, side) in side_of {
+        let Some(side) = side else {
+            out.left.push((k, "its marker is in no side of an if".into()));
+            continue;
+        };
+        if let Some((_, why)) = dropped.iter().find(|(x, _)| *x == side) {
+            out.left.push((k, (*why).into()));
+        } else if let Some(&y) = map.get(&side) {
+            out.sides.insert(k, y);
+        } else {
+            out.left.push((k, "its side has no counterpart in the real build".into()));
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -450,6 +656,104 @@ mod tests {
         assert_eq!(p.per_pass(Some(&p.loops[0])), 22.5);
         assert_eq!(p.cycles(|l| p.aco_passes(l)), want);
         assert_eq!(p.cycles(|_| 3.0), 8.0 + 3.0 * 22.5);
+        // The if's two sides, by their first blocks, and the shape of the control flow.
+        let (then, els) = (Side { first: 2, weight: 0.75 }, Side { first: 5, weight: 0.75 });
+        assert_eq!((d(2).sides.clone(), d(5).sides.clone(), d(3).sides.clone()), (vec![then], vec![els], vec![]));
+        use Event as E;
+        let shape = [E::Loop, E::If(0.75), E::Side(2), E::EndSide, E::Side(5), E::EndSide, E::EndIf, E::EndLoop];
+        assert_eq!(p.events, shape);
+        // The product of a block's sides' weights is ACO's if factor.
+        for b in &p.blocks {
+            assert_eq!(b.sides.iter().map(|s| s.weight).product::<f64>(), b.depth.if_factor(), "BB{}", b.index);
+        }
+    }
+
+    #[test]
+    fn markers_are_read_from_their_atomic_operations() {
+        let b = |instrs: &[&str]| Block { instrs: instrs.iter().map(|s| s.to_string()).collect(), ..Block::default() };
+        assert_eq!(
+            markers(&b(&["(  4 clk)   buffer_atomic_add %1, %2, 0 offset:4", "v_mov_b32 v0, 1"])),
+            vec![Branch::Edges]
+        );
+        assert_eq!(
+            markers(&b(&["global_atomic_cmpswap v[0:1], v2", "buffer_atomic_smin v1"])),
+            vec![Branch::Best, Branch::Huge]
+        );
+        assert_eq!(markers(&b(&["buffer_atomic_swap v1", "buffer_store_dword v1"])), vec![]);
+    }
+
+    /// A program of events `ev` whose blocks `marked` hold markers, each in the side `first`.
+    fn shaped(ev: Vec<Event>, marked: &[(usize, Branch)]) -> Program {
+        Program {
+            blocks: marked
+                .iter()
+                .map(|&(first, k)| Weighed {
+                    index: first,
+                    clk: 0,
+                    depth: Depth::default(),
+                    skip_side: false,
+                    sides: vec![Side { first, weight: 0.75 }],
+                    markers: vec![k],
+                })
+                .collect(),
+            loops: vec![],
+            printed_latency: 0.0,
+            printed: Default::default(),
+            events: ev,
+        }
+    }
+
+    #[test]
+    fn a_marked_build_names_the_real_builds_sides() {
+        use Event::*;
+        // Real: a loop holding an if (sides 3, 9) with an if inside its then side (5).
+        let real = shaped(
+            vec![Loop, If(0.75), Side(3), If(0.75), Side(5), EndSide, EndIf, EndSide, Side(9), EndSide, EndIf, EndLoop],
+            &[],
+        );
+        // Marked: the same, the markers moving the blocks' numbers, and one marked (uniform) if
+        // more (side 8: flattened in the real build).
+        let with = |flat: f64| {
+            vec![
+                Loop,
+                If(0.75),
+                Side(4),
+                If(0.75),
+                Side(6),
+                EndSide,
+                EndIf,
+                If(flat),
+                Side(8),
+                EndSide,
+                EndIf,
+                EndSide,
+                Side(12),
+                EndSide,
+                EndIf,
+                EndLoop,
+            ]
+        };
+        let marks = [(4, Branch::Edges), (6, Branch::Cross), (8, Branch::Best), (12, Branch::Flat)];
+        let marked = shaped(with(0.5), &marks);
+        let s = branch_sides(&marked, &real).unwrap();
+        assert_eq!(s.sides, [(Branch::Edges, 3), (Branch::Cross, 5), (Branch::Flat, 9)].into());
+        let left: Vec<Branch> = s.left.iter().map(|x| x.0).collect();
+        assert_eq!(left, vec![Branch::Huge, Branch::Divide, Branch::Candidate, Branch::Best]);
+        assert!(s.left.iter().any(|(k, why)| *k == Branch::Best && why.contains("flattened")), "{:?}", s.left);
+        // Two marked divergent ifs in a row where the real build has one: either could be it,
+        // so neither is named.
+        let s = branch_sides(&shaped(with(0.75), &marks), &real).unwrap();
+        assert_eq!(s.sides, [(Branch::Edges, 3), (Branch::Flat, 9)].into());
+        assert!(s.left.iter().any(|(k, why)| *k == Branch::Cross && why.contains("another")), "{:?}", s.left);
+        // An if the real build lacks that holds no marker, or a loop more: not the same program.
+        let unmarked = shaped(marked.events.clone(), &[(4, Branch::Edges)]);
+        assert!(branch_sides(&unmarked, &real).unwrap_err().contains("not the real build's"));
+        let mut looped = marked.clone();
+        looped.events.splice(0..0, [Loop, EndLoop]);
+        assert!(branch_sides(&looped, &real).is_err());
+        // A marker twice is refused.
+        let twice = shaped(marked.events.clone(), &[(4, Branch::Edges), (6, Branch::Edges)]);
+        assert!(branch_sides(&twice, &real).unwrap_err().contains("twice"));
     }
 
     /// ACO 26 leaves an empty else side out: the merge follows the then side's linear block,

@@ -63,6 +63,9 @@ pub struct ModelArgs {
     /// Write the representations under this folder.
     #[arg(long)]
     pub disasm: Option<PathBuf>,
+    /// Build each kernel with its named branches marked ([`crate::variant::Source::Marked`]).
+    #[arg(long)]
+    pub marked: bool,
 }
 
 impl ModelArgs {
@@ -75,6 +78,7 @@ impl ModelArgs {
             .list("branchings", &self.branchings)
             .flag("validation", self.validation)
             .opt("disasm", self.disasm.as_ref().map(|d| d.display()))
+            .flag("marked", self.marked)
     }
 }
 
@@ -208,6 +212,7 @@ fn run_model(cfg: &Config, exe: &Path, t: &Target, builds: &[KernelSpec]) -> any
         branchings: cfg.branchings.clone(),
         validation: cfg.validation,
         disasm: cfg.disasm.as_ref().map(|d| d.join(sub)),
+        marked: false,
     };
     shim::run_model(exe, (v, &m), dir, &args.argv(), builds)
 }
@@ -257,6 +262,7 @@ pub fn aco_programs(
     matrix: Matrix,
     layouts: &[LayoutId],
     amd: Option<&Path>,
+    marked: bool,
 ) -> anyhow::Result<Vec<(IsaRow, Result<aco::Program, String>)>> {
     let args = ModelArgs {
         model: family.into(),
@@ -265,6 +271,7 @@ pub fn aco_programs(
         branchings: Vec::new(),
         validation: false,
         disasm: None,
+        marked,
     };
     // Under the amdgpu shim of a compilers folder (Mesa 26 on), by the folder's copy of this binary.
     let (exe, env) = match amd.and_then(|d| Some((d, shim::amd_shim(d)?))) {
@@ -392,7 +399,8 @@ fn build_one(
     row.float_controls = k.variant.fc.name().into();
     before(&row.kernel);
     let t0 = Instant::now();
-    let kernel = match Kernel::build(g, &d, &Source::Builtin) {
+    let source = if b.source == Source::Marked { Source::Marked } else { Source::Builtin };
+    let kernel = match Kernel::build(g, &d, &source) {
         Ok(k) => k,
         Err(GpuError::Unsupported(why)) => {
             row.status = Status::Skipped(why);

@@ -63,6 +63,19 @@ pub struct RayRow {
     pub lane_average: f64,
     /// Per ray, by part.
     pub split: Split,
+    /// Cycles per ray with ACO's weights for every branch (before the rays weighed the named
+    /// ones), and its triangle part.
+    #[serde(default)]
+    pub aco_branches: f64,
+    #[serde(default)]
+    pub aco_triangles: f64,
+    /// aco_branches ÷ f32's peer's.
+    #[serde(default)]
+    pub aco_vs_f32: Option<f64>,
+    /// Which named branches the rays weighed (`rays: edges cross …`), which were left to
+    /// ACO's weights and why.
+    #[serde(default)]
+    pub branches: String,
     /// ACO's waves per SIMD (registers and LDS).
     pub waves: f64,
     /// Rays per 1000 clocks per SIMD: ACO's throughput (`wave64_per_cycle`, its waves per SIMD
@@ -79,12 +92,17 @@ super::key::keyed_row!(RayRow, |r| place: [&r.family, "", &r.scene, &r.rays], fl
 
 /// Sets each row's ratio to its f32 peer's cycles per ray.
 pub fn set_ratios(rows: &mut [RayRow]) {
-    let ratios: Vec<Option<f64>> = rows
+    let ratios: Vec<Option<(f64, f64)>> = rows
         .iter()
-        .map(|r| f32_peer(r, rows.iter()).filter(|_| r.status.is_ok()).map(|f| r.cycles_per_ray / f.cycles_per_ray))
+        .map(|r| {
+            f32_peer(r, rows.iter())
+                .filter(|_| r.status.is_ok())
+                .map(|f| (r.cycles_per_ray / f.cycles_per_ray, r.aco_branches / f.aco_branches.max(f64::MIN_POSITIVE)))
+        })
         .collect();
     for (r, q) in rows.iter_mut().zip(ratios) {
-        r.vs_f32 = q;
+        r.vs_f32 = q.map(|q| q.0);
+        r.aco_vs_f32 = q.map(|q| q.1);
     }
 }
 
@@ -98,7 +116,13 @@ pub fn section(rows: &[RayRow]) -> String {
            hidden, not a measurement.** `cycles/ray`: a wave's cycles ÷ its rays; `lane avg`: the same if every \
            pass lasted as long as the wave's average lane (or packet); the split: set-up and hit write, the traversal step \
            (entering a node, box tests, ordering, stack), the child-slot loop, the triangle tests; `rays/kclk`: \
-           rays per 1000 clocks per SIMD at ACO's occupancy (its throughput model scaled to these rays).\n\n";
+           rays per 1000 clocks per SIMD at ACO's occupancy (its throughput model scaled to these rays). \
+           **Branches**: the named sides of the triangle test (past the projected miss test: `edges`; past the \
+           edge functions' miss: `cross`; no usable determinant: `flat`, else `divide`; huge coordinates: `huge`; \
+           not rejected by tmin or the best: `candidate`; kept as the best: `best`) run in as many of a wave's \
+           triangle passes as the rays take them (any lane), found in the program by a build with a marker at the \
+           start of each; the other ifs keep ACO's weights (×0.75 divergent, ×0.5 uniform). `ACO's branches`: the \
+           same with ACO's weights for every branch (the figure before the rays weighed them).\n\n";
     let mut groups: Vec<(&str, &str, &str)> =
         rows.iter().map(|r| (r.family.as_str(), r.scene.as_str(), r.rays.as_str())).collect();
     groups.dedup();
@@ -111,13 +135,23 @@ pub fn section(rows: &[RayRow]) -> String {
             g[0].ray_count,
             g[0].wave
         );
-        md += "| kernel | layout | math | B | P | cycles/ray | ÷ f32 | lane avg | set-up | step | slots | triangles | waves | rays/kclk | status |\n";
-        md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+        let named = |r: &&&RayRow| r.layout == "f32" && r.branches.starts_with("rays: ");
+        if let Some(f) = g.iter().filter(named).find(|r| r.branching == 4 && r.packet == 1).or(g.iter().find(named)) {
+            md += &format!("Named branches, share of f32 {}'s triangle passes — {}.\n\n", f.kernel, &f.branches[6..]);
+        }
+        for r in g.iter().filter(|r| r.status.is_ok() && !r.branches.starts_with("rays: ")) {
+            md += &format!("- {}: {}\n", r.kernel, r.branches);
+        }
+        if g.iter().any(|r| r.status.is_ok() && !r.branches.starts_with("rays: ")) {
+            md += "\n";
+        }
+        md += "| kernel | layout | math | B | P | cycles/ray | ÷ f32 | ACO's branches | ÷ f32 | lane avg | set-up | step | slots | triangles | triangles, ACO's branches | waves | rays/kclk | status |\n";
+        md += "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
         for r in g {
             let ok = r.status.is_ok();
             let n = |x: f64| if ok { format!("{x:.1}") } else { "–".into() };
             md += &format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 r.kernel,
                 r.layout,
                 r.math,
@@ -125,11 +159,14 @@ pub fn section(rows: &[RayRow]) -> String {
                 if r.packet > 1 { format!("{} {}", r.packet, r.packet_impl) } else { "1".into() },
                 n(r.cycles_per_ray),
                 r.vs_f32.map_or("–".into(), |v| format!("{v:.2}")),
+                n(r.aco_branches),
+                r.aco_vs_f32.map_or("–".into(), |v| format!("{v:.2}")),
                 n(r.lane_average),
                 n(r.split.setup),
                 n(r.split.step),
                 n(r.split.slots),
                 n(r.split.triangles),
+                n(r.aco_triangles),
                 if ok { format!("{:.0}", r.waves) } else { "–".into() },
                 if ok { format!("{:.2}", r.rays_per_kclk) } else { "–".into() },
                 r.status
@@ -178,6 +215,13 @@ struct RayRecord<'a> {
     waves: f64,
     #[serde(serialize_with = "display")]
     rays_per_kclk: f64,
+    #[serde(serialize_with = "display")]
+    aco_branches: f64,
+    #[serde(serialize_with = "opt_display")]
+    aco_vs_f32: Option<f64>,
+    #[serde(serialize_with = "display")]
+    aco_triangles: f64,
+    branches: &'a str,
 }
 
 /// estimate-rays.csv: one line per kernel, family and ray set.
@@ -206,6 +250,10 @@ pub fn csv(rows: &[RayRow]) -> anyhow::Result<Vec<u8>> {
         triangles: r.split.triangles,
         waves: r.waves,
         rays_per_kclk: r.rays_per_kclk,
+        aco_branches: r.aco_branches,
+        aco_vs_f32: r.aco_vs_f32,
+        aco_triangles: r.aco_triangles,
+        branches: &r.branches,
     }))
 }
 

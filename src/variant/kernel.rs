@@ -14,6 +14,11 @@ pub enum Source {
     Glsl(PathBuf),
     /// A user's SPIR-V module.
     Spirv(PathBuf),
+    /// The built-in kernel with a marker at the start of each named side of its triangle test
+    /// (`BRANCH_MARKS`: an atomic operation per side, `glsl/ray.glsl`'s `MARK`), so that a
+    /// compiler's listing shows which of its blocks run each side — `estimate`'s branch
+    /// weights. Built, never run.
+    Marked,
 }
 
 impl Source {

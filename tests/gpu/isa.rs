@@ -107,17 +107,38 @@ fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
     assert!(std::path::Path::new(RADV_ICD).exists(), "{RADV_ICD} is missing: RADV provides the null devices");
     let bin = std::path::Path::new(env!("CARGO_BIN_EXE_halftrace"));
     let runs: Vec<_> = std::thread::scope(|s| {
-        let hs: Vec<_> = ["navi31", "vega10"]
-            .map(|f| s.spawn(move || (f, halftrace::isa::aco_programs(bin, f, Matrix::Default, &[], None))))
+        let hs: Vec<_> = [("navi31", false), ("navi31", true), ("vega10", false), ("vega10", true)]
+            .map(|(f, m)| s.spawn(move || (f, halftrace::isa::aco_programs(bin, f, Matrix::Default, &[], None, m))))
             .into_iter()
             .collect();
         hs.into_iter().map(|h| h.join().unwrap()).collect()
     });
-    for (family, run) in runs {
+    let mut runs = runs.into_iter();
+    while let (Some((family, run)), Some((_, marked))) = (runs.next(), runs.next()) {
         let run = run.unwrap_or_else(|e| panic!("{family}: {e:#}"));
+        let marked = marked.unwrap_or_else(|e| panic!("{family}, marked: {e:#}"));
         assert_eq!(run.len(), plan(Matrix::Default, &[]).len(), "{family}: one row per kernel");
-        for (row, p) in run {
+        assert_eq!(marked.len(), run.len(), "{family}: one marked build per kernel");
+        for ((row, p), (mrow, mp)) in run.into_iter().zip(marked) {
             let p = p.unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
+            let mp = mp.unwrap_or_else(|e| panic!("{family} {} marked: {e}", mrow.kernel));
+            assert_eq!(mrow.kernel, row.kernel);
+            // The sides the replay tracks weigh as ACO's depths do, block by block.
+            for b in &p.blocks {
+                let w: f64 = b.sides.iter().map(|s| s.weight).product();
+                assert_eq!(w, b.depth.if_factor(), "{family} {} BB{}: {:?}", row.kernel, b.index, b.sides);
+            }
+            // The marked build names the triangle test's sides in the real program, each inside
+            // its triangle loop; the undecided pair's update is made selects (left out, said).
+            let sides =
+                halftrace::isa::aco::branch_sides(&mp, &p).unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
+            let r = halftrace::estimate::roles(&p).unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
+            use halftrace::base::tri::Branch;
+            for k in [Branch::Edges, Branch::Cross, Branch::Divide, Branch::Flat, Branch::Candidate, Branch::Best] {
+                let s =
+                    sides.sides.get(&k).unwrap_or_else(|| panic!("{family} {}: no {k:?} side: {sides:?}", row.kernel));
+                assert!(r.triangles.contains(*s), "{family} {}: {k:?} at BB{s}, outside {:?}", row.kernel, r.triangles);
+            }
             let mine = p.aco_latency();
             assert!(
                 (mine - p.printed_latency).abs() <= 1e-6,
@@ -141,7 +162,8 @@ fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
 }
 
 /// `halftrace estimate` end to end on navi31 (f32 and f16a, B = 4, the teapot's primary and ao
-/// rays): every kernel rebuilt exactly and estimated; f32's ratio is 1; a wave in lockstep
+/// rays): every kernel rebuilt exactly and estimated, its named branches found by the marked
+/// build and weighed by the rays; f32's ratio is 1; a wave in lockstep
 /// costs at least its average lane and, on incoherent ao rays, more; the triangle tests and
 /// the traversal step carry cycles; `report` renders the section and the plot; bad arguments
 /// are refused by name.
@@ -173,8 +195,18 @@ fn estimate_weighs_acos_model_with_the_rays() {
             assert!(r.cycles_per_ray > 1.2 * r.lane_average, "{what}: lockstep on incoherent rays {r:?}");
         }
         if r.layout == "f32" {
-            assert_eq!(r.vs_f32, Some(1.0), "{what}");
+            assert_eq!((r.vs_f32, r.aco_vs_f32), (Some(1.0), Some(1.0)), "{what}");
         }
+        // The marked build names the triangle test's sides in ACO's program (the candidate's
+        // update of the undecided pair is made selects, unmarked), and the rays' branch weights
+        // move the triangle tests' part only.
+        for k in ["edges", "cross", "flat", "divide", "candidate", "best", "huge 0.0%"] {
+            assert!(r.branches.starts_with("rays: ") && r.branches.contains(k), "{what}: {k} in {}", r.branches);
+        }
+        assert!(r.aco_branches > 0.0 && r.aco_triangles > 0.0, "{what}: {r:?}");
+        let moved = (r.aco_branches - r.aco_triangles) - (r.cycles_per_ray - r.split.triangles);
+        assert!(moved.abs() < 1e-6 * r.cycles_per_ray, "{what}: only the triangle part moves: {r:?}");
+        assert!(r.split.triangles != r.aco_triangles, "{what}: the rays weighed no branch: {r:?}");
     }
     let (ok, _, err) = cli(&["report", o]);
     assert!(ok, "{err}");

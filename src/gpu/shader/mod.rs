@@ -89,6 +89,18 @@ pub fn compile(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
     with_float_modes(&k.name(), &words, v)
 }
 
+/// The built-in kernel `k` with its named branches marked (`BRANCH_MARKS`,
+/// [`crate::variant::Source::Marked`]).
+pub fn compile_marked(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
+    let src = source("trav.comp").expect("glsl/trav.comp is embedded");
+    let v = &k.variant;
+    let mut defines = v.defines(k.imp, k.stats, dev);
+    defines.push(("BRANCH_MARKS".into(), "1".into()));
+    let name = format!("{} (branches marked)", k.name());
+    let words = compile_source(&name, "trav.comp", src, &defines, &Includes::variant(v), dev.spirv_minor)?;
+    with_float_modes(&name, &words, v)
+}
+
 /// `words` with the float-control modes of `v` added ([`spirv::add_float_modes`]).
 fn with_float_modes(name: &str, words: &[u32], v: &Variant) -> Result<Vec<u32>, GpuError> {
     spirv::add_float_modes(words, &super::support::float_modes(v))
