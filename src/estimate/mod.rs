@@ -31,7 +31,7 @@
 mod rays;
 
 pub use crate::report::estimate::{RayRow, Split};
-pub use rays::{ray_cycles, ray_rows, roles, Built, LoopCosts, Rays, Roles};
+pub use rays::{ray_cycles, ray_rows, roles, roles_at, Built, LoopCosts, Rays, Roles};
 
 use crate::base::Status;
 use crate::gpu::null;

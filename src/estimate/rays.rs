@@ -53,6 +53,14 @@ impl LoopCosts for aco::Program {
 
 /// Names the traversal, slot and triangle loops of `p` by its shape, or says why it cannot.
 pub fn roles(p: &impl LoopCosts) -> Result<Roles, String> {
+    roles_at(p, None)
+}
+
+/// [`roles`], the triangle loop being the innermost loop around block `test` where it is
+/// given (a named side of the triangle test: [`aco::branch_sides`]) and lies inside the
+/// traversal loop. By shape alone the costliest pass can be another loop's: ACO 26 keeps f16h
+/// fp16's child-slot loop at B = 16, beside the triangle loop and costlier per pass.
+pub fn roles_at(p: &impl LoopCosts, test: Option<usize>) -> Result<Roles, String> {
     let within = |outer: &aco::Loop, inner: &aco::Loop| outer.header <= inner.header && inner.exit <= outer.exit;
     let share = |l: &aco::Loop| -> f64 {
         p.loops().iter().filter(|m| within(l, m)).map(|m| p.per_pass(Some(m)) * p.assumed_passes(m)).sum()
@@ -63,11 +71,16 @@ pub fn roles(p: &impl LoopCosts) -> Result<Roles, String> {
         .filter(|l| l.depth == 1)
         .max_by(|a, b| share(a).total_cmp(&share(b)))
         .ok_or("no loop: not a traversal kernel")?;
-    let triangles = *p
-        .loops()
-        .iter()
-        .filter(|l| **l != traversal && within(&traversal, l))
-        .max_by(|a, b| p.per_pass(Some(a)).total_cmp(&p.per_pass(Some(b))))
+    let around = test.and_then(|t| {
+        p.loops().iter().filter(|l| **l != traversal && within(&traversal, l) && l.contains(t)).max_by_key(|l| l.depth)
+    });
+    let triangles = *around
+        .or_else(|| {
+            p.loops()
+                .iter()
+                .filter(|l| **l != traversal && within(&traversal, l))
+                .max_by(|a, b| p.per_pass(Some(a)).total_cmp(&p.per_pass(Some(b))))
+        })
         .ok_or("no loop inside the traversal loop (the triangle loop)")?;
     let between: Vec<aco::Loop> = p
         .loops()
@@ -205,7 +218,14 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
     // The loops the rays weigh depend on the program only.
     let named: Vec<Vec<Result<Roles, String>>> = built
         .iter()
-        .map(|(_, b)| b.iter().map(|(_, p, _)| p.as_ref().map_err(String::clone).and_then(roles)).collect())
+        .map(|(_, b)| {
+            b.iter()
+                .map(|(_, p, sides)| {
+                    let test = sides.as_ref().ok().and_then(|s| s.sides.get(&Branch::Edges).copied());
+                    p.as_ref().map_err(String::clone).and_then(|p| roles_at(p, test))
+                })
+                .collect()
+        })
         .collect();
     let mut per_family: Vec<Vec<RayRow>> = vec![Vec::new(); built.len()];
     let mut runner = Runner::new(None, &[], Default::default())?;
@@ -397,6 +417,21 @@ mod tests {
         assert!(ray_cycles_branches(&p, &r, &w, &other, 4, &named).unwrap_err().contains("21 triangle passes"));
         let outside = aco::BranchSides { sides: [(Branch::Edges, 1)].into(), left: vec![] };
         assert!(ray_cycles_branches(&p, &r, &w, &bw, 4, &outside).unwrap_err().contains("outside the triangle loop"));
+    }
+
+    /// A loop beside the triangle loop whose pass costs more is taken for it by shape alone; a
+    /// named side of the triangle test names the right one.
+    #[test]
+    fn a_named_side_names_the_triangle_loop() {
+        let mut p = branchy();
+        let d = Depth { loops: 2, divergent_ifs: 0, uniform_ifs: 0 };
+        p.blocks.push(Weighed { index: 7, clk: 500, depth: d, skip_side: false, sides: vec![], markers: vec![] });
+        p.blocks.sort_by_key(|b| b.index);
+        p.loops[0].exit = 9;
+        p.loops.push(Loop { header: 7, exit: 8, depth: 2, at: Depth { loops: 1, ..Depth::default() } });
+        assert_eq!(roles(&p).unwrap().triangles.header, 7, "by shape: the costlier pass");
+        assert_eq!(roles_at(&p, Some(3)).unwrap().triangles.header, 2, "by the side in BB3");
+        assert_eq!(roles_at(&p, Some(0)).unwrap().triangles.header, 7, "a side outside the traversal: by shape");
     }
 
     #[test]
