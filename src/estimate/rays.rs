@@ -180,10 +180,12 @@ pub fn ray_cycles_branches(
 }
 
 /// The named sides a row was weighed with, in words: those weighed by the rays with the share
-/// of the wave's triangle passes that run them (`bw`), then those left to ACO's weights and why.
-fn branches_said(s: &aco::BranchSides, bw: &BranchWork) -> String {
-    let share = |k: Branch| 100.0 * bw.taken[k as usize] as f64 / bw.tri_passes.max(1) as f64;
-    let named: Vec<String> = s.sides.keys().map(|&k| format!("{} {:.1}%", k.name(), share(k))).collect();
+/// of the waves' triangle passes that run them (`bw`) and, in brackets, of the packets' (or
+/// rays') each alone (`alone`), then those left to ACO's weights and why.
+fn branches_said(s: &aco::BranchSides, bw: &BranchWork, alone: &BranchWork) -> String {
+    let share = |w: &BranchWork, k: Branch| 100.0 * w.taken[k as usize] as f64 / w.tri_passes.max(1) as f64;
+    let named: Vec<String> =
+        s.sides.keys().map(|&k| format!("{} {:.1}% ({:.1}%)", k.name(), share(bw, k), share(alone, k))).collect();
     let mut out = format!("rays: {}", named.join(", "));
     for (k, why) in &s.left {
         out += &format!("; {}: {why}", k.name());
@@ -288,7 +290,7 @@ pub fn ray_rows(built: &[(String, &Built)], rays: &Rays) -> anyhow::Result<Vec<R
                                     *branch_work.entry((v, wave)).or_insert(w)
                                 }
                             };
-                            let said = branches_said(sides, &bl);
+                            let said = branches_said(sides, &bl, &ba);
                             Ok((
                                 ray_cycles_branches(p, roles, &lock, &bl, r.branching, sides)?,
                                 ray_cycles_branches(p, roles, &lanes, &ba, r.branching, sides)?,

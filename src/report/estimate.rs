@@ -137,7 +137,11 @@ pub fn section(rows: &[RayRow]) -> String {
         );
         let named = |r: &&&RayRow| r.layout == "f32" && r.branches.starts_with("rays: ");
         if let Some(f) = g.iter().filter(named).find(|r| r.branching == 4 && r.packet == 1).or(g.iter().find(named)) {
-            md += &format!("Named branches, share of f32 {}'s triangle passes — {}.\n\n", f.kernel, &f.branches[6..]);
+            md += &format!(
+                "Named branches, share of f32 {}'s triangle passes in lockstep waves (each packet or ray alone) — {}.\n\n",
+                f.kernel,
+                &f.branches[6..]
+            );
         }
         for r in g.iter().filter(|r| r.status.is_ok() && !r.branches.starts_with("rays: ")) {
             md += &format!("- {}: {}\n", r.kernel, r.branches);
