@@ -31,16 +31,11 @@ layout(std430, set = 0, binding = BINDING_TRI_IDS) readonly buffer TriIds { uint
 #endif
 layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { float ray_f[]; };            // ox oy oz tmin dx dy dz tmax
 #ifdef BRANCH_MARKS
-// estimate's marked build (built, never run): MARK puts an atomic operation on the hits buffer
-// at the start of each named side of the triangle test (tri.glsl), a different operation per
-// side (tri.rs, Branch::marker), so that the compiler's listing shows which blocks run it.
+// estimate's marked build (built, never run): the interface's MARK_<NAME>() put an atomic
+// operation on the hits buffer at the start of each named side of the triangle test (tri.glsl).
 layout(std430, set = 0, binding = BINDING_HITS) buffer Hits { Hit hits[]; };
-#define MARK(op) op(hits[gl_GlobalInvocationID.x].prim, 1)
-#define MARK_SWAP() atomicCompSwap(hits[gl_GlobalInvocationID.x].prim, 0, 1)
 #else
 layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
-#define MARK(op)
-#define MARK_SWAP()
 #endif
 #ifdef STATS
 layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer CounterBuf { Counters counters[]; };

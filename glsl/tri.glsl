@@ -32,7 +32,7 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     for (int k = 0; k < 3; k++) m = max(max(m, abs(A[k])), max(abs(Bv[k]), abs(C[k])));
     float back = 1.0;
     if (m > 1099511627776.0) {
-        MARK(atomicMin);
+        MARK_HUGE();
         int shift = int((floatBitsToUint(m) >> 23) & 0xffu) - 127 - 39;
         float down = uintBitsToFloat(uint(127 - shift) << 23);
         back = uintBitsToFloat(uint(127 + shift) << 23);
@@ -58,7 +58,7 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     // the exact projected triangle lies on one side of the ray: a certain miss
     if (min(min(ax, bx), cx) > ex || max(max(ax, bx), cx) < -ex || min(min(ay, by), cy) > ey
         || max(max(ay, by), cy) < -ey) return CERT_MISS;
-    MARK(atomicAdd);
+    MARK_EDGES();
     precise float xm = max(max(abs(ax), abs(bx)), abs(cx));
     precise float ym = max(max(abs(ay), abs(by)), abs(cy));
     precise float e = ((5.0 * U24) * xm * ym + 2.0 * (xm * ey + ym * ex + ex * ey)) * SLACK18;
@@ -68,7 +68,7 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     bool pos = uu > e || vv > e || ww > e;
     bool neg = uu < -e || vv < -e || ww < -e;
     if (pos && neg) return CERT_MISS;
-    MARK(atomicOr);
+    MARK_CROSS();
     bool sure = abs(uu) > e && abs(vv) > e && abs(ww) > e;
     precise float det = uu + vv + ww;
     precise float s = abs(uu) + abs(vv) + abs(ww);
@@ -79,13 +79,13 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     precise float err;
     if (!(abs(det) > 2.0 * ed)) {
         // no usable t: a crossing, if any, lies within the vertices' depths
-        MARK(atomicXor);
+        MARK_FLAT();
         precise float z0 = min(min(az, bz), cz), z1 = max(max(az, bz), cz);
         t = 0.5 * (z0 + z1);
         err = (0.5 * (z1 - z0) + ez + U24 * abs(t)) * SLACK16;
         sure = false;
     } else {
-        MARK(atomicAnd);
+        MARK_DIVIDE();
         precise float tt = uu * az + vv * bz + ww * cz;
         t = div_rte(tt, det);
         precise float spread = abs(az - t) + abs(bz - t) + abs(cz - t);
@@ -129,9 +129,9 @@ void closest_test(RayPre r, uint ti) {
     int prim = int(tri_id[ti]);
     if (!bounded) lo = -INF;
     if ((bounded && hi < r.tmin) || !closer(lo, prim)) return;
-    MARK(atomicMax);
+    MARK_CANDIDATE();
     if (c == CERT_HIT && lo >= r.tmin && hi <= r.tmax && hi < best_lo) {
-        MARK_SWAP();
+        MARK_BEST();
         best_t = hi; best_lo = lo; best_prim = prim; best_u = div_rte(nu, det); best_v = div_rte(nv, det);
         return;
     }

@@ -9,6 +9,7 @@
 //! `GROUPS_ALLOC`).
 
 use crate::base::glsl::GlslStruct;
+use crate::base::tri::Branch;
 use crate::base::{Counters, Hit};
 use crate::glsl_struct;
 
@@ -128,6 +129,22 @@ fn glsl_fields(fields: &[(&str, &str)]) -> String {
     fields.iter().map(|(n, t)| format!(" {t} {n};")).collect()
 }
 
+/// `MARK_<NAME>()` for each named side of the triangle test ([`Branch`]): in `estimate`'s
+/// marked build (`BRANCH_MARKS`; glsl/ray.glsl then declares the hits buffer read-write) an
+/// atomic operation on the ray's hit, a different one per side, so that a compiler's listing
+/// shows which blocks run it; in every other build nothing.
+fn branch_markers() -> String {
+    let (mut on, mut off) = (String::new(), String::new());
+    for b in Branch::ALL {
+        let name = b.name().to_uppercase();
+        if let Some((f, args, _)) = b.marker_op() {
+            on += &format!("#define MARK_{name}() {f}(hits[gl_GlobalInvocationID.x].prim, {args})\n");
+            off += &format!("#define MARK_{name}()\n");
+        }
+    }
+    format!("#ifdef BRANCH_MARKS\n{on}#else\n{off}#endif\n")
+}
+
 /// The `interface.glsl` header of a kernel. `layout`: the layout's stack entry fields and its
 /// constants (`None` for kernels without a layout, such as the ray-query baseline).
 pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
@@ -157,6 +174,7 @@ pub fn glsl_header(layout: Option<(&[(&str, &str)], &str)>) -> String {
     s += &format!("layout(push_constant) uniform Push {{{} }} pc;\n", glsl_fields(PushConstants::FIELDS));
     s += &format!("struct Hit {{{} }};\n", glsl_fields(Hit::FIELDS));
     s += &format!("struct Counters {{{} }};\n", glsl_fields(Counters::FIELDS));
+    s += &branch_markers();
     if let Some((entry, constants)) = layout {
         s += &format!(
             "// The layout's stack entry besides the node index ({} bytes with it) and its constants.\n",
@@ -186,6 +204,16 @@ mod tests {
         assert!(h.contains("layout(push_constant) uniform Push { uint ray_count; uint node_count; float hit_pad; uint pad1; vec4 root; vec4 box_lo; vec4 box_hi; } pc;"), "{h}");
         assert!(h.contains("struct Hit { float t; int prim; float u; float v; };"), "{h}");
         assert!(h.contains("struct Entry { float t; };") && h.contains("#define STACK_ENTRY_BYTES 8"), "{h}");
+        // The branch markers: an atomic in the marked build, nothing in any other.
+        assert!(
+            h.contains("#ifdef BRANCH_MARKS\n#define MARK_HUGE() atomicMin(hits[gl_GlobalInvocationID.x].prim, 1)\n"),
+            "{h}"
+        );
+        assert!(
+            h.contains("#define MARK_BEST() atomicCompSwap(hits[gl_GlobalInvocationID.x].prim, 0, 1)\n#else\n"),
+            "{h}"
+        );
+        assert!(h.contains("#define MARK_EDGES()\n") && !h.contains("MARK_NOTE"), "{h}");
     }
 
     #[test]

@@ -137,23 +137,30 @@ impl Branch {
         }
     }
 
-    /// The atomic operation of the side's marker in the kernel's marked build (`BRANCH_MARKS`,
-    /// glsl/ray.glsl's `MARK`): how its instruction is named after `atomic_` in a compiler's
-    /// listing (`buffer_atomic_smin`, `global_atomic_cmpswap`). `Note` has none: the seven
-    /// integer atomics that stay themselves are taken (ACO 26 turns an exchange whose result
-    /// is unused into something else), and its two moves are made selects by every compiler
-    /// met, where a marker would keep an if that the real build does not have.
-    pub fn marker(self) -> Option<&'static str> {
+    /// The side's marker in the kernel's marked build (`BRANCH_MARKS`: the generated
+    /// interface's `MARK_<NAME>()`, [`crate::interface`]): its GLSL atomic function, the
+    /// arguments after the hits buffer's `prim`, and how its instruction is named after
+    /// `atomic_` in a compiler's listing (`buffer_atomic_smin`, `global_atomic_cmpswap`).
+    /// `Note` has none: the seven integer atomics that stay themselves are taken (ACO 26 turns
+    /// an exchange whose result is unused into something else), and its two moves are made
+    /// selects by every compiler met, where a marker would keep an if that the real build does
+    /// not have.
+    pub fn marker_op(self) -> Option<(&'static str, &'static str, &'static str)> {
         match self {
-            Branch::Huge => Some("smin"),
-            Branch::Edges => Some("add"),
-            Branch::Cross => Some("or"),
-            Branch::Flat => Some("xor"),
-            Branch::Divide => Some("and"),
-            Branch::Candidate => Some("smax"),
-            Branch::Best => Some("cmpswap"),
+            Branch::Huge => Some(("atomicMin", "1", "smin")),
+            Branch::Edges => Some(("atomicAdd", "1", "add")),
+            Branch::Cross => Some(("atomicOr", "1", "or")),
+            Branch::Flat => Some(("atomicXor", "1", "xor")),
+            Branch::Divide => Some(("atomicAnd", "1", "and")),
+            Branch::Candidate => Some(("atomicMax", "1", "smax")),
+            Branch::Best => Some(("atomicCompSwap", "0, 1", "cmpswap")),
             Branch::Note => None,
         }
+    }
+
+    /// How the side's marker instruction is named after `atomic_` in a listing, if it has one.
+    pub fn marker(self) -> Option<&'static str> {
+        self.marker_op().map(|(_, _, listed)| listed)
     }
 
     /// The side a marker instruction's operation (`smin`, `add`, … as [`Self::marker`]) names.

@@ -15,7 +15,7 @@ pub enum Source {
     /// A user's SPIR-V module.
     Spirv(PathBuf),
     /// The built-in kernel with a marker at the start of each named side of its triangle test
-    /// (`BRANCH_MARKS`: an atomic operation per side, `glsl/ray.glsl`'s `MARK`), so that a
+    /// (`BRANCH_MARKS`: an atomic operation per side, the interface's `MARK_<NAME>()`), so that a
     /// compiler's listing shows which of its blocks run each side — `estimate`'s branch
     /// weights. Built, never run.
     Marked,
