@@ -31,7 +31,7 @@
 mod rays;
 
 pub use crate::report::estimate::{RayRow, Split};
-pub use rays::{ray_cycles, ray_rows, roles, roles_at, Built, LoopCosts, Rays, Roles};
+pub use rays::{ray_cycles, ray_rows, roles, roles_at, Built, BuiltKernel, LoopCosts, Rays, Roles};
 
 use crate::base::Status;
 use crate::gpu::null;
@@ -142,6 +142,43 @@ fn row(family: &str, generation: &str, r: &crate::report::isa::IsaRow, p: Result
     row
 }
 
+/// One AMD family's kernels of `matrix` (for `layouts`), built as they are and with their named
+/// branches marked, in two child processes at once ([`isa::aco_programs`]): each kernel's isa
+/// row, ACO's program and the sides of its triangle test the marked build names in it
+/// ([`aco::branch_sides`]), or why not.
+pub fn programs(
+    exe: &Path,
+    family: &str,
+    matrix: Matrix,
+    layouts: &[LayoutId],
+    amd: Option<&Path>,
+) -> anyhow::Result<Vec<BuiltKernel>> {
+    let (real, marked) = rayon::join(
+        || isa::aco_programs(exe, family, matrix, layouts, amd, false),
+        || isa::aco_programs(exe, family, matrix, layouts, amd, true),
+    );
+    let (real, marked) = (real?, marked?);
+    anyhow::ensure!(
+        real.len() == marked.len(),
+        "--family {family}: the marked build made {} kernels, the real one {}",
+        marked.len(),
+        real.len()
+    );
+    Ok(real
+        .into_iter()
+        .zip(marked)
+        .map(|((r, p), (mr, mp))| {
+            let sides = match (&p, mp) {
+                (Ok(p), Ok(mp)) if mr.kernel == r.kernel => aco::branch_sides(&mp, p),
+                (Ok(_), Ok(_)) => Err(format!("the marked build is {}, not {}", mr.kernel, r.kernel)),
+                (_, Err(e)) => Err(format!("the marked build: {e}")),
+                (Err(e), _) => Err(e.clone()),
+            };
+            (r, p, sides)
+        })
+        .collect())
+}
+
 /// Builds `matrix` (for `layouts`; empty: all) on each AMD family, one child process each,
 /// as many at once as there are cores, takes each kernel's estimate apart and weighs its
 /// loops with `rays`; rows in family order.
@@ -154,38 +191,8 @@ pub fn run(
     amd: Option<&Path>,
 ) -> anyhow::Result<(Vec<Row>, Vec<RayRow>)> {
     use rayon::prelude::*;
-    // Each family's kernels, and the same kernels with their named branches marked (a second
-    // child process each).
-    let jobs: Vec<(&String, bool)> = families.iter().flat_map(|f| [(f, false), (f, true)]).collect();
-    let mut both: Vec<Vec<_>> = jobs
-        .par_iter()
-        .map(|&(f, marked)| isa::aco_programs(exe, f, matrix, layouts, amd, marked))
-        .collect::<anyhow::Result<_>>()?;
-    let mut built: Vec<Vec<_>> = Vec::new();
-    while !both.is_empty() {
-        let marked = both.remove(1);
-        let real = both.remove(0);
-        anyhow::ensure!(
-            real.len() == marked.len(),
-            "the marked build made {} kernels, the real one {}",
-            marked.len(),
-            real.len()
-        );
-        built.push(
-            real.into_iter()
-                .zip(marked)
-                .map(|((r, p), (mr, mp))| {
-                    let sides = match (&p, mp) {
-                        (Ok(p), Ok(mp)) if mr.kernel == r.kernel => aco::branch_sides(&mp, p),
-                        (Ok(_), Ok(_)) => Err(format!("the marked build is {}, not {}", mr.kernel, r.kernel)),
-                        (_, Err(e)) => Err(format!("the marked build: {e}")),
-                        (Err(e), _) => Err(e.clone()),
-                    };
-                    (r, p, sides)
-                })
-                .collect(),
-        );
-    }
+    let built: Vec<Vec<_>> =
+        families.par_iter().map(|f| programs(exe, f, matrix, layouts, amd)).collect::<anyhow::Result<_>>()?;
     let by_family: Vec<(String, &Built)> = families.iter().cloned().zip(built.iter().map(Vec::as_slice)).collect();
     let ray_out = ray_rows(&by_family, rays)?;
     let mut rows = Vec::new();

@@ -166,11 +166,11 @@ pub fn ray_cycles_branches(
             .filter(|l| l.header > tri.header && l.contains(blk.index))
             .map(aco::Loop::aco_trips)
             .product();
-        let sides: Vec<&aco::Side> = blk.sides.iter().filter(|s| inside(s.first)).collect();
-        let at = sides.iter().rposition(|s| named.contains_key(&s.first));
+        let around: Vec<&aco::Side> = blk.sides.iter().filter(|s| inside(s.first)).collect();
+        let at = around.iter().rposition(|s| named.contains_key(&s.first));
         let (passes, rest) = match at {
-            Some(i) => (bw.taken[named[&sides[i].first] as usize] as f64, &sides[i + 1..]),
-            None => (w.tri_passes as f64, &sides[..]),
+            Some(i) => (bw.taken[named[&around[i].first] as usize] as f64, &around[i + 1..]),
+            None => (w.tri_passes as f64, &around[..]),
         };
         let weight: f64 = rest.iter().map(|s| s.weight).product::<f64>() * if blk.skip_side { 0.25 } else { 1.0 };
         triangles += blk.clk as f64 * loops * passes * weight;
@@ -209,7 +209,10 @@ impl Rays {
 
 /// One family's kernels: its isa rows beside ACO's programs ([`crate::isa::aco_programs`])
 /// and their named branches, from the marked builds ([`aco::branch_sides`]).
-pub type Built = [(crate::report::isa::IsaRow, Result<aco::Program, String>, Result<aco::BranchSides, String>)];
+pub type Built = [BuiltKernel];
+
+/// One kernel of [`Built`]: its isa row, ACO's program, its named branches (or why not).
+pub type BuiltKernel = (crate::report::isa::IsaRow, Result<aco::Program, String>, Result<aco::BranchSides, String>);
 
 /// Each kernel of each family in `built` on each ray set of `rays`: its estimated cycles per
 /// ray, with f32's ratio; rows by family, then ray set. Scenes, ray sets and encodings come

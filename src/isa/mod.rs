@@ -22,7 +22,7 @@ use crate::precision::{FcChoice, FloatControls};
 use crate::report::isa::IsaRow;
 use crate::report::What;
 pub use crate::variant::Matrix;
-use crate::variant::{self, KernelId, KernelSpec, Source};
+use crate::variant::{self, KernelId, KernelSpec};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -399,8 +399,7 @@ fn build_one(
     row.float_controls = k.variant.fc.name().into();
     before(&row.kernel);
     let t0 = Instant::now();
-    let source = if b.source == Source::Marked { Source::Marked } else { Source::Builtin };
-    let kernel = match Kernel::build(g, &d, &source) {
+    let kernel = match Kernel::build(g, &d, &b.source) {
         Ok(k) => k,
         Err(GpuError::Unsupported(why)) => {
             row.status = Status::Skipped(why);

@@ -106,23 +106,12 @@ fn isa_builds_every_kernel_on_a_null_device() {
 fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
     assert!(std::path::Path::new(RADV_ICD).exists(), "{RADV_ICD} is missing: RADV provides the null devices");
     let bin = std::path::Path::new(env!("CARGO_BIN_EXE_halftrace"));
-    let runs: Vec<_> = std::thread::scope(|s| {
-        let hs: Vec<_> = [("navi31", false), ("navi31", true), ("vega10", false), ("vega10", true)]
-            .map(|(f, m)| s.spawn(move || (f, halftrace::isa::aco_programs(bin, f, Matrix::Default, &[], None, m))))
-            .into_iter()
-            .collect();
-        hs.into_iter().map(|h| h.join().unwrap()).collect()
-    });
-    let mut runs = runs.into_iter();
-    while let (Some((family, run)), Some((_, marked))) = (runs.next(), runs.next()) {
-        let run = run.unwrap_or_else(|e| panic!("{family}: {e:#}"));
-        let marked = marked.unwrap_or_else(|e| panic!("{family}, marked: {e:#}"));
+    for family in ["navi31", "vega10"] {
+        let run = halftrace::estimate::programs(bin, family, Matrix::Default, &[], None)
+            .unwrap_or_else(|e| panic!("{family}: {e:#}"));
         assert_eq!(run.len(), plan(Matrix::Default, &[]).len(), "{family}: one row per kernel");
-        assert_eq!(marked.len(), run.len(), "{family}: one marked build per kernel");
-        for ((row, p), (mrow, mp)) in run.into_iter().zip(marked) {
+        for (row, p, sides) in run {
             let p = p.unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
-            let mp = mp.unwrap_or_else(|e| panic!("{family} {} marked: {e}", mrow.kernel));
-            assert_eq!(mrow.kernel, row.kernel);
             // The sides the replay tracks weigh as ACO's depths do, block by block.
             for b in &p.blocks {
                 let w: f64 = b.sides.iter().map(|s| s.weight).product();
@@ -130,8 +119,7 @@ fn aco_latency_is_rebuilt_from_its_blocks_on_every_kernel() {
             }
             // The marked build names the triangle test's sides in the real program, each inside
             // its triangle loop; the undecided pair's update is made selects (left out, said).
-            let sides =
-                halftrace::isa::aco::branch_sides(&mp, &p).unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
+            let sides = sides.unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
             let r = halftrace::estimate::roles(&p).unwrap_or_else(|e| panic!("{family} {}: {e}", row.kernel));
             use halftrace::base::tri::Branch;
             // On this release the loop the edges side names is the one the shape names.

@@ -76,27 +76,24 @@ impl Includes {
 
 /// Compiles one built-in kernel for a device offering `dev`.
 pub fn compile(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
-    let src = source("trav.comp").expect("glsl/trav.comp is embedded");
-    let v = &k.variant;
-    let words = compile_source(
-        &k.name(),
-        "trav.comp",
-        src,
-        &v.defines(k.imp, k.stats, dev),
-        &Includes::variant(v),
-        dev.spirv_minor,
-    )?;
-    with_float_modes(&k.name(), &words, v)
+    compile_builtin(k, dev, false)
 }
 
 /// The built-in kernel `k` with its named branches marked (`BRANCH_MARKS`,
 /// [`crate::variant::Source::Marked`]).
 pub fn compile_marked(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
+    compile_builtin(k, dev, true)
+}
+
+fn compile_builtin(k: &KernelId, dev: DeviceBuild, marked: bool) -> Result<Vec<u32>, GpuError> {
     let src = source("trav.comp").expect("glsl/trav.comp is embedded");
     let v = &k.variant;
     let mut defines = v.defines(k.imp, k.stats, dev);
-    defines.push(("BRANCH_MARKS".into(), "1".into()));
-    let name = format!("{} (branches marked)", k.name());
+    let mut name = k.name();
+    if marked {
+        defines.push(("BRANCH_MARKS".into(), "1".into()));
+        name += " (branches marked)";
+    }
     let words = compile_source(&name, "trav.comp", src, &defines, &Includes::variant(v), dev.spirv_minor)?;
     with_float_modes(&name, &words, v)
 }
