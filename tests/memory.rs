@@ -676,3 +676,59 @@ fn the_command_writes_its_files_and_refuses_bad_flags() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `memory --node-order`: breadth first is a permutation; depth first is a permutation in which each subtree is
+/// contiguous after its root; re-indexing the reads moves only addresses — the requested bytes
+/// and the steps stay, and a one-lane wave's node steps are the permuted nodes' places.
+#[test]
+fn node_orders_move_addresses_only() {
+    use halftrace::memory::{node_permutation, permute_nodes, NodeOrder};
+    let (p, sets) = sets();
+    let (kind, rays) = &sets[0];
+    for layout in LayoutId::all() {
+        for b in [4, 8] {
+            let enc = encode(&p, layout, b);
+            let n = enc.nodes.len();
+            assert!(node_permutation(enc.nodes.as_ref(), b, NodeOrder::Layout).unwrap().is_none());
+            let bfs = node_permutation(enc.nodes.as_ref(), b, NodeOrder::Bfs).unwrap().unwrap();
+            let dfs = node_permutation(enc.nodes.as_ref(), b, NodeOrder::Dfs).unwrap().unwrap();
+            let mut seen = dfs.clone();
+            seen.sort_unstable();
+            assert_eq!(seen, (0..n as u32).collect::<Vec<_>>(), "{layout} B={b}: a permutation");
+            let mut seen_b = bfs.clone();
+            seen_b.sort_unstable();
+            assert_eq!(seen_b, (0..n as u32).collect::<Vec<_>>(), "{layout} B={b}: breadth first, a permutation");
+            assert_ne!(dfs, bfs, "{layout} B={b}: depth first differs on the teapot");
+            // Depth first: a subtree of s nodes takes the s places after its root's.
+            fn size(enc: &halftrace::layout::encoded::Encoded, b: usize, i: usize) -> usize {
+                1 + (0..b)
+                    .map(|s| enc.nodes.child(i, s))
+                    .filter(|c| c & halftrace::interface::LEAF_BIT == 0)
+                    .map(|c| size(enc, b, c as usize))
+                    .sum::<usize>()
+            }
+            for i in 0..n.min(50) {
+                let mut at = dfs[i] + 1;
+                for c in (0..b).map(|s| enc.nodes.child(i, s)).filter(|c| c & halftrace::interface::LEAF_BIT == 0) {
+                    assert_eq!(dfs[c as usize], at, "{layout} B={b}: node {i}'s child {c}");
+                    at += size(&enc, b, c as usize) as u32;
+                }
+            }
+            let buf = Buffers::new([enc.node_size(), n, enc.tris.verts.len()]);
+            let stack = Stack { entry: 8, slots: 97, meta: None };
+            let reads = layout.imp().mem_reads(&enc, rays, 1, Math::F32, FloatControls::On);
+            let mut moved = reads.clone();
+            permute_nodes(&mut moved, &dfs);
+            let what = format!("{layout} B={b} {kind}");
+            assert_eq!(requested(&reads, &buf, &stack, 1), requested(&moved, &buf, &stack, 1), "{what}");
+            let (a, m) = (waves(&reads, rays.len(), 1, 1, &buf), waves(&moved, rays.len(), 1, 1, &buf));
+            for (lane, (wa, wm)) in reads.iter().zip(a.iter().zip(&m)) {
+                assert_eq!(wa.steps.len(), wm.steps.len(), "{what}: steps");
+                let nodes: Vec<_> = lane.iter().filter_map(|x| x.node).map(|i| buf.node(dfs[i as usize])).collect();
+                let steps: Vec<_> =
+                    wm.steps.iter().filter(|s| s.len() == 1 && s[0].0 < buf.nodes_end()).map(|s| s[0]).collect();
+                assert_eq!(steps, nodes, "{what}: the node steps at the permuted places");
+            }
+        }
+    }
+}

@@ -49,6 +49,12 @@ pub struct MemoryArgs {
     /// node in one 64-byte line) — no kernel places them so; the model says what it would save.
     #[arg(long, default_value_t = 0)]
     pub node_align: u64,
+    /// What-if: every layout's nodes re-indexed in this order — `bfs` (each node's inner
+    /// children side by side, level by level), `dfs` (each subtree contiguous, children in slot
+    /// order) — instead of as the layout stores them (`layout`: f32 and the fp16 layouts depth
+    /// first, q8 breadth first). Hits and requested bytes are the same; lines and caches differ.
+    #[arg(long, value_enum, default_value_t = memory::NodeOrder::Layout)]
+    pub node_order: memory::NodeOrder,
     /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
     /// refused unless --force; other files there are left alone.
     #[arg(long)]
@@ -126,6 +132,7 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         estimates,
         stack: !a.no_stack,
         node_align: a.node_align,
+        node_order: a.node_order,
         isa_rows,
     };
     let rows = memory::run(&cfg, |_| {})?;
@@ -140,6 +147,17 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
             "**What-if (`--node-align {}`)**: every layout's nodes padded to a multiple of {} bytes; no kernel \
              places them so. Requested node bytes stay the records'; lines and the cache model see the padding.\n\n",
             a.node_align, a.node_align
+        );
+    }
+    if a.node_order != memory::NodeOrder::Layout {
+        gpus_table += &format!(
+            "**What-if (`--node-order {}`)**: every layout's nodes re-indexed {}; no kernel places them so. \
+             Requested bytes stay; lines and the cache model see the new places.\n\n",
+            a.node_order.name(),
+            match a.node_order {
+                memory::NodeOrder::Bfs => "breadth first (each node's inner children side by side)",
+                _ => "depth first (each subtree contiguous, children in slot order)",
+            }
         );
     }
     let md = crate::report::memory::markdown(&rows, &gpus_table);

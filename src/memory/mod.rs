@@ -231,6 +231,84 @@ impl Stack {
     }
 }
 
+/// Where the nodes lie in `memory --node-order`'s what-if: as each layout stores them, or
+/// re-indexed breadth first (every node's inner children side by side, level by level) or depth
+/// first (each inner child's subtree before the next child's, in slot order), from the root.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum NodeOrder {
+    #[default]
+    Layout,
+    Bfs,
+    Dfs,
+}
+
+impl NodeOrder {
+    pub fn name(self) -> &'static str {
+        match self {
+            NodeOrder::Layout => "layout",
+            NodeOrder::Bfs => "bfs",
+            NodeOrder::Dfs => "dfs",
+        }
+    }
+}
+
+/// The new index of every node of `nodes` (B slots each, the root at 0) in `order`, or `None`
+/// for [`NodeOrder::Layout`]. An error where the child words do not form one tree over every
+/// node (a layout whose child words are not node indices).
+pub fn node_permutation(
+    nodes: &dyn crate::layout::encoded::NodeArray,
+    branching: usize,
+    order: NodeOrder,
+) -> anyhow::Result<Option<Vec<u32>>> {
+    use crate::interface::LEAF_BIT;
+    let n = nodes.len();
+    let inner = |i: usize| (0..branching).map(move |s| nodes.child(i, s)).filter(|c| c & LEAF_BIT == 0);
+    let mut seq: Vec<usize> = Vec::with_capacity(n);
+    match order {
+        NodeOrder::Layout => return Ok(None),
+        NodeOrder::Bfs => {
+            seq.push(0);
+            let mut i = 0;
+            while i < seq.len() && seq.len() <= n {
+                seq.extend(inner(seq[i]).map(|c| c as usize));
+                i += 1;
+            }
+        }
+        NodeOrder::Dfs => {
+            let mut todo = vec![0usize];
+            while let Some(i) = todo.pop() {
+                seq.push(i);
+                if seq.len() > n {
+                    break;
+                }
+                let kids: Vec<usize> = inner(i).map(|c| c as usize).collect();
+                todo.extend(kids.into_iter().rev());
+            }
+        }
+    }
+    let mut perm = vec![u32::MAX; n];
+    for (k, &old) in seq.iter().enumerate() {
+        anyhow::ensure!(
+            old < n && perm[old] == u32::MAX,
+            "--node-order {}: node {old} reached twice or out of range ({n} nodes)",
+            order.name()
+        );
+        perm[old] = k as u32;
+    }
+    anyhow::ensure!(seq.len() == n, "--node-order {}: {} of {n} nodes reached from the root", order.name(), seq.len());
+    Ok(Some(perm))
+}
+
+/// The reads with every node index (visited and entered parents) moved by `perm`
+/// ([`node_permutation`]).
+pub fn permute_nodes(reads: &mut [Vec<Reads>], perm: &[u32]) {
+    let at = |i: u32| perm.get(i as usize).copied().unwrap_or(i);
+    for r in reads.iter_mut().flatten() {
+        r.node = r.node.map(at);
+        r.entered = r.entered.map(|(p, s, hit)| (at(p), s, hit));
+    }
+}
+
 const ALIGN: u64 = 64 * 1024;
 
 impl Buffers {
@@ -464,6 +542,8 @@ pub struct Config {
     /// Nodes padded to a multiple of this many bytes (`memory --node-align`, a what-if; 0: as
     /// the layouts pack them).
     pub node_align: u64,
+    /// Nodes re-indexed in this order (`memory --node-order`, a what-if; `Layout`: as stored).
+    pub node_order: NodeOrder,
     /// `isa`'s rows of the single-ray kernels on one compilers release (`memory --compilers`):
     /// where a GPU's compiler ([`gpus::Gpu::compiler`]) built a kernel and gave its occupancy,
     /// that sets the kernel's resident waves per unit ([`resident`]); empty: every GPU's
@@ -559,7 +639,10 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
             for v in &cfg.variants {
                 let id = KernelId::new(*v, v.portable_impl(), false);
                 progress(&format!("{scene} {kind} {}", id.name()));
-                let (reads, sizes) = runner.mem_reads(v, set)?;
+                let (mut reads, sizes) = runner.mem_reads(v, set)?;
+                if let Some(perm) = runner.node_permutation(v, cfg.node_order)? {
+                    permute_nodes(&mut reads, &perm);
+                }
                 let stack = Stack::of(v);
                 let b = Buffers::new(sizes).with_node_align(cfg.node_align);
                 let b = if cfg.stack { b.with_stack(stack) } else { b };
