@@ -51,8 +51,7 @@ pub struct MemoryArgs {
     pub node_align: u64,
     /// What-if: every layout's nodes re-indexed in this order — `bfs` (each node's inner
     /// children side by side, level by level), `dfs` (each subtree contiguous, children in slot
-    /// order) — instead of as the layout stores them (`layout`: f32 and the fp16 layouts depth
-    /// first, q8 breadth first). Hits and requested bytes are the same; lines and caches differ.
+    /// order) — instead of as the layouts store them (`layout`: breadth first, every layout). Hits and requested bytes are the same; lines and caches differ.
     #[arg(long, value_enum, default_value_t = memory::NodeOrder::Layout)]
     pub node_order: memory::NodeOrder,
     /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
