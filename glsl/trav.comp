@@ -49,7 +49,11 @@ struct Counts { uint visits; uint box_tests; uint tri_tests; uint reanchors; };
 
 // The ray's counters (STATS only): the packet's visits and active rays on its first lane.
 void write_counters(uint i, Counts c, uint pnodes, uint asum) {
-#ifdef STATS
+#if defined(STATS) && defined(BRANCH_COUNTS)
+    // The branch-counting build: the ray's count of each named side of its triangle tests, the
+    // sides two by two in 16-bit halves (Branch::counted), its triangle tests where they are.
+    counters[i] = Counters(branch_pair(0u, 1u), branch_pair(2u, 3u), c.tri_tests, branch_pair(4u, 5u), branch_pair(6u, 7u), 0u);
+#elif defined(STATS)
     bool first = packet_lane() == 0u;
     counters[i] = Counters(c.visits, c.box_tests, c.tri_tests, c.reanchors, first ? pnodes : 0u, first ? asum : 0u);
 #endif

@@ -132,17 +132,27 @@ fn glsl_fields(fields: &[(&str, &str)]) -> String {
 /// `MARK_<NAME>()` for each named side of the triangle test ([`Branch`]): in `estimate`'s
 /// marked build (`BRANCH_MARKS`; glsl/ray.glsl then declares the hits buffer read-write) an
 /// atomic operation on the ray's hit, a different one per side, so that a compiler's listing
-/// shows which blocks run it; in every other build nothing.
+/// shows which blocks run it; in the branch-counting build (`BRANCH_COUNTS`, with `STATS`) an
+/// increment of the ray's count of that side, which `branch_pair` packs into its counters
+/// ([`Branch::counted`]); in every other build nothing.
 fn branch_markers() -> String {
-    let (mut on, mut off) = (String::new(), String::new());
-    for b in Branch::ALL {
+    let (mut on, mut count, mut off) = (String::new(), String::new(), String::new());
+    for (k, b) in Branch::ALL.into_iter().enumerate() {
         let name = b.name().to_uppercase();
         if let Some((f, args, _)) = b.marker_op() {
             on += &format!("#define MARK_{name}() {f}(hits[gl_GlobalInvocationID.x].prim, {args})\n");
+            count += &format!("#define MARK_{name}() branch_taken[{k}]++\n");
             off += &format!("#define MARK_{name}()\n");
         }
     }
-    format!("#ifdef BRANCH_MARKS\n{on}#else\n{off}#endif\n")
+    let n = Branch::ALL.len();
+    let zeros = vec!["0u"; n].join(", ");
+    count += &format!(
+        "uint branch_taken[{n}] = uint[{n}]({zeros});\n\
+         // Sides a and b of the ray's counts in one word, 16 bits each (saturating).\n\
+         uint branch_pair(uint a, uint b) {{ return min(branch_taken[a], 0xffffu) | (min(branch_taken[b], 0xffffu) << 16u); }}\n"
+    );
+    format!("#ifdef BRANCH_MARKS\n{on}#elif defined(BRANCH_COUNTS)\n{count}#else\n{off}#endif\n")
 }
 
 /// The `interface.glsl` header of a kernel. `layout`: the layout's stack entry fields and its
@@ -210,9 +220,12 @@ mod tests {
             "{h}"
         );
         assert!(
-            h.contains("#define MARK_BEST() atomicCompSwap(hits[gl_GlobalInvocationID.x].prim, 0, 1)\n#else\n"),
+            h.contains("#define MARK_BEST() atomicCompSwap(hits[gl_GlobalInvocationID.x].prim, 0, 1)\n#elif defined(BRANCH_COUNTS)\n#define MARK_HUGE() branch_taken[0]++\n"),
             "{h}"
         );
+        // The counting build: Branch::ALL's order, two sides a word.
+        assert!(h.contains("#define MARK_BEST() branch_taken[6]++\nuint branch_taken[8] = uint[8](0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u);\n"), "{h}");
+        assert!(h.contains("uint branch_pair(uint a, uint b)") && h.contains("#endif\n"), "{h}");
         assert!(h.contains("#define MARK_EDGES()\n") && !h.contains("MARK_NOTE"), "{h}");
     }
 

@@ -158,6 +158,15 @@ impl Branch {
         }
     }
 
+    /// Each side's count of one ray as the branch-counting kernel writes it
+    /// ([`crate::variant::Source::Counted`]): the sides of [`Self::ALL`] two by two in the low
+    /// and high 16 bits of `nodes`, `box_tests`, `reanchors` and `packet_nodes` (`tri_tests`
+    /// stays the ray's triangle tests); a count of 65 535 may be more (saturated).
+    pub fn counted(c: &crate::base::Counters) -> [u32; 8] {
+        let words = [c.nodes, c.box_tests, c.reanchors, c.packet_nodes];
+        std::array::from_fn(|k| (words[k / 2] >> (16 * (k % 2))) & 0xffff)
+    }
+
     /// How the side's marker instruction is named after `atomic_` in a listing, if it has one.
     pub fn marker(self) -> Option<&'static str> {
         self.marker_op().map(|(_, _, listed)| listed)

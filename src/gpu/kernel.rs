@@ -34,6 +34,7 @@ impl<'g> Kernel<'g> {
         match &self.source {
             Source::Builtin => self.name(),
             Source::Marked => format!("{} (branches marked)", self.name()),
+            Source::Counted => format!("{} (branches counted)", self.name()),
             Source::Glsl(p) | Source::Spirv(p) => format!("{} (user kernel {})", self.name(), p.display()),
         }
     }
@@ -47,6 +48,7 @@ impl<'g> Kernel<'g> {
         let code = match source {
             Source::Builtin => shader::compile(k, dev)?,
             Source::Marked => shader::compile_marked(k, dev)?,
+            Source::Counted => shader::compile_counted(k, dev)?,
             Source::Glsl(p) => shader::check_user(p, &shader::compile_user(p, k, dev)?, k, gpu)?,
             Source::Spirv(p) => {
                 // The interface first (its messages say what a kernel must look like), then the
@@ -129,7 +131,7 @@ impl<'g> Kernel<'g> {
         let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&hits.download(hit_bytes)?);
         if let Some(bad) = hits.iter().position(|h| h.prim == PRIM_OVERFLOW) {
             return Err(GpuError::Other(match &self.source {
-                Source::Builtin | Source::Marked => {
+                Source::Builtin | Source::Marked | Source::Counted => {
                     format!("{}: ray {bad} overflowed the traversal stack", self.name())
                 }
                 Source::Glsl(p) | Source::Spirv(p) => format!(

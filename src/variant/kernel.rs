@@ -19,6 +19,11 @@ pub enum Source {
     /// compiler's listing shows which of its blocks run each side — `estimate`'s branch
     /// weights. Built, never run.
     Marked,
+    /// The built-in counting kernel with each named side of its triangle test counted per ray
+    /// (`BRANCH_COUNTS`: the interface's `MARK_<NAME>()` increments the side's count), written in
+    /// place of the work counters but the triangle tests ([`crate::base::tri::Branch::counted`]):
+    /// the kernel's own count of what `estimate`'s branch weights take from the CPU reference.
+    Counted,
 }
 
 impl Source {

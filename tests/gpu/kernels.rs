@@ -259,3 +259,66 @@ fn next_entry_in_shared_memory_equals_the_reference() {
     }
     clean(&g);
 }
+
+/// The kernel's own count of each named side of its triangle test (the branch-counting build,
+/// `Source::Counted`: each `MARK_<NAME>()` increments the ray's count) equals, ray by ray, what
+/// the CPU reference's replay counts for `estimate`'s branch weights
+/// (`layout::traverse::branch_work` for a wave of one lane): every layout in every math at
+/// B = 4, f32 and q8 at B = 8, on the teapot and fandisk, primary, ao, diffuse and grazing rays.
+/// Hits and triangle tests are the reference's too, and every side but `huge` and `flat` (which
+/// these scenes never take) is taken somewhere, so a wrong count cannot hide.
+#[test]
+fn kernels_take_the_branches_the_reference_counts() {
+    use halftrace::base::tri::Branch;
+    use halftrace::layout::traverse::branch_work;
+    let g = gpu();
+    let mut total = [0u64; 8];
+    for scene in ["teapot.obj", "fandisk.obj"] {
+        let p = prepare(&scene_path(scene));
+        let sets = ray_sets(&p, 24, 500);
+        for layout in LayoutId::all() {
+            for b in [4, 8] {
+                if b == 8 && layout != LayoutId::f32() && layout != self::layout("q8") {
+                    continue;
+                }
+                let enc = encode(&p, layout, b);
+                let gb = GpuBvh::upload(&g, &enc).unwrap();
+                for &math in layout.info().maths {
+                    let v = Variant::new(layout, b, 1).with_math(math).with_buffers(gb.buffers);
+                    let id = KernelId::new(v, PacketImpl::Single, true);
+                    let d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
+                    let k = Kernel::build(&g, &d.with_stats(true), &Source::Counted)
+                        .unwrap_or_else(|e| panic!("{id}: {e}"));
+                    for (kind, rays) in &sets {
+                        let what = format!("{}, {scene} {kind} rays", k.label());
+                        let a = k.run(&g, &gb, rays, 0, 1).unwrap();
+                        let (hits, counters) = enc.trace_raw(rays, 1, v.math, v.fc);
+                        assert_same_hits(&what, rays, &hits, &a.hits);
+                        let reads = layout.imp().mem_reads(&enc, rays, 1, v.math, v.fc);
+                        for (i, gc) in a.counters.unwrap().iter().enumerate() {
+                            assert_eq!(gc.tri_tests, counters[i].tri_tests, "{what}: ray {i}'s triangle tests");
+                            let cpu = branch_work(&reads[i..=i], &rays[i..=i], &enc.tris, 1, 1).0;
+                            let gpu = Branch::counted(gc);
+                            for side in Branch::ALL {
+                                let (c, k) = (cpu.taken[side as usize], gpu[side as usize] as u64);
+                                assert!(k < 0xffff, "{what}: ray {i} {}: the count saturated", side.name());
+                                assert_eq!(
+                                    k,
+                                    if side.marker().is_some() { c } else { 0 },
+                                    "{what}: ray {i} took `{}` {k} times in the kernel, {c} in the reference's replay",
+                                    side.name()
+                                );
+                                total[side as usize] += k;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for side in [Branch::Edges, Branch::Cross, Branch::Divide, Branch::Candidate, Branch::Best] {
+        assert!(total[side as usize] > 0, "no ray took `{}`: {total:?}", side.name());
+    }
+    eprintln!("sides taken, summed over the runs: {total:?}");
+    clean(&g);
+}

@@ -76,23 +76,33 @@ impl Includes {
 
 /// Compiles one built-in kernel for a device offering `dev`.
 pub fn compile(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
-    compile_builtin(k, dev, false)
+    compile_builtin(k, dev, None)
 }
 
 /// The built-in kernel `k` with its named branches marked (`BRANCH_MARKS`,
 /// [`crate::variant::Source::Marked`]).
 pub fn compile_marked(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
-    compile_builtin(k, dev, true)
+    compile_builtin(k, dev, Some(("BRANCH_MARKS", "branches marked")))
 }
 
-fn compile_builtin(k: &KernelId, dev: DeviceBuild, marked: bool) -> Result<Vec<u32>, GpuError> {
+/// The built-in counting kernel `k` with its named branches counted (`BRANCH_COUNTS`,
+/// [`crate::variant::Source::Counted`]).
+pub fn compile_counted(k: &KernelId, dev: DeviceBuild) -> Result<Vec<u32>, GpuError> {
+    if !k.stats {
+        return Err(GpuError::Other(format!("{}: the branch-counting build is a counting kernel", k.name())));
+    }
+    compile_builtin(k, dev, Some(("BRANCH_COUNTS", "branches counted")))
+}
+
+/// `extra`: a define and what it makes of the kernel (in its name).
+fn compile_builtin(k: &KernelId, dev: DeviceBuild, extra: Option<(&str, &str)>) -> Result<Vec<u32>, GpuError> {
     let src = source("trav.comp").expect("glsl/trav.comp is embedded");
     let v = &k.variant;
     let mut defines = v.defines(k.imp, k.stats, dev);
     let mut name = k.name();
-    if marked {
-        defines.push(("BRANCH_MARKS".into(), "1".into()));
-        name += " (branches marked)";
+    if let Some((define, what)) = extra {
+        defines.push((define.into(), "1".into()));
+        name += &format!(" ({what})");
     }
     let words = compile_source(&name, "trav.comp", src, &defines, &Includes::variant(v), dev.spirv_minor)?;
     with_float_modes(&name, &words, v)
