@@ -618,7 +618,41 @@ fn the_command_writes_its_files_and_refuses_bad_flags() {
     let out = run(&["--node-align", "48", "--out", dir.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("--node-align 48"), "{err}");
+    let out = run(&["--packets", "3", "--out", dir.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--packets 3"), "{err}");
     let teapot = scene_path("teapot.obj");
+    // Packets: every row at the P asked, each layout's ratio to f32's at the same P.
+    let pdir = dir.with_extension("packets");
+    let out = run(&[
+        "--gpu",
+        "navi31",
+        "--res",
+        "24",
+        "--rays",
+        "primary",
+        "--branchings",
+        "4",
+        "--packets",
+        "4",
+        "--layouts",
+        "q8",
+        "--scene",
+        teapot.to_str().unwrap(),
+        "--out",
+        pdir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = halftrace::report::memory::read(&pdir).unwrap().expect("memory.json");
+    assert_eq!(rows.len(), 1 + LayoutId::parse("q8").unwrap().info().maths.len(), "f32 and q8's maths");
+    for r in &rows {
+        assert_eq!((r.packet, r.branching), (4, 4), "{}", r.kernel);
+        assert!(r.node_bytes > 0.0 && r.dram_vs_f32.is_some(), "{}", r.kernel);
+        if r.layout == "f32" {
+            assert_eq!(r.dram_vs_f32, Some(1.0), "{}", r.kernel);
+        }
+    }
+    std::fs::remove_dir_all(&pdir).unwrap();
     let out = run(&[
         "--gpu",
         "navi31,g610",

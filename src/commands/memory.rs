@@ -19,6 +19,11 @@ pub struct MemoryArgs {
     /// Branching factors, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "4,8")]
     pub branchings: Vec<usize>,
+    /// Packet sizes, comma-separated (1: single rays; a packet's P rays share one traversal,
+    /// lanes of one wave; its stack is in shared memory or registers and moves no memory
+    /// traffic in the model).
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    pub packets: Vec<usize>,
     /// Scenes (OBJ, glTF or PLY; repeatable).
     #[arg(long, default_value = "scenes/teapot.obj")]
     pub scene: Vec<std::path::PathBuf>,
@@ -89,6 +94,13 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
     for &b in &a.branchings {
         crate::bvh::check_branching(b).map_err(|e| anyhow::anyhow!("--branchings: {e}"))?;
     }
+    for &p in &a.packets {
+        anyhow::ensure!(
+            crate::variant::PACKETS.contains(&p),
+            "--packets {p}: a packet size is one of {}",
+            crate::variant::PACKETS.map(|p| p.to_string()).join(", ")
+        );
+    }
     let kinds: Vec<crate::rays::RayKind> = a
         .rays
         .iter()
@@ -127,7 +139,7 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
         kinds,
         res: a.res,
         gpus: gpus.clone(),
-        variants: memory::default_variants(&a.branchings, &a.layouts),
+        variants: memory::default_variants(&a.branchings, &a.packets, &a.layouts),
         estimates,
         stack: !a.no_stack,
         node_align: a.node_align,

@@ -757,14 +757,21 @@ pub fn latency(h: &cache::Hierarchy, rays: usize) -> (f64, f64) {
     (step, bound)
 }
 
-/// The default variants: every layout in every math at each of `branchings`, single rays.
-pub fn default_variants(branchings: &[usize], layouts: &[crate::layout::LayoutId]) -> Vec<crate::variant::Variant> {
+/// The default variants: every layout in every math at each of `branchings` and `packets`
+/// (1: single rays), f32 always among them (every ratio's peer at the same B and P).
+pub fn default_variants(
+    branchings: &[usize],
+    packets: &[usize],
+    layouts: &[crate::layout::LayoutId],
+) -> Vec<crate::variant::Variant> {
     use crate::layout::LayoutId;
     let mut v = Vec::new();
     for l in LayoutId::all().filter(|l| layouts.is_empty() || layouts.contains(l) || *l == LayoutId::f32()) {
         for &m in l.info().maths {
-            for &b in branchings {
-                v.push(crate::variant::Variant::new(l, b, 1).with_math(m));
+            for &p in packets {
+                for &b in branchings {
+                    v.push(crate::variant::Variant::new(l, b, p).with_math(m));
+                }
             }
         }
     }
