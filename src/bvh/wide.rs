@@ -25,7 +25,7 @@ pub struct WideNode {
 /// A B-wide BVH over the same triangle order as the binary BVH it came from.
 /// `nodes[0]` is the root; nodes lie breadth first — each node's inner children side by side in
 /// slot order, level by level — so children always have larger indices than their parent
-/// ([`collapse`] says why).
+/// (`breadth_first` says why).
 #[derive(Clone, Debug)]
 pub struct WideBvh {
     pub branching: usize,
@@ -34,7 +34,7 @@ pub struct WideBvh {
     pub prims: Vec<u32>,
 }
 
-/// Collapses a binary BVH to branching factor `b` (2, 4, 8 or 16).
+/// Collapses a binary BVH to branching factor `b` (2, 4, 8 or 16), its nodes breadth first.
 pub fn collapse(bin: &BinaryBvh, b: usize) -> WideBvh {
     assert!((2..=16).contains(&b), "branching {b} must be checked by the caller");
     let mut out = WideBvh { branching: b, nodes: Vec::new(), prims: bin.prims.clone() };

@@ -640,7 +640,10 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let id = KernelId::new(*v, v.portable_impl(), false);
                 progress(&format!("{scene} {kind} {}", id.name()));
                 let (mut reads, sizes) = runner.mem_reads(v, set)?;
-                if let Some(perm) = runner.node_permutation(v, cfg.node_order)? {
+                let enc = runner.encoded(v.layout, v.branching)?;
+                let perm = node_permutation(enc.nodes.as_ref(), v.branching, cfg.node_order)
+                    .with_context(|| format!("{} B={}", v.layout, v.branching))?;
+                if let Some(perm) = perm {
                     permute_nodes(&mut reads, &perm);
                 }
                 let stack = Stack::of(v);

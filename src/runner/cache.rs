@@ -282,15 +282,9 @@ impl<'g> Runner<'g> {
         Ok((v.layout.imp().mem_reads(enc, &s.sets[i].rays, v.packet, v.math, v.fc), sizes))
     }
 
-    /// Where `v`'s encoding's nodes go in `order` ([`crate::memory::node_permutation`]).
-    pub fn node_permutation(
-        &mut self,
-        v: &Variant,
-        order: crate::memory::NodeOrder,
-    ) -> anyhow::Result<Option<Vec<u32>>> {
-        let enc = self.encoding(v.layout, v.branching)?;
-        crate::memory::node_permutation(enc.nodes.as_ref(), v.branching, order)
-            .map_err(|e| anyhow::anyhow!("{} B={}: {e}", v.layout, v.branching))
+    /// The host encoding of `layout` at `b` (encoded once, as every other use of it).
+    pub fn encoded(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<&Encoded> {
+        self.encoding(layout, b)
     }
 
     /// The CPU reference of `v` on ray set `set` (the latest few are kept, unless frugal).
