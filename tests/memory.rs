@@ -609,18 +609,17 @@ fn the_command_writes_its_files_and_refuses_bad_flags() {
     let dir = std::env::temp_dir().join(format!("halftrace-memory-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let run = |args: &[&str]| Command::new(bin).arg("memory").args(args).output().unwrap();
-    let out = run(&["--gpu", "nope", "--out", dir.to_str().unwrap()]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("--gpu 'nope'"), "{err}");
-    let out = run(&["--branchings", "3", "--out", dir.to_str().unwrap()]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("--branchings"), "{err}");
-    let out = run(&["--node-align", "48", "--out", dir.to_str().unwrap()]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("--node-align 48"), "{err}");
-    let out = run(&["--packets", "3", "--out", dir.to_str().unwrap()]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("--packets 3"), "{err}");
+    // A bad flag fails, its message naming it.
+    for (flag, value, says) in [
+        ("--gpu", "nope", "--gpu 'nope'"),
+        ("--branchings", "3", "--branchings"),
+        ("--node-align", "48", "--node-align 48"),
+        ("--packets", "3", "--packets 3"),
+    ] {
+        let out = run(&[flag, value, "--out", dir.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(says), "{flag} {value}: {err}");
+    }
     let teapot = scene_path("teapot.obj");
     // Packets: every row at the P asked, each layout's ratio to f32's at the same P.
     let pdir = dir.with_extension("packets");

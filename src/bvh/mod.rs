@@ -9,7 +9,7 @@ pub mod stats;
 pub mod wide;
 
 pub use build::{build_binary, BinaryBvh, BinaryNode};
-pub use wide::{collapse, ChildRef, WideBvh, WideNode};
+pub use wide::{breadth_first, collapse, ChildRef, WideBvh, WideNode};
 
 use thiserror::Error;
 

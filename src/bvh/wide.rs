@@ -57,7 +57,7 @@ pub fn collapse(bin: &BinaryBvh, b: usize) -> WideBvh {
 /// siblings side by side against subtrees contiguous (depth first, the collapse's own order)
 /// on f32's nodes at 2–3 % fewer DRAM bytes per ray on a 1.1 M-triangle scene and no loss
 /// elsewhere (docs/reports/issue-52-memory.md, "Where the nodes lie").
-fn breadth_first(nodes: Vec<WideNode>) -> Vec<WideNode> {
+pub fn breadth_first(nodes: Vec<WideNode>) -> Vec<WideNode> {
     let mut order = vec![0usize];
     let mut new_index = vec![u32::MAX; nodes.len()];
     new_index[0] = 0;

@@ -56,7 +56,8 @@ pub struct MemoryArgs {
     pub node_align: u64,
     /// What-if: every layout's nodes re-indexed in this order — `bfs` (each node's inner
     /// children side by side, level by level), `dfs` (each subtree contiguous, children in slot
-    /// order) — instead of as the layouts store them (`layout`: breadth first, every layout). Hits and requested bytes are the same; lines and caches differ.
+    /// order) — instead of as the layouts store them (`layout`: breadth first, every layout).
+    /// Hits and requested bytes are the same; lines and caches differ.
     #[arg(long, value_enum, default_value_t = memory::NodeOrder::Layout)]
     pub node_order: memory::NodeOrder,
     /// Output folder (default reports/memory-<UTC timestamp>/). Its memory files, if any, are
@@ -165,10 +166,7 @@ pub fn memory(a: &MemoryArgs) -> anyhow::Result<()> {
             "**What-if (`--node-order {}`)**: every layout's nodes re-indexed {}; no kernel places them so. \
              Requested bytes stay; lines and the cache model see the new places.\n\n",
             a.node_order.name(),
-            match a.node_order {
-                memory::NodeOrder::Bfs => "breadth first (each node's inner children side by side)",
-                _ => "depth first (each subtree contiguous, children in slot order)",
-            }
+            a.node_order.what()
         );
     }
     let md = crate::report::memory::markdown(&rows, &gpus_table);

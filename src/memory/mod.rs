@@ -243,6 +243,15 @@ pub enum NodeOrder {
 }
 
 impl NodeOrder {
+    /// How the nodes lie in this order, in words.
+    pub fn what(self) -> &'static str {
+        match self {
+            NodeOrder::Layout => "as each layout stores them (breadth first, every layout)",
+            NodeOrder::Bfs => "breadth first (each node's inner children side by side)",
+            NodeOrder::Dfs => "depth first (each subtree contiguous, children in slot order)",
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             NodeOrder::Layout => "layout",
@@ -640,7 +649,7 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let id = KernelId::new(*v, v.portable_impl(), false);
                 progress(&format!("{scene} {kind} {}", id.name()));
                 let (mut reads, sizes) = runner.mem_reads(v, set)?;
-                let enc = runner.encoded(v.layout, v.branching)?;
+                let enc = runner.encoding(v.layout, v.branching)?;
                 let perm = node_permutation(enc.nodes.as_ref(), v.branching, cfg.node_order)
                     .with_context(|| format!("{} B={}", v.layout, v.branching))?;
                 if let Some(perm) = perm {

@@ -203,7 +203,7 @@ impl<'g> Runner<'g> {
     }
 
     /// The host encoding of `layout` at `b`, encoded once (again after a frugal drop).
-    fn encoding(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<&Encoded> {
+    pub fn encoding(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<&Encoded> {
         let have = self.state().encodings.get(&(layout, b)).is_some_and(|r| r.enc.is_some());
         if !have {
             self.ensure_bin();
@@ -280,11 +280,6 @@ impl<'g> Runner<'g> {
         let enc = s.encodings[&(v.layout, v.branching)].enc.as_ref().expect("just encoded");
         let sizes = [enc.node_size(), enc.nodes.len(), enc.tris.verts.len()];
         Ok((v.layout.imp().mem_reads(enc, &s.sets[i].rays, v.packet, v.math, v.fc), sizes))
-    }
-
-    /// The host encoding of `layout` at `b` (encoded once, as every other use of it).
-    pub fn encoded(&mut self, layout: LayoutId, b: usize) -> anyhow::Result<&Encoded> {
-        self.encoding(layout, b)
     }
 
     /// The CPU reference of `v` on ray set `set` (the latest few are kept, unless frugal).

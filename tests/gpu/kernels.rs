@@ -285,10 +285,7 @@ fn kernels_take_the_branches_the_reference_counts() {
                 let gb = GpuBvh::upload(&g, &enc).unwrap();
                 for &math in layout.info().maths {
                     let v = Variant::new(layout, b, 1).with_math(math).with_buffers(gb.buffers);
-                    let id = KernelId::new(v, PacketImpl::Single, true);
-                    let d = halftrace::gpu::support::admit(&g.info, &id).unwrap_or_else(|e| panic!("{id}: {e}"));
-                    let k = Kernel::build(&g, &d.with_stats(true), &Source::Counted)
-                        .unwrap_or_else(|e| panic!("{id}: {e}"));
+                    let k = built_from(&g, &v, PacketImpl::Single, true, &Source::Counted, |_| {});
                     for (kind, rays) in &sets {
                         let what = format!("{}, {scene} {kind} rays", k.label());
                         let a = k.run(&g, &gb, rays, 0, 1).unwrap();

@@ -55,10 +55,22 @@ pub fn builtin_as<'g>(
     stats: bool,
     edit: impl FnOnce(&mut halftrace::gpu::support::Decision),
 ) -> Kernel<'g> {
+    built_from(g, v, imp, stats, &Source::Builtin, edit)
+}
+
+/// [`builtin_as`] built from `source` (the built-in kernel's marked or counted builds).
+pub fn built_from<'g>(
+    g: &'g Gpu,
+    v: &Variant,
+    imp: PacketImpl,
+    stats: bool,
+    source: &Source,
+    edit: impl FnOnce(&mut halftrace::gpu::support::Decision),
+) -> Kernel<'g> {
     let k = KernelId::new(*v, imp, stats);
     let mut d = halftrace::gpu::support::admit(&g.info, &k).unwrap_or_else(|e| panic!("{k}: {e}"));
     edit(&mut d);
-    Kernel::build(g, &d.with_stats(stats), &Source::Builtin).unwrap_or_else(|e| panic!("{k}: {e}"))
+    Kernel::build(g, &d.with_stats(stats), source).unwrap_or_else(|e| panic!("{k}: {e}"))
 }
 
 pub fn tmp(name: &str) -> PathBuf {

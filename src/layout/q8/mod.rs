@@ -267,45 +267,21 @@ impl Layout for Q8 {
     /// (entry parameter, its lower bound).
     type ChildHit = (f32, f32);
 
-    /// Breadth first, so each node's inner children are consecutive; triangles leaf by leaf in
-    /// that node order, so each node's leaves are consecutive (offsets < 16·16).
+    /// Breadth first (`bvh::breadth_first`, as `collapse` lays every tree out), so each node's
+    /// inner children are consecutive; triangles leaf by leaf in that node order, so each
+    /// node's leaves are consecutive (offsets < 16·16).
     fn reorder(w: &WideBvh) -> Option<WideBvh> {
-        let mut order = vec![0usize];
-        let mut new_index = vec![u32::MAX; w.nodes.len()];
-        new_index[0] = 0;
-        let mut i = 0;
-        while i < order.len() {
-            for (_, c) in &w.nodes[order[i]].children {
-                if let ChildRef::Inner(j) = *c {
-                    new_index[j as usize] = order.len() as u32;
-                    order.push(j as usize);
+        let mut nodes = crate::bvh::breadth_first(w.nodes.clone());
+        let mut prims = Vec::with_capacity(w.prims.len());
+        for n in &mut nodes {
+            for (_, c) in &mut n.children {
+                if let ChildRef::Leaf { first, count } = *c {
+                    let f = prims.len() as u32;
+                    prims.extend_from_slice(&w.prims[first as usize..(first + count) as usize]);
+                    *c = ChildRef::Leaf { first: f, count };
                 }
             }
-            i += 1;
         }
-        let mut prims = Vec::with_capacity(w.prims.len());
-        let nodes = order
-            .iter()
-            .map(|&old| {
-                let n = &w.nodes[old];
-                let children = n
-                    .children
-                    .iter()
-                    .map(|(b, c)| {
-                        let c = match *c {
-                            ChildRef::Inner(j) => ChildRef::Inner(new_index[j as usize]),
-                            ChildRef::Leaf { first, count } => {
-                                let f = prims.len() as u32;
-                                prims.extend_from_slice(&w.prims[first as usize..(first + count) as usize]);
-                                ChildRef::Leaf { first: f, count }
-                            }
-                        };
-                        (*b, c)
-                    })
-                    .collect();
-                WideNode { bounds: n.bounds, children }
-            })
-            .collect();
         Some(WideBvh { branching: w.branching, nodes, prims })
     }
 
