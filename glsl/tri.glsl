@@ -11,6 +11,16 @@ const float U24 = 5.9604644775390625e-08;
 const float SLACK18 = 1.000003814697265625;   // 1 + 2^-18
 const float SLACK16 = 1.0000152587890625;     // 1 + 2^-16
 const float ULP22 = 2.384185791015625e-07;    // 2^-22
+const float COORD_ERR = (2.0 * U24) * SLACK18; // 2u(1 + 2^-18): exact
+
+// tri.rs, certify (edge): the bound of the error of the edge function x1*y2 - x2*y1 of
+// sheared coordinates within ex, ey of the exact ones: its products' and difference's rounding,
+// its operands' errors.
+float edge_bound(float x1, float y1, float x2, float y2, float ex, float ey) {
+    precise float r = (2.0 * U24) * (abs(x1 * y2) + abs(x2 * y1)) + ex * (abs(y1) + abs(y2)) + ey * (abs(x1) + abs(x2))
+        + 2.0 * ex * ey;
+    return r * SLACK18;
+}
 
 // tri.rs, certify: CERT_MISS, or the interval [lo, hi] that holds the exact crossing's
 // parameter (CERT_HIT: the exact ray certainly crosses; CERT_UNSURE: fp32 cannot decide,
@@ -51,28 +61,30 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     precise float az = r.sz * A[kz];
     precise float bz = r.sz * Bv[kz];
     precise float cz = r.sz * C[kz];
-    precise float mx = max(max(abs(A[kx]) + abs(px0), abs(Bv[kx]) + abs(px1)), abs(C[kx]) + abs(px2));
-    precise float my = max(max(abs(A[ky]) + abs(py0), abs(Bv[ky]) + abs(py1)), abs(C[ky]) + abs(py2));
-    precise float ex = (6.0 * U24) * mx;
-    precise float ey = (6.0 * U24) * my;
+    // |x - x*| <= 2u(1 + 2^-18)(|A_x| + 2|p|) (tri.rs, certify)
+    precise float mx = max(max(abs(A[kx]) + abs(px0) * 2.0, abs(Bv[kx]) + abs(px1) * 2.0), abs(C[kx]) + abs(px2) * 2.0);
+    precise float my = max(max(abs(A[ky]) + abs(py0) * 2.0, abs(Bv[ky]) + abs(py1) * 2.0), abs(C[ky]) + abs(py2) * 2.0);
+    precise float ex = COORD_ERR * mx;
+    precise float ey = COORD_ERR * my;
     // the exact projected triangle lies on one side of the ray: a certain miss
     if (min(min(ax, bx), cx) > ex || max(max(ax, bx), cx) < -ex || min(min(ay, by), cy) > ey
         || max(max(ay, by), cy) < -ey) return CERT_MISS;
     MARK_EDGES();
-    precise float xm = max(max(abs(ax), abs(bx)), abs(cx));
-    precise float ym = max(max(abs(ay), abs(by)), abs(cy));
-    precise float e = ((5.0 * U24) * xm * ym + 2.0 * (xm * ey + ym * ex + ex * ey)) * SLACK18;
     precise float uu = cx * by - cy * bx;
     precise float vv = ax * cy - ay * cx;
     precise float ww = bx * ay - by * ax;
-    bool pos = uu > e || vv > e || ww > e;
-    bool neg = uu < -e || vv < -e || ww < -e;
+    precise float eu = edge_bound(cx, cy, bx, by, ex, ey);
+    precise float ev = edge_bound(ax, ay, cx, cy, ex, ey);
+    precise float ew = edge_bound(bx, by, ax, ay, ex, ey);
+    bool pos = uu > eu || vv > ev || ww > ew;
+    bool neg = uu < -eu || vv < -ev || ww < -ew;
     if (pos && neg) return CERT_MISS;
     MARK_CROSS();
-    bool sure = abs(uu) > e && abs(vv) > e && abs(ww) > e;
+    bool sure = abs(uu) > eu && abs(vv) > ev && abs(ww) > ew;
     precise float det = uu + vv + ww;
     precise float s = abs(uu) + abs(vv) + abs(ww);
-    precise float ed = 3.0 * e + (2.5 * U24) * s;
+    precise float e = max(max(eu, ev), ew);
+    precise float ed = eu + ev + ew + (2.5 * U24) * s;
     precise float zm = max(max(abs(az), abs(bz)), abs(cz));
     precise float ez = (3.5 * U24) * zm;
     precise float t;
@@ -88,9 +100,8 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
         MARK_DIVIDE();
         precise float tt = uu * az + vv * bz + ww * cz;
         t = div_rte(tt, det);
-        precise float spread = abs(az - t) + abs(bz - t) + abs(cz - t);
-        precise float et = (3.5 * U24) * s * zm + U24 * abs(tt) + (2.5 * U24) * abs(t) * s + e * (spread + 3.0 * ez)
-            + s * ez;
+        precise float edge_err = e * (abs(az - t) + abs(bz - t) + abs(cz - t) + 3.0 * ez);
+        precise float et = (3.5 * U24) * s * zm + U24 * abs(tt) + (2.5 * U24) * abs(t) * s + edge_err + s * ez;
         err = div_rte(et, abs(det) - ed) * SLACK16;
         nu = vv; nv = ww; det_out = det;
     }

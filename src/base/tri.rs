@@ -71,6 +71,8 @@ impl Cert {
 }
 
 const U: f32 = 1.0 / 16_777_216.0; // the unit roundoff 2⁻²⁴
+/// 2u·(1 + 2⁻¹⁸): the sheared coordinates' error per unit of |A_x| + 2|sx·A_z| ([`certify`]).
+const COORD_ERR: f32 = 2.0 * U * (1.0 + 1.0 / 262_144.0);
 
 /// The watertight test of [`intersect`] with a forward error bound on every value it
 /// computes, so that what it reports is true of the *exact* ray, not only of the rounded
@@ -186,16 +188,19 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         *path |= Branch::Huge.bit();
     }
     let (kx, ky, kz) = (r.kx, r.ky, r.kz);
-    // Sheared coordinates, and per axis the bound of their error: |x − x*| ≤ 5.0001u·(|A_x| +
-    // |sx·A_z|) (the translation, the shear's quotient, its product and difference).
+    // Sheared coordinates, and per axis the bound of their error: |x − x*| ≤ 2u·|A_x| +
+    // 4u·|sx·A_z| to first order (the translation's rounding twice: of A_x, and of A_x − p;
+    // the product p's thrice: the translation of A_z, the shear's quotient and the product;
+    // docs/layouts.md), here 2u·(1 + 2⁻¹⁸)·(|A_x| + 2|p|).
     let px = [r.sx * a[kz], r.sx * b[kz], r.sx * c[kz]];
     let py = [r.sy * a[kz], r.sy * b[kz], r.sy * c[kz]];
     let (ax, bx, cx) = (a[kx] - px[0], b[kx] - px[1], c[kx] - px[2]);
     let (ay, by, cy) = (a[ky] - py[0], b[ky] - py[1], c[ky] - py[2]);
-    let mx = (a[kx].abs() + px[0].abs()).max(b[kx].abs() + px[1].abs()).max(c[kx].abs() + px[2].abs());
-    let my = (a[ky].abs() + py[0].abs()).max(b[ky].abs() + py[1].abs()).max(c[ky].abs() + py[2].abs());
-    let ex = (6.0 * U) * mx;
-    let ey = (6.0 * U) * my;
+    let twice = |p: f32| p.abs() * 2.0;
+    let mx = (a[kx].abs() + twice(px[0])).max(b[kx].abs() + twice(px[1])).max(c[kx].abs() + twice(px[2]));
+    let my = (a[ky].abs() + twice(py[0])).max(b[ky].abs() + twice(py[1])).max(c[ky].abs() + twice(py[2]));
+    let ex = COORD_ERR * mx;
+    let ey = COORD_ERR * my;
     // The exact projected triangle lies on one side of the ray: a certain miss, whatever the
     // edge functions (a tiny or edge-on triangle beside the ray).
     let (x0, x1) = (ax.min(bx).min(cx), ax.max(bx).max(cx));
@@ -204,24 +209,31 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         return Cert::Miss;
     }
     *path |= Branch::Edges.bit();
-    let xm = ax.abs().max(bx.abs()).max(cx.abs());
-    let ym = ay.abs().max(by.abs()).max(cy.abs());
-    // One bound for the three edge functions: 2γ₂·X·Y for the rounding of the 2×2
-    // determinant, 2(X·ey + Y·ex + ex·ey) for the error of its operands.
-    let e = ((5.0 * U) * xm * ym + 2.0 * (xm * ey + ym * ex + ex * ey)) * (1.0 + 1.0 / 262_144.0);
     let uu = cx * by - cy * bx;
     let vv = ax * cy - ay * cx;
     let ww = bx * ay - by * ax;
-    let pos = uu > e || vv > e || ww > e;
-    let neg = uu < -e || vv < -e || ww < -e;
+    // Per edge function: 2u(|p₁| + |p₂|) for the rounding of its two products and their
+    // difference, ex·(|y₁| + |y₂|) + ey·(|x₁| + |x₂|) + 2ex·ey for its operands' errors.
+    let edge = |x1: f32, y1: f32, x2: f32, y2: f32| {
+        ((2.0 * U) * ((x1 * y2).abs() + (x2 * y1).abs())
+            + ex * (y1.abs() + y2.abs())
+            + ey * (x1.abs() + x2.abs())
+            + 2.0 * ex * ey)
+            * (1.0 + 1.0 / 262_144.0)
+    };
+    let (eu, ev, ew) = (edge(cx, cy, bx, by), edge(ax, ay, cx, cy), edge(bx, by, ax, ay));
+    let pos = uu > eu || vv > ev || ww > ew;
+    let neg = uu < -eu || vv < -ev || ww < -ew;
     if pos && neg {
         return Cert::Miss;
     }
     *path |= Branch::Cross.bit();
-    let sure = uu.abs() > e && vv.abs() > e && ww.abs() > e;
+    let sure = uu.abs() > eu && vv.abs() > ev && ww.abs() > ew;
     let det = uu + vv + ww;
     let s = uu.abs() + vv.abs() + ww.abs();
-    let ed = 3.0 * e + (2.5 * U) * s;
+    // One bound for the three in t's error (fewer values live across the division).
+    let e = eu.max(ev).max(ew);
+    let ed = eu + ev + ew + (2.5 * U) * s;
     let az = r.sz * a[kz];
     let bz = r.sz * b[kz];
     let cz = r.sz * c[kz];
@@ -241,8 +253,8 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         // s − t = Σ U*ᵢ(z*ᵢ − t) / det*: the rounding of T, of det and of the quotient; the edge
         // functions' errors times each vertex's depth from t (small for a small triangle: its
         // errors, common to the numerator and det, cancel); the depths' own errors.
-        let spread = (az - t).abs() + (bz - t).abs() + (cz - t).abs();
-        let et = (3.5 * U) * s * zm + U * tt.abs() + (2.5 * U) * t.abs() * s + e * (spread + 3.0 * ez) + s * ez;
+        let edge_err = e * ((az - t).abs() + (bz - t).abs() + (cz - t).abs() + 3.0 * ez);
+        let et = (3.5 * U) * s * zm + U * tt.abs() + (2.5 * U) * t.abs() * s + edge_err + s * ez;
         (t, et / (det.abs() - ed) * (1.0 + 1.0 / 65_536.0))
     };
     // A certified hit's interval stays within 2⁻¹⁰ of the farthest vertex's depth, so t' − s is
