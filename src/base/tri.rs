@@ -65,14 +65,17 @@ impl Cert {
             return (f32::NEG_INFINITY, f32::INFINITY);
         }
         // m ≥ err·(1 + 2⁻¹⁸) + |t|·2⁻²²: covers the rounding of t ± m and of m itself.
-        let m = err * (1.0 + 1.0 / 262_144.0) + t.abs() * (1.0 / 4_194_304.0);
+        let m = err * SLACK18 + t.abs() * (1.0 / 4_194_304.0);
         (t - m, t + m)
     }
 }
 
 const U: f32 = 1.0 / 16_777_216.0; // the unit roundoff 2⁻²⁴
+/// The bounds' slack factors 1 + 2⁻¹⁸ and 1 + 2⁻¹⁶ (exact; `SLACK18`, `SLACK16` of glsl/tri.glsl).
+const SLACK18: f32 = 1.0 + 1.0 / 262_144.0;
+const SLACK16: f32 = 1.0 + 1.0 / 65_536.0;
 /// 2u·(1 + 2⁻¹⁸): the sheared coordinates' error per unit of |A_x| + 2|sx·A_z| ([`certify`]).
-const COORD_ERR: f32 = 2.0 * U * (1.0 + 1.0 / 262_144.0);
+const COORD_ERR: f32 = 2.0 * U * SLACK18;
 
 /// The watertight test of [`intersect`] with a forward error bound on every value it
 /// computes, so that what it reports is true of the *exact* ray, not only of the rounded
@@ -219,7 +222,7 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
             + ex * (y1.abs() + y2.abs())
             + ey * (x1.abs() + x2.abs())
             + 2.0 * ex * ey)
-            * (1.0 + 1.0 / 262_144.0)
+            * SLACK18
     };
     let (eu, ev, ew) = (edge(cx, cy, bx, by), edge(ax, ay, cx, cy), edge(bx, by, ax, ay));
     let pos = uu > eu || vv > ev || ww > ew;
@@ -246,7 +249,7 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         // lies within the vertices' depths (each within ez of its computed value).
         let (z0, z1) = (az.min(bz).min(cz), az.max(bz).max(cz));
         let t = 0.5 * (z0 + z1);
-        (t, (0.5 * (z1 - z0) + ez + U * t.abs()) * (1.0 + 1.0 / 65_536.0))
+        (t, (0.5 * (z1 - z0) + ez + U * t.abs()) * SLACK16)
     } else {
         let tt = uu * az + vv * bz + ww * cz;
         let t = tt / det;
@@ -255,7 +258,7 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         // errors, common to the numerator and det, cancel); the depths' own errors.
         let edge_err = e * ((az - t).abs() + (bz - t).abs() + (cz - t).abs() + 3.0 * ez);
         let et = (3.5 * U) * s * zm + U * tt.abs() + (2.5 * U) * t.abs() * s + edge_err + s * ez;
-        (t, et / (det.abs() - ed) * (1.0 + 1.0 / 65_536.0))
+        (t, et / (det.abs() - ed) * SLACK16)
     };
     // A certified hit's interval stays within 2⁻¹⁰ of the farthest vertex's depth, so t' − s is
     // bounded in the geometry's terms; a looser one (a ray grazing a large triangle) is left to
