@@ -13,14 +13,24 @@ const float SLACK16 = 1.0000152587890625;     // 1 + 2^-16
 const float ULP22 = 2.384185791015625e-07;    // 2^-22
 const float COORD_ERR = (2.0 * U24) * SLACK18; // 2u(1 + 2^-18): exact
 
+// tri.rs, certify (round): the rounding of the edge function x1*y2 - x2*y1's two products and
+// difference.
+float edge_round(float x1, float y1, float x2, float y2) {
+    precise float r = (2.0 * U24) * (abs(x1 * y2) + abs(x2 * y1));
+    return r;
+}
+
 // tri.rs, certify (edge): the bound of the error of the edge function x1*y2 - x2*y1 of
-// sheared coordinates within ex, ey of the exact ones: its products' and difference's rounding,
-// its operands' errors.
-float edge_bound(float x1, float y1, float x2, float y2, float ex, float ey) {
-    precise float r = (2.0 * U24) * (abs(x1 * y2) + abs(x2 * y1)) + ex * (abs(y1) + abs(y2)) + ey * (abs(x1) + abs(x2))
-        + 2.0 * ex * ey;
+// sheared coordinates within ex, ey of the exact ones: its rounding (edge_round), its
+// operands' errors.
+float edge_bound(float x1, float y1, float x2, float y2, float ex, float ey, float round) {
+    precise float r = round + ex * (abs(y1) + abs(y2)) + ey * (abs(x1) + abs(x2)) + 2.0 * ex * ey;
     return r * SLACK18;
 }
+
+// GLSL's min and max as the selects tri.rs spells (sel_min, sel_max): a NaN comes out alike.
+float sel_min(float x, float y) { return y < x ? y : x; }
+float sel_max(float x, float y) { return x < y ? y : x; }
 
 // tri.rs, certify: CERT_MISS, or the interval [lo, hi] that holds the exact crossing's
 // parameter (CERT_HIT: the exact ray certainly crosses; CERT_UNSURE: fp32 cannot decide,
@@ -70,12 +80,24 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     if (min(min(ax, bx), cx) > ex || max(max(ax, bx), cx) < -ex || min(min(ay, by), cy) > ey
         || max(max(ay, by), cy) < -ey) return CERT_MISS;
     MARK_EDGES();
+    // t's error through the computed vertices' plane (tri.rs): ez + (|Gx| ex + |Gy| ey)/|D|, Gx's
+    // bound the least of its three vertex references; here, while the sheared coordinates live
+    // (past the edge functions it took turnip 25.0.7's f16h fp32 kernel from 96 to 128 registers)
+    precise float wa = abs(by - cy), wb = abs(cy - ay), wc = abs(ay - by);
+    precise float va = abs(bx - cx), vb = abs(cx - ax), vc = abs(ax - bx);
+    precise float zab = abs(az - bz), zac = abs(az - cz), zbc = abs(bz - cz);
+    precise float gx = sel_min(sel_min(zab * wb + zac * wc, zab * wa + zbc * wc), zac * wa + zbc * wb);
+    precise float gy = sel_min(sel_min(zab * vb + zac * vc, zab * va + zbc * vc), zac * va + zbc * vb);
+    precise float plane = gx * ex + gy * ey;
     precise float uu = cx * by - cy * bx;
     precise float vv = ax * cy - ay * cx;
     precise float ww = bx * ay - by * ax;
-    precise float eu = edge_bound(cx, cy, bx, by, ex, ey);
-    precise float ev = edge_bound(ax, ay, cx, cy, ex, ey);
-    precise float ew = edge_bound(bx, by, ax, ay, ex, ey);
+    precise float ru = edge_round(cx, cy, bx, by);
+    precise float rv = edge_round(ax, ay, cx, cy);
+    precise float rw = edge_round(bx, by, ax, ay);
+    precise float eu = edge_bound(cx, cy, bx, by, ex, ey, ru);
+    precise float ev = edge_bound(ax, ay, cx, cy, ex, ey, rv);
+    precise float ew = edge_bound(bx, by, ax, ay, ex, ey, rw);
     bool pos = uu > eu || vv > ev || ww > ew;
     bool neg = uu < -eu || vv < -ev || ww < -ew;
     if (pos && neg) return CERT_MISS;
@@ -83,9 +105,10 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     bool sure = abs(uu) > eu && abs(vv) > ev && abs(ww) > ew;
     precise float det = uu + vv + ww;
     precise float s = abs(uu) + abs(vv) + abs(ww);
-    precise float e = max(max(eu, ev), ew);
     precise float ed = eu + ev + ew + (2.5 * U24) * s;
     precise float zm = max(max(abs(az), abs(bz)), abs(cz));
+    // the largest rounding of one edge function's products and difference (t's error)
+    precise float er = sel_max(sel_max(ru, rv), rw) * SLACK18;
     precise float ez = (3.5 * U24) * zm;
     precise float t;
     precise float err;
@@ -99,10 +122,11 @@ int tri_certify(RayPre r, uint ti, out float lo, out float hi, out bool bounded,
     } else {
         MARK_DIVIDE();
         precise float tt = uu * az + vv * bz + ww * cz;
+        // what does not need t, before the division (fewer values live across it)
+        precise float e0 = plane + (3.5 * U24) * s * zm + U24 * abs(tt);
         t = div_rte(tt, det);
-        precise float edge_err = e * (abs(az - t) + abs(bz - t) + abs(cz - t) + 3.0 * ez);
-        precise float et = (3.5 * U24) * s * zm + U24 * abs(tt) + (2.5 * U24) * abs(t) * s + edge_err + s * ez;
-        err = div_rte(et, abs(det) - ed) * SLACK16;
+        precise float et = e0 + (2.5 * U24) * abs(t) * s + er * (abs(az - t) + abs(bz - t) + abs(cz - t));
+        err = (div_rte(et, abs(det) - ed) + ez) * SLACK16;
         nu = vv; nv = ww; det_out = det;
     }
     // a certified interval stays within 2^-10 of the farthest vertex's depth (tri.rs)

@@ -124,9 +124,9 @@ pub fn padded_box(v: &[f32; 9], pad: f32) -> ([f32; 3], [f32; 3]) {
 }
 
 /// GLSL's `min` and `max` (`y < x ? y : x`, `x < y ? y : x`), spelled out so that a signed
-/// zero comes out as the kernels give it.
+/// zero or a NaN comes out as the kernels give it (glsl/tri.glsl's `sel_min`, `sel_max` too).
 #[inline]
-fn sel_min(x: f32, y: f32) -> f32 {
+pub(super) fn sel_min(x: f32, y: f32) -> f32 {
     if y < x {
         y
     } else {
@@ -134,7 +134,7 @@ fn sel_min(x: f32, y: f32) -> f32 {
     }
 }
 #[inline]
-fn sel_max(x: f32, y: f32) -> f32 {
+pub(super) fn sel_max(x: f32, y: f32) -> f32 {
     if x < y {
         y
     } else {

@@ -1,6 +1,7 @@
 //! Watertight ray–triangle test (Woop, Benthin, Wald 2013, JCGT 2(1)), fp32 with the paper's
 //! fp64 recomputation of the edge functions when one of them is exactly zero.
 
+use super::hit::{sel_max, sel_min};
 use super::slab::{RayPre, HIT_CAP};
 
 /// Returns `(t, u, v)` where the ray's line meets the triangle (`t` unchecked against the
@@ -202,6 +203,9 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
     let twice = |p: f32| p.abs() * 2.0;
     let mx = (a[kx].abs() + twice(px[0])).max(b[kx].abs() + twice(px[1])).max(c[kx].abs() + twice(px[2]));
     let my = (a[ky].abs() + twice(py[0])).max(b[ky].abs() + twice(py[1])).max(c[ky].abs() + twice(py[2]));
+    let az = r.sz * a[kz];
+    let bz = r.sz * b[kz];
+    let cz = r.sz * c[kz];
     let ex = COORD_ERR * mx;
     let ey = COORD_ERR * my;
     // The exact projected triangle lies on one side of the ray: a certain miss, whatever the
@@ -212,19 +216,30 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         return Cert::Miss;
     }
     *path |= Branch::Edges.bit();
+    // t's error, s* − t = (s* − s_c) + (s_c − t), s_c the crossing of the computed vertices'
+    // plane (docs/layouts.md, "The certified fp32 test"). The first is Σ λ*ᵢ(z*ᵢ − zᵢ − g·δᵢ)
+    // for the exact crossing's barycentrics λ* ≥ 0, the plane's gradient g = (Gx, Gy)/D and the
+    // coordinates' errors δ: at most ez + (|Gx|·ex + |Gy|·ey)/|D|, no sliver factor. Gx =
+    // Σ (zᵢ − z_k)(y_j − y_l) for any vertex k: the least of the three bounds is taken. Computed
+    // here, where the kernel does (computed past the edge functions, it took turnip 25.0.7's
+    // f16h fp32 kernel from 96 to 128 registers).
+    let (wa, wb, wc) = ((by - cy).abs(), (cy - ay).abs(), (ay - by).abs());
+    let (va, vb, vc) = ((bx - cx).abs(), (cx - ax).abs(), (ax - bx).abs());
+    let (zab, zac, zbc) = ((az - bz).abs(), (az - cz).abs(), (bz - cz).abs());
+    let gx = sel_min(sel_min(zab * wb + zac * wc, zab * wa + zbc * wc), zac * wa + zbc * wb);
+    let gy = sel_min(sel_min(zab * vb + zac * vc, zab * va + zbc * vc), zac * va + zbc * vb);
+    let plane = gx * ex + gy * ey;
     let uu = cx * by - cy * bx;
     let vv = ax * cy - ay * cx;
     let ww = bx * ay - by * ax;
     // Per edge function: 2u(|p₁| + |p₂|) for the rounding of its two products and their
-    // difference, ex·(|y₁| + |y₂|) + ey·(|x₁| + |x₂|) + 2ex·ey for its operands' errors.
-    let edge = |x1: f32, y1: f32, x2: f32, y2: f32| {
-        ((2.0 * U) * ((x1 * y2).abs() + (x2 * y1).abs())
-            + ex * (y1.abs() + y2.abs())
-            + ey * (x1.abs() + x2.abs())
-            + 2.0 * ex * ey)
-            * SLACK18
+    // difference (`round`), ex·(|y₁| + |y₂|) + ey·(|x₁| + |x₂|) + 2ex·ey for its operands' errors.
+    let round = |x1: f32, y1: f32, x2: f32, y2: f32| (2.0 * U) * ((x1 * y2).abs() + (x2 * y1).abs());
+    let edge = |x1: f32, y1: f32, x2: f32, y2: f32, round: f32| {
+        (round + ex * (y1.abs() + y2.abs()) + ey * (x1.abs() + x2.abs()) + 2.0 * ex * ey) * SLACK18
     };
-    let (eu, ev, ew) = (edge(cx, cy, bx, by), edge(ax, ay, cx, cy), edge(bx, by, ax, ay));
+    let (ru, rv, rw) = (round(cx, cy, bx, by), round(ax, ay, cx, cy), round(bx, by, ax, ay));
+    let (eu, ev, ew) = (edge(cx, cy, bx, by, ru), edge(ax, ay, cx, cy, rv), edge(bx, by, ax, ay, rw));
     let pos = uu > eu || vv > ev || ww > ew;
     let neg = uu < -eu || vv < -ev || ww < -ew;
     if pos && neg {
@@ -234,13 +249,10 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
     let sure = uu.abs() > eu && vv.abs() > ev && ww.abs() > ew;
     let det = uu + vv + ww;
     let s = uu.abs() + vv.abs() + ww.abs();
-    // One bound for the three in t's error (fewer values live across the division).
-    let e = eu.max(ev).max(ew);
     let ed = eu + ev + ew + (2.5 * U) * s;
-    let az = r.sz * a[kz];
-    let bz = r.sz * b[kz];
-    let cz = r.sz * c[kz];
     let zm = az.abs().max(bz.abs()).max(cz.abs());
+    // The largest rounding of one edge function's products and difference (t's error).
+    let er = sel_max(sel_max(ru, rv), rw) * SLACK18;
     let ez = (3.5 * U) * zm;
     let usable = det.abs() > 2.0 * ed; // false for NaN too
     *path |= if usable { Branch::Divide.bit() } else { Branch::Flat.bit() };
@@ -252,13 +264,14 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         (t, (0.5 * (z1 - z0) + ez + U * t.abs()) * SLACK16)
     } else {
         let tt = uu * az + vv * bz + ww * cz;
+        // s_c − t = Σ Uᵢ(zᵢ − t) / D for the computed vertices' exact edge functions Uᵢ and D:
+        // the rounding of T, of the quotient and of det, and the edge functions' rounding
+        // times each vertex's depth from t (the terms without t first, as the kernel sums them
+        // before its division).
+        let e0 = plane + (3.5 * U) * s * zm + U * tt.abs();
         let t = tt / det;
-        // s − t = Σ U*ᵢ(z*ᵢ − t) / det*: the rounding of T, of det and of the quotient; the edge
-        // functions' errors times each vertex's depth from t (small for a small triangle: its
-        // errors, common to the numerator and det, cancel); the depths' own errors.
-        let edge_err = e * ((az - t).abs() + (bz - t).abs() + (cz - t).abs() + 3.0 * ez);
-        let et = (3.5 * U) * s * zm + U * tt.abs() + (2.5 * U) * t.abs() * s + edge_err + s * ez;
-        (t, et / (det.abs() - ed) * SLACK16)
+        let et = e0 + (2.5 * U) * t.abs() * s + er * ((az - t).abs() + (bz - t).abs() + (cz - t).abs());
+        (t, (et / (det.abs() - ed) + ez) * SLACK16)
     };
     // A certified hit's interval stays within 2⁻¹⁰ of the farthest vertex's depth, so t' − s is
     // bounded in the geometry's terms; a looser one (a ray grazing a large triangle) is left to
