@@ -649,11 +649,14 @@ pub fn run(cfg: &Config, mut progress: impl FnMut(&str)) -> anyhow::Result<Vec<c
                 let id = KernelId::new(*v, v.portable_impl(), false);
                 progress(&format!("{scene} {kind} {}", id.name()));
                 let (mut reads, sizes) = runner.mem_reads(v, set)?;
-                let enc = runner.encoding(v.layout, v.branching)?;
-                let perm = node_permutation(enc.nodes.as_ref(), v.branching, cfg.node_order)
-                    .with_context(|| format!("{} B={}", v.layout, v.branching))?;
-                if let Some(perm) = perm {
-                    permute_nodes(&mut reads, &perm);
+                // The layout's own order (the default) needs neither the encoding nor a permutation.
+                if cfg.node_order != NodeOrder::Layout {
+                    let enc = runner.encoding(v.layout, v.branching)?;
+                    let perm = node_permutation(enc.nodes.as_ref(), v.branching, cfg.node_order)
+                        .with_context(|| format!("{} B={}", v.layout, v.branching))?;
+                    if let Some(perm) = perm {
+                        permute_nodes(&mut reads, &perm);
+                    }
                 }
                 let stack = Stack::of(v);
                 let b = Buffers::new(sizes).with_node_align(cfg.node_align);
