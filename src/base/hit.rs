@@ -33,7 +33,7 @@ use super::exact;
 use super::geom::Aabb;
 use super::ray::Ray;
 use super::slab::{lower32, upper32, RayPre, HIT_CAP};
-use super::tri;
+use super::tri::{self, sel_max, sel_min};
 use crate::glsl_struct;
 
 glsl_struct! {
@@ -121,25 +121,6 @@ pub fn padded_box(v: &[f32; 9], pad: f32) -> ([f32; 3], [f32; 3]) {
         hi[a] = sel_max(sel_max(x, y), z) + pad;
     }
     (lo, hi)
-}
-
-/// GLSL's `min` and `max` (`y < x ? y : x`, `x < y ? y : x`), spelled out so that a signed
-/// zero or a NaN comes out as the kernels give it (glsl/tri.glsl's `sel_min`, `sel_max` too).
-#[inline]
-pub(super) fn sel_min(x: f32, y: f32) -> f32 {
-    if y < x {
-        y
-    } else {
-        x
-    }
-}
-#[inline]
-pub(super) fn sel_max(x: f32, y: f32) -> f32 {
-    if x < y {
-        y
-    } else {
-        x
-    }
 }
 
 /// The box rule ([`ClosestBox`]): for a hit of triangle `v` at `t >=

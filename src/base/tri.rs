@@ -1,7 +1,6 @@
 //! Watertight ray–triangle test (Woop, Benthin, Wald 2013, JCGT 2(1)), fp32 with the paper's
 //! fp64 recomputation of the edge functions when one of them is exactly zero.
 
-use super::hit::{sel_max, sel_min};
 use super::slab::{RayPre, HIT_CAP};
 
 /// Returns `(t, u, v)` where the ray's line meets the triangle (`t` unchecked against the
@@ -286,6 +285,25 @@ pub fn certify_traced(r: &RayPre, v: &[f32; 9], path: &mut u8) -> Cert {
         Cert::Hit { t, err, u: vv / det, v: ww / det }
     } else {
         Cert::Unsure { t, err }
+    }
+}
+
+/// GLSL's `min` and `max` (`y < x ? y : x`, `x < y ? y : x`), spelled out so that a signed
+/// zero or a NaN comes out as the kernels give it (glsl/tri.glsl's `sel_min`, `sel_max`).
+#[inline]
+pub(super) fn sel_min(x: f32, y: f32) -> f32 {
+    if y < x {
+        y
+    } else {
+        x
+    }
+}
+#[inline]
+pub(super) fn sel_max(x: f32, y: f32) -> f32 {
+    if x < y {
+        y
+    } else {
+        x
     }
 }
 
